@@ -1,0 +1,20 @@
+"""Test-suite options shared by every folder.
+
+Slow and browser tests carry markers and are skipped unless ``--all`` is
+given (the README's test command and ``.ci/run`` give it).
+"""
+
+import pytest
+
+
+def pytest_addoption(parser):
+    parser.addoption("--all", action="store_true", help="also run tests marked slow or browser")
+
+
+def pytest_collection_modifyitems(config, items):
+    if config.getoption("--all"):
+        return
+    skip = pytest.mark.skip(reason="marked slow or browser: run with --all")
+    for item in items:
+        if "slow" in item.keywords or "browser" in item.keywords:
+            item.add_marker(skip)
