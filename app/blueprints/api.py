@@ -1,0 +1,55 @@
+"""Read-only JSON views of the dataset (the labelling and study APIs build on these)."""
+
+from flask import Blueprint, url_for
+
+from app.extensions import db
+from app.models import Activity, Frame, Sequence
+from app.services import frames as frames_service
+
+bp = Blueprint("api", __name__, url_prefix="/api")
+
+
+def frame_json(frame: Frame, status) -> dict:
+    return {
+        "id": frame.id,
+        "activity": frame.sequence.activity.name,
+        "sequence": frame.sequence.name,
+        "index": frame.index,
+        "timestamp_s": frame.timestamp_s,
+        "source_name": frame.source_name,
+        "width": frame.width,
+        "height": frame.height,
+        "content_hash": frame.content_hash,
+        "intrinsics": frame.intrinsics,
+        "status": status.value,
+        "rgb_url": url_for("frames.media_file", name=frame.rgb_path),
+        "depth_url": url_for("frames.depth", frame_id=frame.id) if frame.depth_path else None,
+        "dhg_url": url_for("frames.media_file", name=frame.dhg_path) if frame.dhg_path else None,
+        "meta": frame.meta,
+    }
+
+
+@bp.get("/activities")
+def activities():
+    return {
+        "activities": [
+            {"id": s.activity.id, "name": s.activity.name, "frames": s.frames, "by_status": s.by_status}
+            for s in frames_service.activity_summaries()
+        ]
+    }
+
+
+@bp.get("/activities/<int:activity_id>/frames")
+def activity_frames(activity_id: int):
+    act = db.get_or_404(Activity, activity_id)
+    ids = db.session.execute(
+        db.select(Frame).join(Sequence).where(Sequence.activity_id == act.id).order_by(Sequence.name, Frame.index)
+    ).scalars().all()
+    statuses = frames_service.frame_statuses([f.id for f in ids])
+    return {"activity": act.name, "frames": [frame_json(f, statuses[f.id]) for f in ids]}
+
+
+@bp.get("/frames/<int:frame_id>")
+def frame(frame_id: int):
+    fr = db.get_or_404(Frame, frame_id)
+    return frame_json(fr, frames_service.frame_statuses([fr.id])[fr.id])

@@ -1,0 +1,138 @@
+"""The ``flask egonet`` command group: thin wrappers over the services.
+
+Every failure exits non-zero with a one-line reason (click's "Error: ...").
+"""
+
+import contextlib
+from pathlib import Path
+
+import click
+from flask import Blueprint
+
+from app.models import Role, Status
+
+bp = Blueprint("egonet_cli", __name__, cli_group="egonet")
+
+
+@contextlib.contextmanager
+def one_line_errors():
+    """Turn the services' validation errors into click's one-line failure."""
+    try:
+        yield
+    except ValueError as exc:  # MediaError, ImportProblem, UserProblem are ValueErrors
+        raise click.ClickException(str(exc)) from None
+
+
+@contextlib.contextmanager
+def progress_bar(label: str):
+    """Yield (on_start, on_progress) callbacks that drive a click progress bar."""
+    state: dict = {}
+
+    def on_start(total: int) -> None:
+        state["bar"] = click.progressbar(length=total, label=label, show_eta=True, show_pos=True)
+        state["bar"].__enter__()
+
+    def on_progress(n: int) -> None:
+        if "bar" not in state:
+            on_start(0)
+        state["bar"].update(n)
+
+    try:
+        yield on_start, on_progress
+    finally:
+        if "bar" in state:
+            state["bar"].__exit__(None, None, None)
+
+
+@bp.cli.command("import")
+@click.argument("path", type=click.Path(path_type=Path))
+@click.option("--activity", required=True, help="Activity the frames belong to (created if new).")
+@click.option("--sequence", help="Recording name within the activity [default: the folder or video name].")
+@click.option("--stride", type=click.IntRange(min=1), default=1, show_default=True, help="Keep every N-th frame.")
+@click.option("--depth", "depth_dir", type=click.Path(path_type=Path), help="Folder of depth maps (16-bit PNG mm, .npy/.npz m).")
+@click.option("--dhg", "dhg_dir", type=click.Path(path_type=Path), help="Folder of DHG images (3-channel 8-bit).")
+@click.option("--masks", "masks_dir", type=click.Path(path_type=Path), help="Folder of binary mask PNGs (initial annotations).")
+@click.option("--intrinsics", type=click.Path(path_type=Path), help="Camera intrinsics JSON (fx, fy, cx, cy or a 3x3 matrix).")
+@click.option("--mask-author", default="import", show_default=True, help="Author of imported masks.")
+@click.option(
+    "--mask-status",
+    type=click.Choice([s.value for s in Status]),
+    default=Status.DONE.value,
+    show_default=True,
+    help="Status of imported masks.",
+)
+def import_command(path, activity, sequence, stride, depth_dir, dhg_dir, masks_dir, intrinsics, mask_author, mask_status):
+    """Import frames from PATH: a folder of images or a video file.
+
+    A folder may hold the images directly or in rgb/ (or color/), with
+    depth/, dhg/ and masks/ beside them, matched by file stem, and one
+    intrinsics *.json. Re-importing the same files adds nothing.
+    """
+    from app.services.importing import import_path
+
+    with one_line_errors(), progress_bar("Importing") as (on_start, on_progress):
+        report = import_path(
+            path,
+            activity=activity,
+            sequence=sequence,
+            stride=stride,
+            depth_dir=depth_dir,
+            dhg_dir=dhg_dir,
+            masks_dir=masks_dir,
+            intrinsics=intrinsics,
+            mask_author=mask_author,
+            mask_status=Status(mask_status),
+            on_start=on_start,
+            on_progress=on_progress,
+        )
+    click.echo(
+        f"{report.activity} / {report.sequence}: {report.added} frames added, "
+        f"{report.skipped} already present, {report.annotations} masks imported"
+    )
+
+
+@bp.cli.command("demo")
+@click.option("--frames-per-activity", type=click.IntRange(min=1), default=40, show_default=True)
+@click.option("--seed", type=int, default=0, show_default=True)
+@click.option("--width", type=click.IntRange(min=32, max=4096), default=320, show_default=True)
+@click.option("--height", type=click.IntRange(min=32, max=4096), default=240, show_default=True)
+def demo_command(frames_per_activity, seed, width, height):
+    """Create the demo dataset: synthetic RGB-D frames for the seven activities."""
+    from app.services.demo import create_demo
+    from egonet.synth import ACTIVITIES
+
+    with one_line_errors(), progress_bar("Rendering demo") as (on_start, on_progress):
+        on_start(frames_per_activity * len(ACTIVITIES))
+        reports = create_demo(
+            frames_per_activity=frames_per_activity, seed=seed, width=width, height=height, on_progress=on_progress
+        )
+    added = sum(r.added for r in reports)
+    skipped = sum(r.skipped for r in reports)
+    click.echo(f"demo: {added} frames added, {skipped} already present, in {len(reports)} activities")
+
+
+@bp.cli.command("create-user")
+@click.argument("name")
+@click.option("--role", type=click.Choice([r.value for r in Role]), required=True)
+@click.option("--password", help="Password (prompted when omitted and a terminal is attached; generated otherwise).")
+def create_user_command(name, role, password):
+    """Create a user NAME with a role."""
+    import sys
+
+    from app.services.users import create_user
+
+    if password is None and role != Role.PARTICIPANT and sys.stdin.isatty():
+        password = click.prompt("Password (empty to generate one)", default="", hide_input=True, show_default=False)
+        if password:
+            click.prompt("Repeat", hide_input=True, confirmation_prompt=False, value_proc=lambda v: _same(v, password))
+    with one_line_errors():
+        user, generated = create_user(name, role, password or None)
+    click.echo(f"created {user.role.value} {user.username!r}")
+    if generated:
+        click.echo(f"password: {generated}")
+
+
+def _same(value: str, password: str) -> str:
+    if value != password:
+        raise click.UsageError("the passwords do not match")
+    return value

@@ -1,0 +1,83 @@
+"""Action-object annotations: one per frame and author, with instances."""
+
+import enum
+from datetime import datetime
+
+from sqlalchemy import Enum, Float, ForeignKey, String, Text, UniqueConstraint
+from sqlalchemy.orm import Mapped, mapped_column, relationship
+
+from app.models.base import Base, UTCDateTime, utcnow
+from app.models.frames import Frame
+from app.models.users import User
+
+
+class Status(enum.StrEnum):
+    TODO = "todo"
+    IN_PROGRESS = "in_progress"
+    DONE = "done"
+    REVIEWED = "reviewed"
+    REJECTED = "rejected"
+
+
+# Annotations with these statuses count as ground truth for training,
+# studies and scoring.
+FINISHED = (Status.DONE, Status.REVIEWED)
+
+
+class InstanceKind(enum.StrEnum):
+    TACTILE = "tactile"
+    VISUAL = "visual"
+
+
+def _enum(cls):
+    return Enum(cls, native_enum=False, length=20, values_callable=lambda e: [m.value for m in e])
+
+
+class Annotation(Base):
+    """A person's action-object labelling of one frame.
+
+    ``mask_path`` points at the binary PNG of the union of the instances
+    (None while nothing is drawn, or when the frame has no action-object).
+    ``version`` is the optimistic-locking counter: SQLAlchemy adds it to
+    every UPDATE, so a stale writer gets StaleDataError instead of silently
+    overwriting someone else's work.
+    """
+
+    __tablename__ = "annotation"
+    __table_args__ = (UniqueConstraint("frame_id", "author_id"),)
+
+    id: Mapped[int] = mapped_column(primary_key=True)
+    frame_id: Mapped[int] = mapped_column(ForeignKey("frame.id", ondelete="CASCADE"), index=True)
+    author_id: Mapped[int] = mapped_column(ForeignKey("user.id"), index=True)
+    status: Mapped[Status] = mapped_column(_enum(Status), default=Status.TODO, index=True)
+    mask_path: Mapped[str | None] = mapped_column(String(200))
+    no_action_object: Mapped[bool] = mapped_column(default=False)
+    version: Mapped[int] = mapped_column(default=1)
+    time_spent_s: Mapped[float] = mapped_column(Float, default=0.0)
+    review_comment: Mapped[str | None] = mapped_column(Text)
+    created_at: Mapped[datetime] = mapped_column(UTCDateTime(), default=utcnow)
+    updated_at: Mapped[datetime] = mapped_column(UTCDateTime(), default=utcnow, onupdate=utcnow)
+
+    frame: Mapped[Frame] = relationship(back_populates="annotations")
+    author: Mapped[User] = relationship()
+    instances: Mapped[list["Instance"]] = relationship(
+        back_populates="annotation", order_by="Instance.position", cascade="all, delete-orphan", passive_deletes=True
+    )
+
+    __mapper_args__ = {"version_id_col": version}
+
+
+class Instance(Base):
+    """One action-object within an annotation; the frame's mask is their union."""
+
+    __tablename__ = "instance"
+    __table_args__ = (UniqueConstraint("annotation_id", "position"),)
+
+    id: Mapped[int] = mapped_column(primary_key=True)
+    annotation_id: Mapped[int] = mapped_column(ForeignKey("annotation.id", ondelete="CASCADE"), index=True)
+    position: Mapped[int]
+    kind: Mapped[InstanceKind | None] = mapped_column(_enum(InstanceKind))
+    label: Mapped[str | None] = mapped_column(String(120))
+    mask_path: Mapped[str] = mapped_column(String(200))
+
+    annotation: Mapped[Annotation] = relationship(back_populates="instances")

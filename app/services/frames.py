@@ -1,0 +1,120 @@
+"""Browsing the dataset: activities, frame grids, a frame and its media views."""
+
+import os
+import tempfile
+from dataclasses import dataclass
+from pathlib import Path
+
+import cv2
+import numpy as np
+from flask import current_app
+from sqlalchemy import func
+
+from app.extensions import db
+from app.models import Activity, Annotation, Frame, Sequence, Status
+from app.services import media
+from egonet import io
+
+# The status a frame shows is the most advanced of its annotations.
+STATUS_ORDER = [Status.TODO, Status.REJECTED, Status.IN_PROGRESS, Status.DONE, Status.REVIEWED]
+
+
+@dataclass
+class ActivitySummary:
+    activity: Activity
+    frames: int
+    by_status: dict[str, int]
+    cover: Frame | None
+
+
+def frame_statuses(frame_ids: list[int]) -> dict[int, Status]:
+    """The labelling status of each frame (TODO when it has no annotation)."""
+    rows = db.session.execute(
+        db.select(Annotation.frame_id, Annotation.status).where(Annotation.frame_id.in_(frame_ids))
+    ).all()
+    statuses = {fid: Status.TODO for fid in frame_ids}
+    for fid, status in rows:
+        if STATUS_ORDER.index(status) > STATUS_ORDER.index(statuses[fid]):
+            statuses[fid] = status
+    return statuses
+
+
+def activity_summaries() -> list[ActivitySummary]:
+    activities = db.session.execute(db.select(Activity).order_by(Activity.name)).scalars().all()
+    summaries = []
+    for act in activities:
+        ids = list(
+            db.session.execute(
+                db.select(Frame.id).join(Sequence).where(Sequence.activity_id == act.id).order_by(Frame.id)
+            ).scalars()
+        )
+        counts = {s.value: 0 for s in STATUS_ORDER}
+        for status in frame_statuses(ids).values():
+            counts[status.value] += 1
+        cover = db.session.get(Frame, ids[0]) if ids else None
+        summaries.append(ActivitySummary(act, len(ids), counts, cover))
+    return summaries
+
+
+def frame_page(activity: Activity, page: int, per_page: int) -> tuple[list[Frame], int]:
+    """One page of an activity's frames in sequence order, and the number of pages."""
+    query = db.select(Frame).join(Sequence).where(Sequence.activity_id == activity.id)
+    total = db.session.execute(db.select(func.count()).select_from(query.subquery())).scalar_one()
+    frames = (
+        db.session.execute(
+            query.order_by(Sequence.name, Frame.index, Frame.id).limit(per_page).offset((page - 1) * per_page)
+        )
+        .scalars()
+        .all()
+    )
+    return frames, max(1, -(-total // per_page))
+
+
+def neighbours(frame: Frame) -> tuple[int | None, int | None]:
+    """The previous and next frame ids within the frame's activity."""
+    order = db.select(Frame.id).join(Sequence).where(Sequence.activity_id == frame.sequence.activity_id)
+    ids = list(db.session.execute(order.order_by(Sequence.name, Frame.index, Frame.id)).scalars())
+    i = ids.index(frame.id)
+    return (ids[i - 1] if i > 0 else None), (ids[i + 1] if i + 1 < len(ids) else None)
+
+
+def depth_preview(frame: Frame) -> Path:
+    """A colour-mapped PNG of the frame's depth (near = warm), cached on disk."""
+    return _cached(f"depth-{Path(frame.depth_path).stem}.png", lambda: _colour_depth(io.read_depth(media.absolute_path(frame.depth_path))))
+
+
+def thumbnail(frame: Frame, *, width: int = 240) -> Path:
+    """A small JPEG of the frame for grids, cached on disk."""
+
+    def make() -> bytes:
+        rgb = io.read_image(media.absolute_path(frame.rgb_path))
+        h = max(1, round(rgb.shape[0] * width / rgb.shape[1]))
+        small = cv2.resize(rgb, (width, h), interpolation=cv2.INTER_AREA)
+        ok, buf = cv2.imencode(".jpg", cv2.cvtColor(small, cv2.COLOR_RGB2BGR), [cv2.IMWRITE_JPEG_QUALITY, 85])
+        return buf.tobytes()
+
+    return _cached(f"thumb{width}-{frame.content_hash}.jpg", make)
+
+
+def _colour_depth(depth: np.ndarray) -> bytes:
+    valid = depth > 0
+    far = float(np.percentile(depth[valid], 99)) if valid.any() else 1.0
+    scaled = np.clip(depth / max(far, 1e-3), 0, 1)
+    gray = (255 * (1 - scaled)).astype(np.uint8)
+    bgr = cv2.applyColorMap(gray, cv2.COLORMAP_TURBO)
+    bgr[~valid] = 0
+    ok, buf = cv2.imencode(".png", bgr)
+    return buf.tobytes()
+
+
+def _cached(name: str, make) -> Path:
+    """Return a derived file under CACHE_ROOT, making it atomically on first use."""
+    root = Path(current_app.config["CACHE_ROOT"])
+    path = root / name
+    if not path.exists():
+        root.mkdir(parents=True, exist_ok=True)
+        fd, tmp = tempfile.mkstemp(dir=root, prefix=".tmp-")
+        with os.fdopen(fd, "wb") as fh:
+            fh.write(make())
+        os.replace(tmp, path)
+    return path

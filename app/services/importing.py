@@ -1,0 +1,392 @@
+"""Importing frames: folders of images, videos, depth, DHG, intrinsics and masks.
+
+One import is one transaction. Every file is decoded and checked before its
+row is added; media are written atomically under their content hash; if
+anything fails, the transaction is rolled back and the media files this run
+created are removed, so nothing is half-imported. Re-importing the same
+files adds nothing (the RGB file's hash is unique within a sequence).
+"""
+
+import re
+from collections.abc import Callable, Iterable, Iterator
+from dataclasses import dataclass, field
+from pathlib import Path
+
+import cv2
+import numpy as np
+from sqlalchemy.exc import IntegrityError
+
+from app.extensions import db
+from app.models import Activity, Annotation, Frame, Instance, Role, Sequence, Status, User
+from app.services import media
+from egonet import io
+
+# Sub-folders recognised inside an import folder.
+RGB_DIRS = ("rgb", "color", "colour", "images")
+DEPTH_DIRS = ("depth",)
+DHG_DIRS = ("dhg",)
+MASK_DIRS = ("masks", "mask")
+
+
+class ImportProblem(ValueError):
+    """An import that cannot go ahead; the message names the file or option."""
+
+
+@dataclass
+class FrameItem:
+    """One frame ready to be added, whatever its source.
+
+    ``rgb`` is either the original encoded file (bytes, stored as they are) or
+    an array (encoded as PNG). The optional arrays follow ``egonet.io``'s
+    conventions.
+    """
+
+    source_name: str
+    index: int
+    origin: str
+    rgb: bytes | np.ndarray
+    rgb_suffix: str = ".png"
+    timestamp_s: float | None = None
+    depth_m: np.ndarray | None = None
+    dhg: np.ndarray | None = None
+    K: np.ndarray | None = None
+    mask: np.ndarray | None = None
+    meta: dict = field(default_factory=dict)
+
+
+@dataclass
+class ImportReport:
+    activity: str
+    sequence: str
+    added: int = 0
+    skipped: int = 0
+    annotations: int = 0
+
+
+@dataclass
+class Source:
+    """What an import path holds, found by ``discover``."""
+
+    name: str
+    images: list[Path] | None = None
+    video: Path | None = None
+    depth_dir: Path | None = None
+    dhg_dir: Path | None = None
+    masks_dir: Path | None = None
+    intrinsics: Path | None = None
+
+
+def discover(
+    path: Path,
+    *,
+    depth_dir: Path | None = None,
+    dhg_dir: Path | None = None,
+    masks_dir: Path | None = None,
+    intrinsics: Path | None = None,
+) -> Source:
+    """Find the frames and their companions under ``path``.
+
+    ``path`` is a video file, or a folder holding images directly or in a
+    ``rgb``/``color``/``images`` sub-folder, with optional ``depth``,
+    ``dhg`` and ``masks`` sub-folders and one ``*.json`` intrinsics file.
+    Options override what is found.
+    """
+    path = Path(path)
+    if not path.exists():
+        raise ImportProblem(f"{path}: no such file or folder")
+    if path.is_file():
+        if path.suffix.lower() not in io.VIDEO_SUFFIXES:
+            raise ImportProblem(
+                f"{path}: unknown format {path.suffix!r} (give a folder of images or a video: "
+                f"{', '.join(io.VIDEO_SUFFIXES)})"
+            )
+        source = Source(name=path.stem, video=path)
+    else:
+        image_dir = next((path / d for d in RGB_DIRS if (path / d).is_dir()), path)
+        source = Source(name=path.name, images=_list_images(image_dir))
+        source.depth_dir = _subdir(path, DEPTH_DIRS)
+        source.dhg_dir = _subdir(path, DHG_DIRS)
+        source.masks_dir = _subdir(path, MASK_DIRS)
+        jsons = sorted(p for p in path.glob("*.json") if not p.name.startswith("."))
+        if len(jsons) > 1 and intrinsics is None:
+            raise ImportProblem(f"{path}: several JSON files {[p.name for p in jsons]}; name the intrinsics with --intrinsics")
+        source.intrinsics = jsons[0] if jsons else None
+    for attr, value in (("depth_dir", depth_dir), ("dhg_dir", dhg_dir), ("masks_dir", masks_dir)):
+        if value is not None:
+            if not Path(value).is_dir():
+                raise ImportProblem(f"{value}: not a folder (--{attr.replace('_dir', '')})")
+            setattr(source, attr, Path(value))
+    if intrinsics is not None:
+        if not Path(intrinsics).is_file():
+            raise ImportProblem(f"{intrinsics}: no such file (--intrinsics)")
+        source.intrinsics = Path(intrinsics)
+    return source
+
+
+def import_path(
+    path: Path,
+    *,
+    activity: str,
+    sequence: str | None = None,
+    stride: int = 1,
+    depth_dir: Path | None = None,
+    dhg_dir: Path | None = None,
+    masks_dir: Path | None = None,
+    intrinsics: Path | None = None,
+    mask_author: str = "import",
+    mask_status: Status = Status.DONE,
+    on_start: Callable[[int], None] | None = None,
+    on_progress: Callable[[int], None] | None = None,
+) -> ImportReport:
+    """Import a folder of images or a video (see ``discover``) in one transaction.
+
+    Depth, DHG and mask files are matched to frames by file stem (for a
+    video, by the frame number: ``12.png`` or ``000012.png`` is frame 12).
+
+    Raises:
+        ImportProblem: bad options or layout, naming the option or path.
+        egonet.io.MediaError: a file that cannot be used, naming the file.
+    """
+    if stride < 1:
+        raise ImportProblem(f"--stride must be >= 1, got {stride}")
+    source = discover(path, depth_dir=depth_dir, dhg_dir=dhg_dir, masks_dir=masks_dir, intrinsics=intrinsics)
+    K = io.read_intrinsics(source.intrinsics) if source.intrinsics else None
+    companions = {
+        "depth": _by_stem(source.depth_dir, io.DEPTH_SUFFIXES),
+        "dhg": _by_stem(source.dhg_dir, io.IMAGE_SUFFIXES),
+        "mask": _by_stem(source.masks_dir, (".png",)),
+    }
+    if source.video is not None:
+        total, frames = _video_frames(source.video, stride)
+        companions = {kind: {_frame_number(stem): p for stem, p in found.items()} for kind, found in companions.items()}
+    else:
+        kept = source.images[::stride]
+        total = len(kept)
+        frames = ((p.stem, str(p), i * stride, io.read_bytes(p), p.suffix.lower(), None) for i, p in enumerate(kept))
+        if total == 0:
+            raise ImportProblem(f"{path}: no images (jpg/png) found")
+
+    def items() -> Iterator[FrameItem]:
+        for stem, origin, index, data, suffix, timestamp in frames:
+            key = index if source.video is not None else stem
+            item = FrameItem(stem, index, origin, rgb=data, rgb_suffix=suffix, timestamp_s=timestamp, K=K)
+            if (p := companions["depth"].get(key)) is not None:
+                item.depth_m = io.read_depth(p)
+                item.meta["depth_file"] = p.name
+            if (p := companions["dhg"].get(key)) is not None:
+                item.dhg = io.read_dhg(p)
+            if (p := companions["mask"].get(key)) is not None:
+                item.mask = io.read_mask(p)
+            yield item
+
+    if on_start:
+        on_start(total)
+    return add_frames(
+        activity=activity,
+        sequence=sequence or source.name,
+        items=items(),
+        source=str(path),
+        mask_author=mask_author,
+        mask_status=mask_status,
+        on_progress=on_progress,
+    )
+
+
+def add_frames(
+    *,
+    activity: str,
+    sequence: str,
+    items: Iterable[FrameItem],
+    source: str | None = None,
+    mask_author: str = "import",
+    mask_status: Status = Status.DONE,
+    on_progress: Callable[[int], None] | None = None,
+) -> ImportReport:
+    """Add frames to ``activity``/``sequence`` in one transaction (see module doc)."""
+    activity = activity.strip()
+    sequence = sequence.strip()
+    if not activity:
+        raise ImportProblem("--activity must not be empty")
+    if not sequence:
+        raise ImportProblem("--sequence must not be empty")
+    report = ImportReport(activity=activity, sequence=sequence)
+    written: list[Path] = []
+    try:
+        act = db.session.execute(db.select(Activity).filter_by(name=activity)).scalar_one_or_none()
+        if act is None:
+            act = Activity(name=activity)
+            db.session.add(act)
+        seq = None
+        if act.id is not None:
+            seq = db.session.execute(db.select(Sequence).filter_by(activity_id=act.id, name=sequence)).scalar_one_or_none()
+        if seq is None:
+            seq = Sequence(activity=act, name=sequence, source=source)
+            db.session.add(seq)
+            db.session.flush()
+        known = set(db.session.execute(db.select(Frame.content_hash).filter_by(sequence_id=seq.id)).scalars())
+        author = None
+        for item in items:
+            frame = _add_frame(seq, item, known, written)
+            if frame is None:
+                report.skipped += 1
+            else:
+                report.added += 1
+                if item.mask is not None:
+                    author = author or _system_user(mask_author)
+                    _add_mask_annotation(frame, item, author, mask_status, written)
+                    report.annotations += 1
+            if on_progress:
+                on_progress(1)
+        db.session.commit()
+    except BaseException:
+        db.session.rollback()
+        for path in written:
+            path.unlink(missing_ok=True)
+        raise
+    return report
+
+
+def _add_frame(seq: Sequence, item: FrameItem, known: set[str], written: list[Path]) -> Frame | None:
+    name = item.source_name
+    if isinstance(item.rgb, np.ndarray):
+        rgb = item.rgb
+        data, suffix = io.encode_png(rgb), ".png"
+    else:
+        data, suffix = item.rgb, item.rgb_suffix
+        rgb = io.decode_image(data, path=item.origin)
+    digest = media.sha256(data)
+    if digest in known:
+        return None
+    known.add(digest)
+    height, width = rgb.shape[:2]
+    frame = Frame(
+        sequence=seq,
+        index=item.index,
+        timestamp_s=item.timestamp_s,
+        source_name=name,
+        width=width,
+        height=height,
+        content_hash=digest,
+        rgb_path=media.store(data, suffix, written=written),
+        meta=dict(item.meta),
+    )
+    if item.K is not None:
+        frame.fx, frame.fy = float(item.K[0, 0]), float(item.K[1, 1])
+        frame.cx, frame.cy = float(item.K[0, 2]), float(item.K[1, 2])
+    if item.depth_m is not None:
+        _check_size(item.depth_m, rgb, f"depth for {item.origin}")
+        frame.depth_path = media.store(io.encode_depth_png(item.depth_m), ".png", written=written)
+    dhg = item.dhg
+    if dhg is None and item.depth_m is not None and item.K is not None:
+        from egonet.dhg import dhg_from_depth
+
+        dhg = dhg_from_depth(item.depth_m, item.K, rgb)
+    if dhg is not None:
+        _check_size(dhg, rgb, f"DHG for {item.origin}")
+        frame.dhg_path = media.store(io.encode_png(dhg), ".png", written=written)
+    if item.mask is not None:
+        _check_size(item.mask, rgb, f"mask for {item.origin}")
+    db.session.add(frame)
+    return frame
+
+
+def _add_mask_annotation(frame: Frame, item: FrameItem, author: User, status: Status, written: list[Path]) -> None:
+    path = media.store(io.encode_png(item.mask), ".png", written=written)
+    empty = not item.mask.any()
+    annotation = Annotation(
+        frame=frame,
+        author=author,
+        status=status,
+        mask_path=None if empty else path,
+        no_action_object=empty,
+    )
+    if not empty:
+        kind = item.meta.get("kind")
+        annotation.instances.append(Instance(position=0, kind=kind, label=item.meta.get("object"), mask_path=path))
+    db.session.add(annotation)
+
+
+def _system_user(name: str) -> User:
+    """The author of imported masks: an annotator account without a password."""
+    user = db.session.execute(db.select(User).filter_by(username=name)).scalar_one_or_none()
+    if user is None:
+        user = User(username=name, role=Role.ANNOTATOR, password_hash=None, active=False)
+        db.session.add(user)
+        try:
+            with db.session.begin_nested():
+                db.session.flush()
+        except IntegrityError:  # created concurrently by another import
+            user = db.session.execute(db.select(User).filter_by(username=name)).scalar_one()
+    return user
+
+
+def _check_size(array: np.ndarray, rgb: np.ndarray, what: str) -> None:
+    if array.shape[:2] != rgb.shape[:2]:
+        h, w = array.shape[:2]
+        raise io.MediaError(what, f"size {w}x{h} does not match the frame's {rgb.shape[1]}x{rgb.shape[0]}")
+
+
+def _video_frames(path: Path, stride: int) -> tuple[int, Iterator]:
+    capture = cv2.VideoCapture(str(path))
+    if not capture.isOpened():
+        raise io.MediaError(path, "cannot open the video (corrupt or unsupported codec)")
+    count = int(capture.get(cv2.CAP_PROP_FRAME_COUNT))
+    fps = capture.get(cv2.CAP_PROP_FPS) or 0.0
+
+    def frames():
+        index = 0
+        try:
+            while True:
+                ok, bgr = capture.read()
+                if not ok:
+                    break
+                if index % stride == 0:
+                    rgb = cv2.cvtColor(bgr, cv2.COLOR_BGR2RGB)
+                    name = f"{path.stem}#{index}"
+                    yield name, f"{path} frame {index}", index, rgb, ".png", (index / fps if fps > 0 else None)
+                index += 1
+        finally:
+            capture.release()
+        if index == 0:
+            raise io.MediaError(path, "no frames could be decoded")
+
+    return max(0, -(-count // stride)), frames()
+
+
+def _list_images(folder: Path) -> list[Path]:
+    files = []
+    for p in sorted(folder.iterdir(), key=lambda p: _natural_key(p.name)):
+        if p.name.startswith(".") or p.is_dir() or p.suffix.lower() == ".json":
+            continue
+        if p.suffix.lower() not in io.IMAGE_SUFFIXES:
+            raise io.MediaError(p, f"unknown format {p.suffix!r} in an image folder (use {', '.join(io.IMAGE_SUFFIXES)})")
+        files.append(p)
+    return files
+
+
+def _by_stem(folder: Path | None, suffixes: tuple[str, ...]) -> dict[str, Path]:
+    if folder is None:
+        return {}
+    found: dict[str, Path] = {}
+    for p in sorted(folder.iterdir()):
+        if p.name.startswith(".") or p.is_dir():
+            continue
+        if p.suffix.lower() not in suffixes:
+            raise io.MediaError(p, f"unknown format {p.suffix!r} (use {', '.join(suffixes)})")
+        if p.stem in found:
+            raise io.MediaError(p, f"two files with the stem {p.stem!r} ({found[p.stem].name})")
+        found[p.stem] = p
+    return found
+
+
+def _frame_number(stem: str) -> int | None:
+    match = re.fullmatch(r"\D*?(\d+)", stem)
+    return int(match.group(1)) if match else None
+
+
+def _natural_key(name: str) -> list:
+    return [int(part) if part.isdigit() else part.lower() for part in re.split(r"(\d+)", name)]
+
+
+def _subdir(folder: Path, names: tuple[str, ...]) -> Path | None:
+    return next((folder / n for n in names if (folder / n).is_dir()), None)

@@ -1,0 +1,42 @@
+"""User accounts."""
+
+import secrets
+
+from werkzeug.security import generate_password_hash
+
+from app.extensions import db
+from app.models import Role, User
+
+
+class UserProblem(ValueError):
+    """A user that cannot be created, with the reason."""
+
+
+def create_user(username: str, role: Role | str, password: str | None = None) -> tuple[User, str | None]:
+    """Create a user; return it and the generated password (None when one was given).
+
+    Passwords are hashed with Werkzeug's scrypt. Participants have no
+    password: they enter through their study code.
+    """
+    username = username.strip()
+    if not username or len(username) > 80:
+        raise UserProblem("NAME must be 1-80 characters")
+    try:
+        role = Role(role)
+    except ValueError:
+        raise UserProblem(f"unknown role {role!r}; use one of {', '.join(r.value for r in Role)}") from None
+    if db.session.execute(db.select(User.id).filter_by(username=username)).first():
+        raise UserProblem(f"a user named {username!r} already exists")
+    generated = None
+    if role is Role.PARTICIPANT:
+        password_hash = None
+    else:
+        if not password:
+            password = generated = secrets.token_urlsafe(12)
+        if len(password) < 8:
+            raise UserProblem("the password must have at least 8 characters")
+        password_hash = generate_password_hash(password)
+    user = User(username=username, role=role, password_hash=password_hash)
+    db.session.add(user)
+    db.session.commit()
+    return user, generated

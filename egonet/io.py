@@ -1,0 +1,207 @@
+"""Reading and writing the media of a frame: RGB, depth, DHG, masks, intrinsics.
+
+Every reader takes a path and returns an array; every failure raises
+``MediaError`` whose message names the file and the reason, so an import can
+stop with a one-line explanation.
+
+Conventions:
+    * RGB images are uint8 (H, W, 3) in RGB order.
+    * Depth is float32 (H, W) metres along the optical axis, 0 where missing.
+      On disk: 16-bit PNG in millimetres, or ``.npy`` / ``.npz`` in metres.
+    * DHG images are uint8 (H, W, 3): depth, height, grayscale.
+    * Masks are bool (H, W). On disk: a PNG whose pixels are 0 or one other
+      value (0/1 or 0/255).
+    * Intrinsics are the 3x3 camera matrix K (float64).
+"""
+
+import json
+from pathlib import Path
+
+import cv2
+import numpy as np
+
+IMAGE_SUFFIXES = (".jpg", ".jpeg", ".png")
+VIDEO_SUFFIXES = (".mp4", ".avi", ".mov")
+DEPTH_SUFFIXES = (".png", ".npy", ".npz")
+
+
+class MediaError(ValueError):
+    """A media file that cannot be used, with the file named in the message."""
+
+    def __init__(self, path: str | Path, reason: str):
+        self.path = str(path)
+        self.reason = reason
+        super().__init__(f"{path}: {reason}")
+
+
+def decode_image(data: bytes, *, path: str | Path = "<bytes>") -> np.ndarray:
+    """Decode encoded image bytes (JPEG or PNG) into RGB uint8 (H, W, 3)."""
+    buf = np.frombuffer(data, np.uint8)
+    image = cv2.imdecode(buf, cv2.IMREAD_UNCHANGED) if buf.size else None
+    if image is None:
+        raise MediaError(path, "not a readable image (corrupt or unknown format)")
+    if image.dtype != np.uint8:
+        raise MediaError(path, f"expected an 8-bit image, got {image.dtype}")
+    if image.ndim == 2:
+        image = cv2.cvtColor(image, cv2.COLOR_GRAY2RGB)
+    elif image.shape[2] == 4:
+        image = cv2.cvtColor(image, cv2.COLOR_BGRA2RGB)
+    else:
+        image = cv2.cvtColor(image, cv2.COLOR_BGR2RGB)
+    return np.ascontiguousarray(image)
+
+
+def read_image(path: str | Path) -> np.ndarray:
+    """Read a JPEG or PNG file as RGB uint8 (H, W, 3)."""
+    path = Path(path)
+    if path.suffix.lower() not in IMAGE_SUFFIXES:
+        raise MediaError(path, f"unknown image format {path.suffix!r} (use {', '.join(IMAGE_SUFFIXES)})")
+    return decode_image(read_bytes(path), path=path)
+
+
+def encode_png(image: np.ndarray) -> bytes:
+    """Encode an RGB uint8 (H, W, 3), a gray uint8/uint16 (H, W) or a bool (H, W) array as PNG bytes."""
+    if image.dtype == bool:
+        image = image.astype(np.uint8) * 255
+    if image.ndim == 3:
+        image = cv2.cvtColor(image, cv2.COLOR_RGB2BGR)
+    ok, buf = cv2.imencode(".png", image)
+    if not ok:
+        raise ValueError("image: could not encode as PNG")
+    return buf.tobytes()
+
+
+def read_depth(path: str | Path) -> np.ndarray:
+    """Read a depth map as float32 metres (H, W), 0 where missing.
+
+    16-bit PNGs hold millimetres; ``.npy`` and ``.npz`` (the ``depth`` array,
+    or the only one) hold metres. NaN and negative values become 0.
+    """
+    path = Path(path)
+    suffix = path.suffix.lower()
+    if suffix == ".png":
+        raw = cv2.imdecode(np.frombuffer(read_bytes(path), np.uint8), cv2.IMREAD_UNCHANGED)
+        if raw is None:
+            raise MediaError(path, "not a readable PNG (corrupt?)")
+        if raw.dtype != np.uint16 or raw.ndim != 2:
+            raise MediaError(path, f"depth PNG must be single-channel 16-bit millimetres, got {raw.dtype} {raw.shape}")
+        return raw.astype(np.float32) / 1000.0
+    if suffix in (".npy", ".npz"):
+        try:
+            loaded = np.load(path, allow_pickle=False)
+        except Exception as exc:  # numpy raises many kinds for bad files
+            raise MediaError(path, f"not a readable numpy file ({exc})") from None
+        if isinstance(loaded, np.lib.npyio.NpzFile):
+            with loaded:
+                keys = list(loaded.keys())
+                if "depth" in keys:
+                    depth = loaded["depth"]
+                elif len(keys) == 1:
+                    depth = loaded[keys[0]]
+                else:
+                    raise MediaError(path, f"npz holds {keys}; name the depth array 'depth'")
+        else:
+            depth = loaded
+        if depth.ndim != 2 or depth.dtype.kind not in "fiu":
+            raise MediaError(path, f"depth must be a 2-D numeric array in metres, got {depth.dtype} {depth.shape}")
+        depth = depth.astype(np.float32)
+        depth[~np.isfinite(depth) | (depth < 0)] = 0.0
+        return depth
+    raise MediaError(path, f"unknown depth format {path.suffix!r} (use {', '.join(DEPTH_SUFFIXES)})")
+
+
+def encode_depth_png(depth_m: np.ndarray) -> bytes:
+    """Encode depth in metres as a 16-bit PNG in millimetres (0 = missing)."""
+    depth = np.nan_to_num(np.asarray(depth_m, np.float64), nan=0.0)
+    mm = np.clip(np.round(depth * 1000.0), 0, 65535).astype(np.uint16)
+    return encode_png(mm)
+
+
+def read_dhg(path: str | Path) -> np.ndarray:
+    """Read a DHG image as uint8 (H, W, 3) in (depth, height, gray) channel order.
+
+    The file stores the channels in that order as an ordinary RGB image.
+    """
+    image = cv2.imdecode(np.frombuffer(read_bytes(Path(path)), np.uint8), cv2.IMREAD_UNCHANGED)
+    if image is None:
+        raise MediaError(path, "not a readable image (corrupt or unknown format)")
+    if image.dtype != np.uint8 or image.ndim != 3 or image.shape[2] != 3:
+        raise MediaError(path, f"DHG must be a 3-channel 8-bit image, got {image.dtype} {image.shape}")
+    return cv2.cvtColor(image, cv2.COLOR_BGR2RGB)
+
+
+def read_mask(path: str | Path) -> np.ndarray:
+    """Read a binary mask PNG as bool (H, W); pixels are 0 or one other value."""
+    path = Path(path)
+    return decode_mask(read_bytes(path), path=path)
+
+
+def decode_mask(data: bytes, *, path: str | Path = "<bytes>") -> np.ndarray:
+    """Decode binary mask PNG bytes into bool (H, W)."""
+    raw = cv2.imdecode(np.frombuffer(data, np.uint8), cv2.IMREAD_UNCHANGED) if data else None
+    if raw is None:
+        raise MediaError(path, "not a readable PNG (corrupt?)")
+    if raw.ndim == 3:
+        if not (raw == raw[..., :1]).all():
+            raise MediaError(path, "mask must be grayscale (0 and one other value)")
+        raw = raw[..., 0]
+    values = np.unique(raw)
+    if len(values) > 2 or (len(values) == 2 and values[0] != 0):
+        raise MediaError(path, f"mask must be binary (0 and one other value), found values {values[:6].tolist()}")
+    return raw > 0
+
+
+def parse_intrinsics(data: object, *, path: str | Path = "<json>") -> np.ndarray:
+    """Parse camera intrinsics from decoded JSON into a 3x3 matrix K.
+
+    Accepted forms:
+        * ``{"fx": .., "fy": .., "cx": .., "cy": ..}``
+        * ``{"K": [[..], [..], [..]]}`` or a bare 3x3 nested list
+        * ``{"intrinsic_matrix": [9 numbers]}`` (Open3D's column-major form) or
+          a flat list of 9 numbers in row-major or column-major order (told
+          apart by where the principal point sits).
+    """
+    try:
+        if isinstance(data, dict) and {"fx", "fy", "cx", "cy"} <= data.keys():
+            fx, fy, cx, cy = (float(data[k]) for k in ("fx", "fy", "cx", "cy"))
+            K = np.array([[fx, 0, cx], [0, fy, cy], [0, 0, 1]], np.float64)
+        else:
+            if isinstance(data, dict):
+                for key in ("K", "intrinsic_matrix", "camera_matrix", "intrinsics"):
+                    if key in data:
+                        data = data[key]
+                        break
+                else:
+                    raise MediaError(path, "intrinsics JSON needs fx, fy, cx, cy or a 3x3 matrix 'K'")
+            K = np.asarray(data, np.float64)
+            if K.shape == (9,):
+                # Column-major puts cx, cy at 6, 7 and zeros at 2, 5.
+                K = K.reshape(3, 3).T if (K[2] == 0 and K[5] == 0 and K[6] != 0) else K.reshape(3, 3)
+    except (TypeError, ValueError) as exc:
+        if isinstance(exc, MediaError):
+            raise
+        raise MediaError(path, f"intrinsics are not numbers ({exc})") from None
+    if K.shape != (3, 3):
+        raise MediaError(path, f"intrinsics must be a 3x3 matrix, got shape {K.shape}")
+    if not np.isfinite(K).all() or K[0, 0] <= 0 or K[1, 1] <= 0 or not np.allclose(K[2], [0, 0, 1]):
+        raise MediaError(path, "intrinsics must have fx, fy > 0 and a last row of 0 0 1")
+    return K
+
+
+def read_intrinsics(path: str | Path) -> np.ndarray:
+    """Read a JSON intrinsics file (see ``parse_intrinsics``) into K (3, 3)."""
+    path = Path(path)
+    try:
+        data = json.loads(read_bytes(path))
+    except (UnicodeDecodeError, json.JSONDecodeError) as exc:
+        raise MediaError(path, f"not valid JSON ({exc})") from None
+    return parse_intrinsics(data, path=path)
+
+
+def read_bytes(path: str | Path) -> bytes:
+    """Read a file's bytes; a failure raises MediaError naming the file."""
+    path = Path(path)
+    try:
+        return path.read_bytes()
+    except OSError as exc:
+        raise MediaError(path, f"cannot read ({exc.strerror or exc})") from None

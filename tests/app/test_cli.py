@@ -1,0 +1,90 @@
+import numpy as np
+from werkzeug.security import check_password_hash
+
+from app.extensions import db
+from app.models import Frame, Role, User
+from tests.app.factories import image_folder
+
+
+def test_import_command_reports_and_is_idempotent(runner, tmp_path):
+    folder = image_folder(tmp_path / "rec", n=3)
+    result = runner.invoke(args=["egonet", "import", str(folder), "--activity", "cooking", "--sequence", "take1"])
+    assert result.exit_code == 0, result.output
+    assert "cooking / take1: 3 frames added, 0 already present" in result.output
+    result = runner.invoke(args=["egonet", "import", str(folder), "--activity", "cooking", "--sequence", "take1"])
+    assert "0 frames added, 3 already present" in result.output
+    assert len(db.session.execute(db.select(Frame)).all()) == 3
+
+
+def test_import_command_fails_with_one_line_naming_the_file(runner, tmp_path):
+    folder = image_folder(tmp_path / "rec", n=2)
+    (folder / "rgb" / "00001.png").write_bytes(b"garbage")
+    result = runner.invoke(args=["egonet", "import", str(folder), "--activity", "cooking"])
+    assert result.exit_code != 0
+    errors = [line for line in result.output.splitlines() if line.startswith("Error:")]
+    assert len(errors) == 1 and "00001.png" in errors[0]
+    assert "Traceback" not in result.output
+    assert db.session.execute(db.select(Frame)).first() is None
+
+
+def test_import_command_validates_options(runner, tmp_path):
+    result = runner.invoke(args=["egonet", "import", str(tmp_path), "--activity", "x", "--stride", "0"])
+    assert result.exit_code == 2 and "--stride" in result.output
+    result = runner.invoke(args=["egonet", "import", str(tmp_path / "nope"), "--activity", "x"])
+    assert result.exit_code == 1 and "no such file" in result.output
+
+
+def test_create_user_with_password_and_generated(runner):
+    result = runner.invoke(args=["egonet", "create-user", "ana", "--role", "annotator", "--password", "s3cret-pass"])
+    assert result.exit_code == 0, result.output
+    ana = db.session.execute(db.select(User).filter_by(username="ana")).scalar_one()
+    assert ana.role is Role.ANNOTATOR
+    assert check_password_hash(ana.password_hash, "s3cret-pass")
+
+    result = runner.invoke(args=["egonet", "create-user", "boss", "--role", "admin"])
+    generated = result.output.split("password: ")[1].strip()
+    boss = db.session.execute(db.select(User).filter_by(username="boss")).scalar_one()
+    assert check_password_hash(boss.password_hash, generated)
+
+
+def test_create_user_errors(runner):
+    runner.invoke(args=["egonet", "create-user", "ana", "--role", "annotator", "--password", "s3cret-pass"])
+    result = runner.invoke(args=["egonet", "create-user", "ana", "--role", "reviewer", "--password", "another-pass"])
+    assert result.exit_code == 1 and "already exists" in result.output
+    result = runner.invoke(args=["egonet", "create-user", "bob", "--role", "wizard"])
+    assert result.exit_code == 2 and "--role" in result.output
+    result = runner.invoke(args=["egonet", "create-user", "bob", "--role", "admin", "--password", "short"])
+    assert result.exit_code == 1 and "at least 8" in result.output
+
+
+def test_demo_command_creates_reviewed_ground_truth(runner):
+    args = ["egonet", "demo", "--frames-per-activity", "2", "--width", "96", "--height", "72", "--seed", "3"]
+    result = runner.invoke(args=args)
+    assert result.exit_code == 0, result.output
+    assert "demo: 14 frames added" in result.output
+    from app.models import Annotation, Status
+    from app.services import media
+    from egonet import io
+
+    anns = db.session.execute(db.select(Annotation)).scalars().all()
+    assert len(anns) == 14
+    assert {a.status for a in anns} == {Status.REVIEWED}
+    assert {a.author.username for a in anns} == {"demo"}
+    for a in anns:
+        mask = io.read_mask(media.absolute_path(a.mask_path))
+        depth = io.read_depth(media.absolute_path(a.frame.depth_path))
+        assert mask.any() and (depth[mask] > 0).all()
+        assert a.frame.dhg_path is not None and a.frame.fx is not None
+    # Same seed again: nothing new.
+    result = runner.invoke(args=args)
+    assert "demo: 0 frames added, 14 already present" in result.output
+
+
+def test_demo_frames_match_the_renderer(runner):
+    from app.services import media
+    from egonet import io, synth
+
+    runner.invoke(args=["egonet", "demo", "--frames-per-activity", "1", "--width", "64", "--height", "48"])
+    frame = db.session.execute(db.select(Frame).filter_by(source_name="cooking-0-0000")).scalar_one()
+    expected = synth.render_frame("cooking", 0, seed=0, width=64, height=48)
+    np.testing.assert_array_equal(io.read_image(media.absolute_path(frame.rgb_path)), expected.rgb)

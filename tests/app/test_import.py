@@ -1,0 +1,186 @@
+import json
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from app.extensions import db
+from app.models import Activity, Annotation, Frame, Status
+from app.services import media
+from app.services.importing import ImportProblem, import_path
+from egonet import io
+from tests.app.factories import image_folder, rgb_image, video_file
+
+SHARED = Path(__file__).resolve().parents[2].parent / "shared" / "data"
+
+
+def frames():
+    return db.session.execute(db.select(Frame).order_by(Frame.index)).scalars().all()
+
+
+def media_files(app) -> list[Path]:
+    root = Path(app.config["MEDIA_ROOT"])
+    return sorted(p for p in root.rglob("*") if p.is_file()) if root.exists() else []
+
+
+def test_folder_import_stores_content_addressed_media(app, tmp_path):
+    folder = image_folder(tmp_path / "rec", n=4)
+    report = import_path(folder, activity="cooking")
+    assert (report.added, report.skipped, report.sequence) == (4, 0, "rec")
+    fs = frames()
+    assert [f.index for f in fs] == [0, 1, 2, 3]
+    for i, f in enumerate(fs):
+        assert (f.width, f.height) == (64, 48)
+        data = media.read(f.rgb_path)
+        assert media.sha256(data) == f.content_hash
+        assert f.rgb_path == f"{f.content_hash[:2]}/{f.content_hash}.png"
+        np.testing.assert_array_equal(io.decode_image(data), rgb_image(i))
+    assert not [p for p in media_files(app) if p.name.startswith(".tmp")]
+
+
+def test_reimport_adds_nothing(app, tmp_path):
+    folder = image_folder(tmp_path / "rec", n=3)
+    import_path(folder, activity="cooking")
+    again = import_path(folder, activity="cooking")
+    assert (again.added, again.skipped) == (0, 3)
+    assert len(frames()) == 3
+
+
+def test_stride_keeps_every_nth_image(app, tmp_path):
+    folder = image_folder(tmp_path / "rec", n=7)
+    import_path(folder, activity="cooking", stride=3)
+    assert [f.index for f in frames()] == [0, 3, 6]
+
+
+def test_video_import_with_stride(app, tmp_path):
+    path = video_file(tmp_path / "walk.avi", n=10)
+    report = import_path(path, activity="hotel", stride=4)
+    assert (report.added, report.sequence) == (3, "walk")
+    fs = frames()
+    assert [f.index for f in fs] == [0, 4, 8]
+    assert fs[1].timestamp_s == pytest.approx(0.4)
+    assert len({f.content_hash for f in fs}) == 3
+
+
+def test_depth_is_paired_by_stem_and_dhg_computed_with_intrinsics(app, tmp_path):
+    folder = image_folder(tmp_path / "rec", n=2, depth=True, intrinsics=True)
+    import_path(folder, activity="desk work")
+    for i, f in enumerate(frames()):
+        assert (f.fx, f.fy, f.cx, f.cy) == (50.0, 50.0, 32.0, 24.0)
+        depth = io.read_depth(media.absolute_path(f.depth_path))
+        assert depth[0, 0] == 0.0
+        assert depth[5, 5] == pytest.approx(1.0 + 0.25 * i, abs=1e-3)
+        dhg = io.read_dhg(media.absolute_path(f.dhg_path))
+        assert dhg.shape == (48, 64, 3)
+
+
+def test_npy_depth_and_given_dhg(app, tmp_path):
+    folder = image_folder(tmp_path / "rec", n=1)
+    (folder / "depth").mkdir()
+    np.save(folder / "depth" / "00000.npy", np.full((48, 64), 2.5, np.float32))
+    (folder / "dhg").mkdir()
+    dhg = rgb_image(99)
+    (folder / "dhg" / "00000.png").write_bytes(io.encode_png(dhg))
+    import_path(folder, activity="grocery")
+    (f,) = frames()
+    assert io.read_depth(media.absolute_path(f.depth_path))[3, 3] == pytest.approx(2.5)
+    np.testing.assert_array_equal(io.read_dhg(media.absolute_path(f.dhg_path)), dhg)
+
+
+def test_masks_become_annotations(app, tmp_path):
+    folder = image_folder(tmp_path / "rec", n=2, masks=True)
+    report = import_path(folder, activity="dining", mask_author="wearer", mask_status=Status.REVIEWED)
+    assert report.annotations == 2
+    anns = db.session.execute(db.select(Annotation)).scalars().all()
+    assert {a.author.username for a in anns} == {"wearer"}
+    assert {a.status for a in anns} == {Status.REVIEWED}
+    mask = io.read_mask(media.absolute_path(anns[0].mask_path))
+    assert mask.sum() == 10 * 25 or mask.sum() == 10 * 24
+    assert len(anns[0].instances) == 1
+
+
+def assert_nothing_imported(app):
+    assert db.session.execute(db.select(Frame)).first() is None
+    assert db.session.execute(db.select(Activity)).first() is None
+    assert media_files(app) == []
+
+
+def test_corrupt_image_stops_and_names_the_file(app, tmp_path):
+    folder = image_folder(tmp_path / "rec", n=4)
+    bad = folder / "rgb" / "00002.png"
+    bad.write_bytes(bad.read_bytes()[:40])  # truncated
+    with pytest.raises(io.MediaError, match="00002.png"):
+        import_path(folder, activity="cooking")
+    assert_nothing_imported(app)
+
+
+def test_depth_size_mismatch_stops_and_names_the_file(app, tmp_path):
+    folder = image_folder(tmp_path / "rec", n=3, depth=True)
+    (folder / "depth" / "00001.png").write_bytes(io.encode_depth_png(np.ones((10, 10), np.float32)))
+    with pytest.raises(io.MediaError, match=r"00001\.png.*10x10 does not match the frame's 64x48"):
+        import_path(folder, activity="cooking")
+    assert_nothing_imported(app)
+
+
+def test_failed_reimport_keeps_earlier_frames_and_media(app, tmp_path):
+    folder = image_folder(tmp_path / "rec", n=2)
+    import_path(folder, activity="cooking")
+    before = media_files(app)
+    (folder / "rgb" / "00009.png").write_bytes(b"not an image")
+    with pytest.raises(io.MediaError, match="00009.png"):
+        import_path(folder, activity="cooking")
+    assert len(frames()) == 2
+    assert media_files(app) == before
+
+
+@pytest.mark.parametrize(
+    "make, message",
+    [
+        (lambda d: (d / "rgb" / "notes.txt").write_text("hi"), "unknown format '.txt'"),
+        (lambda d: (d / "depth").mkdir() or (d / "depth" / "00000.tiff").write_bytes(b"x"), "unknown format '.tiff'"),
+        (lambda d: (d / "camera.json").write_text(json.dumps({"fx": 1})), "camera.json"),
+    ],
+)
+def test_unknown_formats_and_bad_intrinsics_are_refused(app, tmp_path, make, message):
+    folder = image_folder(tmp_path / "rec", n=2)
+    make(folder)
+    with pytest.raises(ValueError, match=message):
+        import_path(folder, activity="cooking")
+    assert_nothing_imported(app)
+
+
+def test_bad_paths_and_options(app, tmp_path):
+    with pytest.raises(ImportProblem, match="no such file"):
+        import_path(tmp_path / "missing", activity="x")
+    (tmp_path / "clip.mkv").write_bytes(b"x")
+    with pytest.raises(ImportProblem, match="unknown format '.mkv'"):
+        import_path(tmp_path / "clip.mkv", activity="x")
+    (tmp_path / "broken.mp4").write_bytes(b"not a video")
+    with pytest.raises(io.MediaError, match="broken.mp4"):
+        import_path(tmp_path / "broken.mp4", activity="x")
+    (tmp_path / "empty").mkdir()
+    with pytest.raises(ImportProblem, match="no images"):
+        import_path(tmp_path / "empty", activity="x")
+    with pytest.raises(ImportProblem, match="--stride"):
+        import_path(tmp_path / "empty", activity="x", stride=0)
+    assert_nothing_imported(app)
+
+
+@pytest.mark.skipif(not (SHARED / "rgbd-primesense").exists(), reason="shared data not present")
+def test_real_rgbd_frames(app):
+    report = import_path(SHARED / "rgbd-primesense", activity="room")
+    assert report.added == 3
+    f = frames()[0]
+    assert (f.width, f.height, f.fx, f.cx) == (640, 480, 525.0, 319.5)
+    depth = io.read_depth(media.absolute_path(f.depth_path))
+    assert 0.3 < np.median(depth[depth > 0]) < 5.0
+    assert f.dhg_path is not None
+
+
+@pytest.mark.skipif(not (SHARED / "egonet-samples").exists(), reason="shared data not present")
+def test_real_egonet_samples_pair_rgb_and_dhg(app):
+    report = import_path(SHARED / "egonet-samples", activity="samples")
+    assert report.added == 3
+    for f in frames():
+        assert f.dhg_path is not None and f.depth_path is None
+        assert (f.width, f.height) == (514, 386)
