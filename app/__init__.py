@@ -41,6 +41,7 @@ def create_app(test_config: dict | None = None) -> Flask:
         SESSION_COOKIE_SAMESITE="Lax",
         WTF_CSRF_HEADERS=["X-CSRFToken", "X-CSRF-Token"],
         FRAMES_PER_PAGE=120,
+        PRODUCTION=False,
     )
     if test_config is None:
         app.config.from_pyfile("config.py", silent=True)
@@ -56,12 +57,16 @@ def create_app(test_config: dict | None = None) -> Flask:
     migrate.init_app(app, db, directory=str(Path(app.root_path).parent / "migrations"), render_as_batch=True)
     csrf.init_app(app)
     login_manager.init_app(app)
+    login_manager.login_view = "auth.login"
 
-    from app import errors
-    from app.blueprints import api, frames
+    from app import errors, security
+    from app.blueprints import api, auth, frames
     from app.cli import bp as cli_bp
 
+    security.require_production_safety(app)
     errors.register(app)
+    security.register(app)
+    app.register_blueprint(auth.bp)
     app.register_blueprint(frames.bp)
     app.register_blueprint(api.bp)
     app.register_blueprint(cli_bp)

@@ -2,7 +2,7 @@
 
 import secrets
 
-from werkzeug.security import generate_password_hash
+from werkzeug.security import check_password_hash, generate_password_hash
 
 from app.extensions import db
 from app.models import Role, User
@@ -40,3 +40,20 @@ def create_user(username: str, role: Role | str, password: str | None = None) ->
     db.session.add(user)
     db.session.commit()
     return user, generated
+
+
+def authenticate(username: str, password: str) -> User | None:
+    """The active staff user with this name and password, or None.
+
+    Participants have no password and never sign in here. The hash is checked
+    even for unknown names, so timing does not reveal which names exist.
+    """
+    user = db.session.execute(db.select(User).filter_by(username=username.strip())).scalar_one_or_none()
+    stored = user.password_hash if user is not None and user.password_hash else _DUMMY_HASH
+    ok = check_password_hash(stored, password)
+    if user is None or not ok or not user.active or user.role is Role.PARTICIPANT:
+        return None
+    return user
+
+
+_DUMMY_HASH = generate_password_hash("not-a-real-password")

@@ -8,10 +8,12 @@ and its own media folder.
 """
 
 import os
+import re
 import uuid
 
 import pytest
 import sqlalchemy as sa
+from flask.testing import FlaskClient
 from flask_migrate import upgrade
 
 from app import create_app, normalise_database_url
@@ -19,6 +21,36 @@ from app.extensions import db
 
 POSTGRES_URL = os.environ.get("EGONET_TEST_POSTGRES_URL")
 BACKENDS = ["sqlite"] + (["postgresql"] if POSTGRES_URL else [])
+
+
+class CSRFClient(FlaskClient):
+    """A test client that behaves like the app's pages: it fetches the CSRF
+    token from a page's meta tag once, and sends it as a header with every
+    state-changing request (CSRF stays on in tests)."""
+
+    csrf_token: str | None = None
+
+    def fetch_csrf_token(self) -> str:
+        page = self.get("/login")
+        self.csrf_token = re.search(rb'name="csrf-token" content="([^"]+)"', page.data).group(1).decode()
+        return self.csrf_token
+
+    def open(self, *args, **kwargs):
+        method = kwargs.get("method", "GET").upper()
+        if method not in ("GET", "HEAD", "OPTIONS") and kwargs.pop("csrf", True):
+            headers = dict(kwargs.pop("headers", None) or {})
+            headers.setdefault("X-CSRFToken", self.csrf_token or self.fetch_csrf_token())
+            kwargs["headers"] = headers
+        return super().open(*args, **kwargs)
+
+    def login(self, username: str, password: str):
+        return self.post("/login", data={"username": username, "password": password})
+
+    def login_as(self, user) -> None:
+        """Sign in without a password (participants have none): set Flask-Login's session key."""
+        with self.session_transaction() as session:
+            session["_user_id"] = str(user.id)
+            session["_fresh"] = True
 
 
 def make_app(database_url: str, tmp_path, **overrides):
@@ -31,7 +63,9 @@ def make_app(database_url: str, tmp_path, **overrides):
         "SERVER_NAME": None,
     }
     config.update(overrides)
-    return create_app(config)
+    app = create_app(config)
+    app.test_client_class = CSRFClient
+    return app
 
 
 @pytest.fixture(scope="session", params=BACKENDS)
@@ -63,14 +97,23 @@ def database_url(request, tmp_path_factory):
 
 @pytest.fixture
 def app(database_url, tmp_path):
+    """The app on empty tables. Requests get their own app context, so ``g``
+    and the database session never leak from one request into the next."""
     app = make_app(database_url, tmp_path)
+    yield app
     with app.app_context():
-        yield app
         db.session.remove()
         with db.engine.begin() as conn:
             for table in reversed(db.metadata.sorted_tables):
                 conn.execute(table.delete())
         db.engine.dispose()
+
+
+@pytest.fixture
+def ctx(app):
+    """An app context for tests that call services directly."""
+    with app.app_context():
+        yield app
 
 
 @pytest.fixture
@@ -81,3 +124,30 @@ def client(app):
 @pytest.fixture
 def runner(app):
     return app.test_cli_runner()
+
+
+PASSWORD = "correct horse battery"
+
+
+@pytest.fixture
+def make_user(app):
+    """Create a user with a role; staff get the password ``PASSWORD``."""
+    from app.models import Role
+    from app.services.users import create_user
+
+    def make(role: str, username: str | None = None):
+        role = Role(role)
+        with app.app_context():
+            user, _ = create_user(username or f"{role.value}-user", role, None if role is Role.PARTICIPANT else PASSWORD)
+            db.session.refresh(user)
+            db.session.expunge(user)
+        return user
+
+    return make
+
+
+@pytest.fixture
+def admin_client(client, make_user):
+    make_user("admin", "admin")
+    assert client.login("admin", PASSWORD).status_code == 302
+    return client

@@ -6,7 +6,7 @@ from app.models import Frame, Role, User
 from tests.app.factories import image_folder
 
 
-def test_import_command_reports_and_is_idempotent(runner, tmp_path):
+def test_import_command_reports_and_is_idempotent(ctx, runner, tmp_path):
     folder = image_folder(tmp_path / "rec", n=3)
     result = runner.invoke(args=["egonet", "import", str(folder), "--activity", "cooking", "--sequence", "take1"])
     assert result.exit_code == 0, result.output
@@ -16,7 +16,7 @@ def test_import_command_reports_and_is_idempotent(runner, tmp_path):
     assert len(db.session.execute(db.select(Frame)).all()) == 3
 
 
-def test_import_command_fails_with_one_line_naming_the_file(runner, tmp_path):
+def test_import_command_fails_with_one_line_naming_the_file(ctx, runner, tmp_path):
     folder = image_folder(tmp_path / "rec", n=2)
     (folder / "rgb" / "00001.png").write_bytes(b"garbage")
     result = runner.invoke(args=["egonet", "import", str(folder), "--activity", "cooking"])
@@ -27,14 +27,14 @@ def test_import_command_fails_with_one_line_naming_the_file(runner, tmp_path):
     assert db.session.execute(db.select(Frame)).first() is None
 
 
-def test_import_command_validates_options(runner, tmp_path):
+def test_import_command_validates_options(ctx, runner, tmp_path):
     result = runner.invoke(args=["egonet", "import", str(tmp_path), "--activity", "x", "--stride", "0"])
     assert result.exit_code == 2 and "--stride" in result.output
     result = runner.invoke(args=["egonet", "import", str(tmp_path / "nope"), "--activity", "x"])
     assert result.exit_code == 1 and "no such file" in result.output
 
 
-def test_create_user_with_password_and_generated(runner):
+def test_create_user_with_password_and_generated(ctx, runner):
     result = runner.invoke(args=["egonet", "create-user", "ana", "--role", "annotator", "--password", "s3cret-pass"])
     assert result.exit_code == 0, result.output
     ana = db.session.execute(db.select(User).filter_by(username="ana")).scalar_one()
@@ -47,7 +47,7 @@ def test_create_user_with_password_and_generated(runner):
     assert check_password_hash(boss.password_hash, generated)
 
 
-def test_create_user_errors(runner):
+def test_create_user_errors(ctx, runner):
     runner.invoke(args=["egonet", "create-user", "ana", "--role", "annotator", "--password", "s3cret-pass"])
     result = runner.invoke(args=["egonet", "create-user", "ana", "--role", "reviewer", "--password", "another-pass"])
     assert result.exit_code == 1 and "already exists" in result.output
@@ -57,7 +57,7 @@ def test_create_user_errors(runner):
     assert result.exit_code == 1 and "at least 8" in result.output
 
 
-def test_demo_command_creates_reviewed_ground_truth(runner):
+def test_demo_command_creates_reviewed_ground_truth(ctx, runner):
     args = ["egonet", "demo", "--frames-per-activity", "2", "--width", "96", "--height", "72", "--seed", "3"]
     result = runner.invoke(args=args)
     assert result.exit_code == 0, result.output
@@ -80,7 +80,7 @@ def test_demo_command_creates_reviewed_ground_truth(runner):
     assert "demo: 0 frames added, 14 already present" in result.output
 
 
-def test_demo_frames_match_the_renderer(runner):
+def test_demo_frames_match_the_renderer(ctx, runner):
     from app.services import media
     from egonet import io, synth
 

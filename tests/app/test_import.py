@@ -23,7 +23,7 @@ def media_files(app) -> list[Path]:
     return sorted(p for p in root.rglob("*") if p.is_file()) if root.exists() else []
 
 
-def test_folder_import_stores_content_addressed_media(app, tmp_path):
+def test_folder_import_stores_content_addressed_media(ctx, tmp_path):
     folder = image_folder(tmp_path / "rec", n=4)
     report = import_path(folder, activity="cooking")
     assert (report.added, report.skipped, report.sequence) == (4, 0, "rec")
@@ -35,10 +35,10 @@ def test_folder_import_stores_content_addressed_media(app, tmp_path):
         assert media.sha256(data) == f.content_hash
         assert f.rgb_path == f"{f.content_hash[:2]}/{f.content_hash}.png"
         np.testing.assert_array_equal(io.decode_image(data), rgb_image(i))
-    assert not [p for p in media_files(app) if p.name.startswith(".tmp")]
+    assert not [p for p in media_files(ctx) if p.name.startswith(".tmp")]
 
 
-def test_reimport_adds_nothing(app, tmp_path):
+def test_reimport_adds_nothing(ctx, tmp_path):
     folder = image_folder(tmp_path / "rec", n=3)
     import_path(folder, activity="cooking")
     again = import_path(folder, activity="cooking")
@@ -46,13 +46,13 @@ def test_reimport_adds_nothing(app, tmp_path):
     assert len(frames()) == 3
 
 
-def test_stride_keeps_every_nth_image(app, tmp_path):
+def test_stride_keeps_every_nth_image(ctx, tmp_path):
     folder = image_folder(tmp_path / "rec", n=7)
     import_path(folder, activity="cooking", stride=3)
     assert [f.index for f in frames()] == [0, 3, 6]
 
 
-def test_video_import_with_stride(app, tmp_path):
+def test_video_import_with_stride(ctx, tmp_path):
     path = video_file(tmp_path / "walk.avi", n=10)
     report = import_path(path, activity="hotel", stride=4)
     assert (report.added, report.sequence) == (3, "walk")
@@ -62,7 +62,7 @@ def test_video_import_with_stride(app, tmp_path):
     assert len({f.content_hash for f in fs}) == 3
 
 
-def test_depth_is_paired_by_stem_and_dhg_computed_with_intrinsics(app, tmp_path):
+def test_depth_is_paired_by_stem_and_dhg_computed_with_intrinsics(ctx, tmp_path):
     folder = image_folder(tmp_path / "rec", n=2, depth=True, intrinsics=True)
     import_path(folder, activity="desk work")
     for i, f in enumerate(frames()):
@@ -74,7 +74,7 @@ def test_depth_is_paired_by_stem_and_dhg_computed_with_intrinsics(app, tmp_path)
         assert dhg.shape == (48, 64, 3)
 
 
-def test_npy_depth_and_given_dhg(app, tmp_path):
+def test_npy_depth_and_given_dhg(ctx, tmp_path):
     folder = image_folder(tmp_path / "rec", n=1)
     (folder / "depth").mkdir()
     np.save(folder / "depth" / "00000.npy", np.full((48, 64), 2.5, np.float32))
@@ -87,7 +87,7 @@ def test_npy_depth_and_given_dhg(app, tmp_path):
     np.testing.assert_array_equal(io.read_dhg(media.absolute_path(f.dhg_path)), dhg)
 
 
-def test_masks_become_annotations(app, tmp_path):
+def test_masks_become_annotations(ctx, tmp_path):
     folder = image_folder(tmp_path / "rec", n=2, masks=True)
     report = import_path(folder, activity="dining", mask_author="wearer", mask_status=Status.REVIEWED)
     assert report.annotations == 2
@@ -99,38 +99,38 @@ def test_masks_become_annotations(app, tmp_path):
     assert len(anns[0].instances) == 1
 
 
-def assert_nothing_imported(app):
+def assert_nothing_imported(ctx):
     assert db.session.execute(db.select(Frame)).first() is None
     assert db.session.execute(db.select(Activity)).first() is None
-    assert media_files(app) == []
+    assert media_files(ctx) == []
 
 
-def test_corrupt_image_stops_and_names_the_file(app, tmp_path):
+def test_corrupt_image_stops_and_names_the_file(ctx, tmp_path):
     folder = image_folder(tmp_path / "rec", n=4)
     bad = folder / "rgb" / "00002.png"
     bad.write_bytes(bad.read_bytes()[:40])  # truncated
     with pytest.raises(io.MediaError, match="00002.png"):
         import_path(folder, activity="cooking")
-    assert_nothing_imported(app)
+    assert_nothing_imported(ctx)
 
 
-def test_depth_size_mismatch_stops_and_names_the_file(app, tmp_path):
+def test_depth_size_mismatch_stops_and_names_the_file(ctx, tmp_path):
     folder = image_folder(tmp_path / "rec", n=3, depth=True)
     (folder / "depth" / "00001.png").write_bytes(io.encode_depth_png(np.ones((10, 10), np.float32)))
     with pytest.raises(io.MediaError, match=r"00001\.png.*10x10 does not match the frame's 64x48"):
         import_path(folder, activity="cooking")
-    assert_nothing_imported(app)
+    assert_nothing_imported(ctx)
 
 
-def test_failed_reimport_keeps_earlier_frames_and_media(app, tmp_path):
+def test_failed_reimport_keeps_earlier_frames_and_media(ctx, tmp_path):
     folder = image_folder(tmp_path / "rec", n=2)
     import_path(folder, activity="cooking")
-    before = media_files(app)
+    before = media_files(ctx)
     (folder / "rgb" / "00009.png").write_bytes(b"not an image")
     with pytest.raises(io.MediaError, match="00009.png"):
         import_path(folder, activity="cooking")
     assert len(frames()) == 2
-    assert media_files(app) == before
+    assert media_files(ctx) == before
 
 
 @pytest.mark.parametrize(
@@ -141,15 +141,15 @@ def test_failed_reimport_keeps_earlier_frames_and_media(app, tmp_path):
         (lambda d: (d / "camera.json").write_text(json.dumps({"fx": 1})), "camera.json"),
     ],
 )
-def test_unknown_formats_and_bad_intrinsics_are_refused(app, tmp_path, make, message):
+def test_unknown_formats_and_bad_intrinsics_are_refused(ctx, tmp_path, make, message):
     folder = image_folder(tmp_path / "rec", n=2)
     make(folder)
     with pytest.raises(ValueError, match=message):
         import_path(folder, activity="cooking")
-    assert_nothing_imported(app)
+    assert_nothing_imported(ctx)
 
 
-def test_bad_paths_and_options(app, tmp_path):
+def test_bad_paths_and_options(ctx, tmp_path):
     with pytest.raises(ImportProblem, match="no such file"):
         import_path(tmp_path / "missing", activity="x")
     (tmp_path / "clip.mkv").write_bytes(b"x")
@@ -163,11 +163,11 @@ def test_bad_paths_and_options(app, tmp_path):
         import_path(tmp_path / "empty", activity="x")
     with pytest.raises(ImportProblem, match="--stride"):
         import_path(tmp_path / "empty", activity="x", stride=0)
-    assert_nothing_imported(app)
+    assert_nothing_imported(ctx)
 
 
 @pytest.mark.skipif(not (SHARED / "rgbd-primesense").exists(), reason="shared data not present")
-def test_real_rgbd_frames(app):
+def test_real_rgbd_frames(ctx):
     report = import_path(SHARED / "rgbd-primesense", activity="room")
     assert report.added == 3
     f = frames()[0]
@@ -178,7 +178,7 @@ def test_real_rgbd_frames(app):
 
 
 @pytest.mark.skipif(not (SHARED / "egonet-samples").exists(), reason="shared data not present")
-def test_real_egonet_samples_pair_rgb_and_dhg(app):
+def test_real_egonet_samples_pair_rgb_and_dhg(ctx):
     report = import_path(SHARED / "egonet-samples", activity="samples")
     assert report.added == 3
     for f in frames():

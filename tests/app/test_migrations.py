@@ -13,18 +13,18 @@ def script_directory(app):
     return ScriptDirectory.from_config(app.extensions["migrate"].migrate.get_config())
 
 
-def test_one_head(app):
-    assert len(script_directory(app).get_heads()) == 1
+def test_one_head(ctx):
+    assert len(script_directory(ctx).get_heads()) == 1
 
 
-def test_upgraded_database_matches_the_models(app):
+def test_upgraded_database_matches_the_models(ctx):
     with db.engine.connect() as conn:
         context = MigrationContext.configure(conn, opts={"compare_type": True})
-        assert context.get_current_revision() == script_directory(app).get_current_head()
+        assert context.get_current_revision() == script_directory(ctx).get_current_head()
         assert compare_metadata(context, db.metadata) == []
 
 
-def test_downgrade_to_base_and_back(app):
+def test_downgrade_to_base_and_back(ctx):
     downgrade(revision="base")
     assert set(inspect(db.engine).get_table_names()) <= {"alembic_version"}
     upgrade()

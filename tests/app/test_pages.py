@@ -2,14 +2,16 @@ from app.services.importing import import_path
 from tests.app.factories import image_folder
 
 
-def test_empty_index_explains_how_to_start(client):
-    page = client.get("/")
+def test_empty_index_explains_how_to_start(admin_client):
+    page = admin_client.get("/")
     assert page.status_code == 200
     assert b"flask --app app egonet demo" in page.data
 
 
-def test_index_grid_viewer_and_media(client, tmp_path):
-    import_path(image_folder(tmp_path / "rec", n=3, depth=True), activity="cooking")
+def test_index_grid_viewer_and_media(app, admin_client, tmp_path):
+    client = admin_client
+    with app.app_context():
+        import_path(image_folder(tmp_path / "rec", n=3, depth=True), activity="cooking")
     page = client.get("/")
     assert b"cooking" in page.data and b"3 frames" in page.data
     api = client.get("/api/activities").get_json()
@@ -29,7 +31,8 @@ def test_index_grid_viewer_and_media(client, tmp_path):
             assert response.mimetype == mimetype
 
 
-def test_errors_are_json_for_the_api_and_pages_for_browsers(client):
+def test_errors_are_json_for_the_api_and_pages_for_browsers(admin_client):
+    client = admin_client
     response = client.get("/api/frames/999")
     assert response.status_code == 404
     body = response.get_json()

@@ -1,0 +1,81 @@
+"""Who may reach what: default-deny access rules checked before every request.
+
+Every view is for signed-in staff (admin, annotator, reviewer) unless it
+says otherwise with one of these decorators:
+
+    @public             anyone (log-in page, static files, participant entry)
+    @roles(Role.ADMIN)  only these roles
+
+A route added without a decorator is therefore staff-only, never open. An
+API call that fails the check gets 401/403 JSON; a page redirects to the
+log-in page (401) or shows a 403 page.
+"""
+
+from collections.abc import Callable
+
+from flask import Flask, current_app, redirect, request, url_for
+from flask_login import current_user
+
+from app.errors import error_response, wants_json
+from app.models import Role
+
+STAFF = frozenset({Role.ADMIN, Role.ANNOTATOR, Role.REVIEWER})
+
+
+def public(view: Callable) -> Callable:
+    view.access = None
+    return view
+
+
+def roles(*allowed: Role) -> Callable[[Callable], Callable]:
+    def decorate(view: Callable) -> Callable:
+        view.access = frozenset(allowed)
+        return view
+
+    return decorate
+
+
+def access_of(view: Callable) -> frozenset[Role] | None:
+    """The roles a view admits (None: public); staff by default."""
+    return getattr(view, "access", STAFF)
+
+
+def current_role() -> Role | None:
+    return current_user.role if current_user.is_authenticated else None
+
+
+def check_access():
+    """before_request hook: refuse requests the current user may not make."""
+    if request.endpoint is None:  # 404 and 405 are answered by Flask itself
+        return None
+    if request.endpoint == "static":
+        return None
+    view = current_app.view_functions[request.endpoint]
+    allowed = access_of(view)
+    if allowed is None:
+        return None
+    role = current_role()
+    if role is None:
+        if wants_json():
+            return error_response(401, "unauthorized", "sign in first")
+        return redirect(url_for("auth.login", next=request.full_path.rstrip("?")))
+    if role not in allowed:
+        return error_response(403, "forbidden", f"the {role.value} role cannot use this")
+    return None
+
+
+def register(app: Flask) -> None:
+    app.before_request(check_access)
+
+
+def require_production_safety(app: Flask) -> None:
+    """Refuse to run in production with the development secret key."""
+    from app import DEV_SECRET_KEY
+
+    if app.config.get("PRODUCTION"):
+        if not app.config.get("SECRET_KEY") or app.config["SECRET_KEY"] == DEV_SECRET_KEY:
+            raise RuntimeError(
+                "PRODUCTION is set but SECRET_KEY is the development key: set FLASK_SECRET_KEY to a long random value"
+            )
+        app.config["SESSION_COOKIE_SECURE"] = True
+        app.config["REMEMBER_COOKIE_SECURE"] = True

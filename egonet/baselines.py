@@ -1,0 +1,313 @@
+"""Baselines that share one prediction interface with the trained models.
+
+Every predictor answers ``predict(rgb, dhg) -> float32 (H, W)`` in [0, 1] at
+the input's own resolution, so the scoring code (``egonet.metrics``) treats a
+baseline and a trained EgoNet alike. Baselines that do not look at depth
+accept ``dhg=None``.
+
+* ``"aop"``: :class:`ActionObjectPrior`, the paper's Action-Object Prior, the
+  mean of the training masks. Under leave-one-activity-out the caller fits
+  it inside each fold on the six training activities only.
+* ``"center"``: :class:`CenterPrior`, an isotropic Gaussian at the image
+  centre (first-person cameras tend to centre what the wearer attends to).
+* ``"saliency"``: :class:`SpectralResidualSaliency`, bottom-up saliency of
+  Hou & Zhang (CVPR 2007), standing in for the paper's GBVS / Judd saliency.
+
+:data:`BASELINES` maps these names to constructors and :func:`build_baseline`
+builds one by name.
+
+Example:
+    >>> import numpy as np
+    >>> rgb = np.zeros((48, 64, 3), dtype=np.uint8)
+    >>> build_baseline("center").predict(rgb, None).shape
+    (48, 64)
+"""
+
+from __future__ import annotations
+
+from collections.abc import Callable, Iterable
+from typing import Protocol, runtime_checkable
+
+import cv2
+import numpy as np
+
+__all__ = [
+    "BASELINES",
+    "ActionObjectPrior",
+    "CenterPrior",
+    "Predictor",
+    "SpectralResidualSaliency",
+    "build_baseline",
+]
+
+
+@runtime_checkable
+class Predictor(Protocol):
+    """Anything that maps a frame to an action-object probability map."""
+
+    def predict(self, rgb: np.ndarray, dhg: np.ndarray | None) -> np.ndarray:
+        """Predict the action-object probability of every pixel.
+
+        Args:
+            rgb: Colour frame, uint8 (H, W, 3), RGB order.
+            dhg: Depth/height/gray frame, uint8 (H, W, 3), or None for
+                predictors that do not use it.
+
+        Returns:
+            Probabilities in [0, 1], float32 (H, W).
+        """
+        ...
+
+
+def _check_frame(rgb: np.ndarray, dhg: np.ndarray | None) -> tuple[int, int]:
+    """Validate a predictor's inputs and return (H, W)."""
+    if not isinstance(rgb, np.ndarray) or rgb.dtype != np.uint8 or rgb.ndim != 3 or rgb.shape[2] != 3:
+        desc = f"{rgb.dtype} {rgb.shape}" if isinstance(rgb, np.ndarray) else type(rgb).__name__
+        raise ValueError(f"rgb must be a uint8 (H, W, 3) array, got {desc}")
+    h, w = rgb.shape[:2]
+    if h < 1 or w < 1:
+        raise ValueError(f"rgb must be at least 1x1, got shape {rgb.shape}")
+    if dhg is not None:
+        if not isinstance(dhg, np.ndarray) or dhg.dtype != np.uint8 or dhg.shape != rgb.shape:
+            desc = f"{dhg.dtype} {dhg.shape}" if isinstance(dhg, np.ndarray) else type(dhg).__name__
+            raise ValueError(f"dhg must be None or a uint8 array shaped like rgb {rgb.shape}, got {desc}")
+    return h, w
+
+
+def _check_positive(value: float, name: str) -> float:
+    if isinstance(value, bool) or not isinstance(value, (int, float, np.integer, np.floating)):
+        raise ValueError(f"{name} must be a positive number, got {value!r}")
+    if not np.isfinite(value) or value <= 0:
+        raise ValueError(f"{name} must be a positive finite number, got {value}")
+    return float(value)
+
+
+def _check_size(size: tuple[int, int], name: str) -> tuple[int, int]:
+    if (
+        not isinstance(size, (tuple, list))
+        or len(size) != 2
+        or any(isinstance(s, bool) or not isinstance(s, (int, np.integer)) or s < 1 for s in size)
+    ):
+        raise ValueError(f"{name} must be (height, width) with positive ints, got {size!r}")
+    return int(size[0]), int(size[1])
+
+
+class ActionObjectPrior:
+    """Action-Object Prior (AOP): the mean training mask.
+
+    The prior lives on a small fixed grid; :meth:`predict` resizes it
+    bilinearly to the frame, so it ignores the frame's content.
+
+    Args:
+        prior: Mean mask in [0, 1], float (h, w).
+
+    Raises:
+        ValueError: If ``prior`` is not a 2-D map in [0, 1].
+
+    Example:
+        >>> masks = [np.eye(2, dtype=bool), np.ones((2, 2), dtype=bool)]
+        >>> ActionObjectPrior.fit(masks, size=(2, 2)).prior
+        array([[1. , 0.5],
+               [0.5, 1. ]], dtype=float32)
+    """
+
+    def __init__(self, prior: np.ndarray) -> None:
+        prior = np.asarray(prior, dtype=np.float32)
+        if prior.ndim != 2 or prior.size == 0:
+            raise ValueError(f"prior must be a non-empty 2-D map (h, w), got shape {prior.shape}")
+        if not np.all(np.isfinite(prior)) or prior.min() < 0 or prior.max() > 1:
+            raise ValueError("prior must hold finite values in [0, 1]")
+        self.prior = prior
+
+    @classmethod
+    def fit(cls, masks: Iterable[np.ndarray], *, size: tuple[int, int] = (60, 80)) -> ActionObjectPrior:
+        """Average training masks on a common grid.
+
+        Each mask, of any size, is resized to ``size`` with area
+        interpolation (the fraction of each grid cell the mask covers), and
+        the resized masks are averaged. Masks are consumed one at a time.
+
+        Args:
+            masks: Training masks, bool (H_i, W_i) each; sizes may differ.
+            size: The grid as (height, width); (60, 80) keeps the 4:3 frames'
+                aspect ratio.
+
+        Returns:
+            The fitted prior.
+
+        Raises:
+            ValueError: If there are no masks, a mask is not a 2-D bool
+                array (the message names its index), or ``size`` is invalid.
+        """
+        h, w = _check_size(size, "size")
+        total = np.zeros((h, w), dtype=np.float64)
+        n = 0
+        for i, mask in enumerate(masks):
+            mask = np.asarray(mask)
+            if mask.dtype != np.bool_ or mask.ndim != 2 or mask.size == 0:
+                raise ValueError(f"masks[{i}] must be a non-empty bool (H, W) mask, got {mask.dtype} {mask.shape}")
+            cover = mask.astype(np.float32)
+            if cover.shape != (h, w):
+                cover = cv2.resize(cover, (w, h), interpolation=cv2.INTER_AREA)
+            total += cover
+            n += 1
+        if n == 0:
+            raise ValueError("masks is empty: fit the prior on at least one training mask")
+        return cls(np.clip(total / n, 0.0, 1.0))
+
+    def predict(self, rgb: np.ndarray, dhg: np.ndarray | None = None) -> np.ndarray:
+        """Return the prior resized (bilinear) to the frame, float32 (H, W).
+
+        Args:
+            rgb: Colour frame, uint8 (H, W, 3); only its size is used.
+            dhg: Ignored; may be None.
+
+        Returns:
+            Probabilities in [0, 1], float32 (H, W).
+        """
+        h, w = _check_frame(rgb, dhg)
+        if self.prior.shape == (h, w):
+            return self.prior.copy()
+        out = cv2.resize(self.prior, (w, h), interpolation=cv2.INTER_LINEAR)
+        return np.clip(out, 0.0, 1.0, out=out)
+
+
+class CenterPrior:
+    """An isotropic Gaussian centred on the image, peak 1.
+
+    ``p(x, y) = exp(-d^2 / (2 s^2))`` where ``d`` is the distance in pixels to
+    the image centre ``((W - 1) / 2, (H - 1) / 2)`` and ``s = sigma *
+    sqrt(H^2 + W^2)``: ``sigma`` is a fraction of the image **diagonal**, so
+    the prior is round in pixels and scales with the frame.
+
+    Args:
+        sigma: Standard deviation as a fraction of the image diagonal, > 0.
+
+    Raises:
+        ValueError: If ``sigma`` is not positive.
+
+    Example:
+        >>> p = CenterPrior(sigma=0.25).predict(np.zeros((3, 3, 3), np.uint8), None)
+        >>> float(p[1, 1])
+        1.0
+    """
+
+    def __init__(self, *, sigma: float = 0.25) -> None:
+        self.sigma = _check_positive(sigma, "sigma")
+
+    def predict(self, rgb: np.ndarray, dhg: np.ndarray | None = None) -> np.ndarray:
+        """Return the centre prior at the frame's size, float32 (H, W).
+
+        Args:
+            rgb: Colour frame, uint8 (H, W, 3); only its size is used.
+            dhg: Ignored; may be None.
+
+        Returns:
+            Values in (0, 1], float32 (H, W), largest at the centre.
+        """
+        h, w = _check_frame(rgb, dhg)
+        s = self.sigma * float(np.hypot(h, w))
+        gy = np.exp(-((np.arange(h) - (h - 1) / 2.0) ** 2) / (2 * s * s)).astype(np.float32)
+        gx = np.exp(-((np.arange(w) - (w - 1) / 2.0) ** 2) / (2 * s * s)).astype(np.float32)
+        return np.outer(gy, gx)
+
+
+class SpectralResidualSaliency:
+    """Spectral-residual saliency (Hou & Zhang, CVPR 2007).
+
+    The frame is converted to grayscale and downscaled (area interpolation)
+    to ``width`` pixels wide, keeping its aspect ratio. With ``F`` its
+    Fourier transform, ``L = log |F|`` and ``P`` its phase, the spectral
+    residual is ``R = L - mean3x3(L)`` and the saliency is
+    ``|IFFT(exp(R + iP))|^2``, smoothed with a Gaussian of ``blur_sigma``
+    (in downscaled pixels). The map is then min-max normalised to [0, 1]
+    per image and resized bilinearly to the frame. Normalising is part of
+    how this baseline is defined (saliency has no probabilistic scale);
+    a uniform frame (or one whose saliency is constant) gives zeros.
+
+    Args:
+        width: Width of the working image in pixels (the paper uses 64).
+        blur_sigma: Standard deviation of the final smoothing, in working
+            pixels, > 0.
+
+    Raises:
+        ValueError: If ``width`` < 8 or ``blur_sigma`` is not positive.
+    """
+
+    def __init__(self, *, width: int = 64, blur_sigma: float = 2.5) -> None:
+        if isinstance(width, bool) or not isinstance(width, (int, np.integer)) or width < 8:
+            raise ValueError(f"width must be an int >= 8, got {width!r}")
+        self.width = int(width)
+        self.blur_sigma = _check_positive(blur_sigma, "blur_sigma")
+
+    def predict(self, rgb: np.ndarray, dhg: np.ndarray | None = None) -> np.ndarray:
+        """Return the normalised saliency map, float32 (H, W) in [0, 1].
+
+        Args:
+            rgb: Colour frame, uint8 (H, W, 3).
+            dhg: Ignored; may be None.
+
+        Returns:
+            Saliency in [0, 1], float32 (H, W).
+        """
+        h, w = _check_frame(rgb, dhg)
+        gray = cv2.cvtColor(rgb, cv2.COLOR_RGB2GRAY).astype(np.float32)
+        ww = min(self.width, w)
+        wh = max(1, round(h * ww / w))
+        small = cv2.resize(gray, (ww, wh), interpolation=cv2.INTER_AREA) / 255.0
+        if float(small.max() - small.min()) < 1e-6:
+            # A uniform frame has no residual, only rounding noise: say so.
+            return np.zeros((h, w), dtype=np.float32)
+        spectrum = np.fft.fft2(small)
+        log_amp = np.log(np.abs(spectrum) + 1e-8)
+        phase = np.angle(spectrum)
+        residual = log_amp - cv2.blur(log_amp, (3, 3), borderType=cv2.BORDER_REFLECT)
+        sal = np.abs(np.fft.ifft2(np.exp(residual + 1j * phase))) ** 2
+        sal = cv2.GaussianBlur(sal.astype(np.float32), (0, 0), self.blur_sigma, borderType=cv2.BORDER_REFLECT)
+        lo, hi = float(sal.min()), float(sal.max())
+        if not hi - lo > 1e-6 * hi:
+            return np.zeros((h, w), dtype=np.float32)
+        sal = (sal - lo) / (hi - lo)
+        out = cv2.resize(sal, (w, h), interpolation=cv2.INTER_LINEAR)
+        return np.clip(out, 0.0, 1.0, out=out).astype(np.float32, copy=False)
+
+
+BASELINES: dict[str, Callable[..., Predictor]] = {
+    "aop": ActionObjectPrior.fit,
+    "center": CenterPrior,
+    "saliency": SpectralResidualSaliency,
+}
+"""Baseline names and their constructors. ``"aop"`` is fitted: call it with
+the training masks of the fold (``BASELINES["aop"](masks, size=...)``); the
+others take keyword options only."""
+
+
+def build_baseline(name: str, *, masks: Iterable[np.ndarray] | None = None) -> Predictor:
+    """Build a baseline by name with its default options.
+
+    Args:
+        name: One of ``"aop"``, ``"center"``, ``"saliency"``.
+        masks: Training masks, bool (H, W) each; required by ``"aop"`` (the
+            fold's training masks), refused by the others.
+
+    Returns:
+        A :class:`Predictor`.
+
+    Raises:
+        ValueError: If ``name`` is unknown (the message lists valid names),
+            or ``masks`` is missing for ``"aop"`` or given to a baseline that
+            does not learn.
+
+    Example:
+        >>> type(build_baseline("saliency")).__name__
+        'SpectralResidualSaliency'
+    """
+    if name not in BASELINES:
+        raise ValueError(f"unknown baseline {name!r}; valid names: {', '.join(sorted(BASELINES))}")
+    if name == "aop":
+        if masks is None:
+            raise ValueError("masks is required for 'aop': pass the training masks of the fold")
+        return ActionObjectPrior.fit(masks)
+    if masks is not None:
+        raise ValueError(f"masks must be None for {name!r}, which does not learn from training masks")
+    return BASELINES[name]()

@@ -1,0 +1,535 @@
+"""Maximum F-score (MF) and average precision (AP) of probability maps.
+
+The paper scores a probability map by thresholding it "at small intervals",
+building a precision/recall curve and reporting its best F-score (MF) and the
+area under it (AP). This module fixes the details (see
+``shared/docs/egonet-reference.md``, "Metrics"):
+
+* ``T`` thresholds ``t_k = k / (T + 1)`` for ``k = 1..T`` (99 thresholds
+  ``0.01 .. 0.99`` by default), each computed as a float64. A pixel is
+  predicted positive at ``t_k`` when ``prob >= t_k``; the comparison is exact
+  (a float32 probability is compared with the float64 threshold without
+  rounding either), so a probability exactly equal to ``t_k`` is positive at
+  ``t_k``.
+* Pooled mode (the default, as in the BSDS benchmark): ``TP_k``, ``FP_k`` and
+  ``FN_k`` are summed over every pixel of every map, then
+  ``P_k = TP_k / (TP_k + FP_k)``, or 1 when ``TP_k + FP_k = 0`` (nothing
+  predicted); ``R_k = TP_k / (TP_k + FN_k)``, or 0 when there are no positive
+  pixels.
+* ``F_k = (1 + beta2) P_k R_k / (beta2 P_k + R_k)``, or 0 when
+  ``P_k + R_k = 0``; ``MF = max_k F_k``.
+* ``AP = sum_k (R_k - R_{k+1}) P_k`` with the thresholds in increasing order
+  and ``R_{T+1} = 0``.
+* Per-image mode: the same counts per map, ``P_k`` and ``R_k`` computed per map
+  and averaged over the maps at each threshold, then F, MF and AP from those
+  averaged curves.
+
+Maps are never normalised before thresholding: a map whose values all lie
+below 0.01 predicts nothing.
+
+The work is split as in smp's ``get_stats`` / ``fbeta_score``: sufficient
+statistics first (:func:`count_stats` gives per-threshold TP/FP/FN of one map
+from a single histogram pass), then a reduction (:meth:`Score.from_counts`,
+:meth:`Score.from_curves`). :class:`ScoreAccumulator` keeps both the pooled
+counts and the per-image curve sums, so a caller can stream an activity,
+merge activities, and score either way at the end. :func:`score_maps` is the
+one-call entry point.
+
+Example:
+    >>> import numpy as np
+    >>> prob = np.array([[0.9, 0.2], [0.6, 0.0]], dtype=np.float32)
+    >>> mask = np.array([[True, False], [True, False]])
+    >>> s = score_maps([prob], [mask])
+    >>> round(s.max_f, 3), round(s.ap, 3)
+    (1.0, 1.0)
+"""
+
+from __future__ import annotations
+
+from collections.abc import Iterable
+from dataclasses import dataclass, field
+from functools import lru_cache
+from typing import NamedTuple
+
+import numpy as np
+
+__all__ = [
+    "Counts",
+    "Score",
+    "ScoreAccumulator",
+    "count_stats",
+    "curve_from_counts",
+    "score_maps",
+    "threshold_values",
+]
+
+DEFAULT_THRESHOLDS = 99
+
+
+class Counts(NamedTuple):
+    """Per-threshold confusion counts of one map or of several pooled maps.
+
+    Attributes:
+        tp: True positives at each threshold, int64 (T,).
+        fp: False positives at each threshold, int64 (T,).
+        fn: False negatives at each threshold, int64 (T,).
+    """
+
+    tp: np.ndarray
+    fp: np.ndarray
+    fn: np.ndarray
+
+
+def _check_thresholds(thresholds: int) -> int:
+    if isinstance(thresholds, bool) or not isinstance(thresholds, (int, np.integer)):
+        raise ValueError(f"thresholds must be a positive int (the number T of thresholds k/(T+1)), got {thresholds!r}")
+    if thresholds < 1 or thresholds > 1_000_000:
+        raise ValueError(f"thresholds must be between 1 and 1000000, got {thresholds}")
+    return int(thresholds)
+
+
+@lru_cache(maxsize=16)
+def _thresholds_cached(thresholds: int) -> np.ndarray:
+    t = np.arange(1, thresholds + 1, dtype=np.float64) / (thresholds + 1)
+    t.setflags(write=False)
+    return t
+
+
+def threshold_values(thresholds: int = DEFAULT_THRESHOLDS) -> np.ndarray:
+    """Return the thresholds ``t_k = k / (T + 1)``, ``k = 1..T``.
+
+    Args:
+        thresholds: The number T of thresholds.
+
+    Returns:
+        Increasing float64 thresholds, read-only, shape (T,).
+
+    Raises:
+        ValueError: If ``thresholds`` is not a positive int.
+
+    Example:
+        >>> threshold_values(3)
+        array([0.25, 0.5 , 0.75])
+    """
+    return _thresholds_cached(_check_thresholds(thresholds))
+
+
+def _bin_index(prob: np.ndarray, thresholds: int) -> np.ndarray:
+    """Number of thresholds each probability reaches, ``#{k: t_k <= p}``.
+
+    ``floor(p * (T + 1))`` is that number except where the rounded product
+    lies within a few ulps of an integer ``k >= 1`` (a probability on or next
+    to a threshold, or 1.0). Those few pixels are recomputed exactly with a
+    float64 search, so the result is exact for every input while the common
+    path costs a multiply and a cast in the map's own precision.
+
+    Args:
+        prob: Probabilities in [0, 1], float32 or float64, any shape.
+        thresholds: The number T of thresholds.
+
+    Returns:
+        Bin indices in ``0..T``, flat, int16 when ``2 (T + 1)`` fits, else
+        int64 (shape (prob.size,)).
+    """
+    flat = prob.reshape(-1)
+    dtype = flat.dtype.type
+    n_bins = thresholds + 1
+    index_type = np.int16 if 2 * n_bins < np.iinfo(np.int16).max else np.int64
+    scaled = np.multiply(flat, dtype(n_bins))
+    bins = scaled.astype(index_type)
+    # The rounding error of the product is at most half an ulp of T + 1; four
+    # ulps is a safe margin for "close to an integer".
+    eps = dtype(4 * np.spacing(dtype(n_bins)))
+    nearest = np.rint(scaled)
+    near = nearest >= 1
+    np.subtract(scaled, nearest, out=nearest)
+    np.abs(nearest, out=nearest)
+    near &= nearest <= eps
+    if near.any():
+        where = np.flatnonzero(near)
+        exact = np.searchsorted(_thresholds_cached(thresholds), flat[where].astype(np.float64), side="right")
+        bins[where] = exact
+    np.minimum(bins, index_type(thresholds), out=bins)
+    return bins
+
+
+def _as_prob(prob: object, name: str) -> np.ndarray:
+    arr = np.asarray(prob)
+    if arr.ndim != 2:
+        raise ValueError(f"{name} must be a 2-D probability map (H, W), got shape {arr.shape}")
+    if arr.dtype == np.float16:
+        arr = arr.astype(np.float32)
+    elif arr.dtype not in (np.float32, np.float64):
+        raise ValueError(
+            f"{name} must be a float32 or float64 map of probabilities in [0, 1], got dtype {arr.dtype}; "
+            "convert scores to probabilities first (never min-max normalise them)"
+        )
+    if arr.size:
+        lo, hi = arr.min(), arr.max()
+        if np.isnan(lo) or np.isnan(hi):
+            raise ValueError(f"{name} contains NaN")
+        if lo < 0 or hi > 1:
+            raise ValueError(f"{name} must lie in [0, 1], got values in [{lo}, {hi}]")
+    return arr
+
+
+def _as_mask(mask: object, name: str, shape: tuple[int, ...]) -> np.ndarray:
+    arr = np.asarray(mask)
+    if arr.dtype != np.bool_:
+        raise ValueError(f"{name} must be a bool mask, got dtype {arr.dtype}; pass mask > 0 or mask.astype(bool)")
+    if arr.shape != shape:
+        raise ValueError(f"{name} has shape {arr.shape} but its probability map has shape {shape}")
+    return arr
+
+
+def _count(prob: np.ndarray, mask: np.ndarray, thresholds: int) -> Counts:
+    n_bins = thresholds + 1
+    bins = _bin_index(prob, thresholds)
+    # One histogram for negatives (bins 0..T) and positives (T+1..2T+1).
+    offset = mask.reshape(-1).view(np.int8).astype(bins.dtype)
+    offset *= bins.dtype.type(n_bins)
+    bins += offset
+    hist = np.bincount(bins, minlength=2 * n_bins).reshape(2, n_bins)
+    # Reverse cumulative sums: pixels reaching at least threshold k.
+    above = np.cumsum(hist[:, ::-1], axis=1)[:, ::-1]
+    tp = above[1, 1:].astype(np.int64)
+    fp = above[0, 1:].astype(np.int64)
+    fn = np.int64(above[1, 0]) - tp
+    return Counts(tp, fp, fn)
+
+
+def count_stats(prob: np.ndarray, mask: np.ndarray, *, thresholds: int = DEFAULT_THRESHOLDS) -> Counts:
+    """Count TP, FP and FN of one map at every threshold in one pass.
+
+    Args:
+        prob: Probability map in [0, 1], float (H, W). Not normalised.
+        mask: Ground truth, bool (H, W).
+        thresholds: The number T of thresholds ``k / (T + 1)``.
+
+    Returns:
+        :class:`Counts` with int64 arrays of shape (T,); sum several with
+        ``np.add`` (or a :class:`ScoreAccumulator`) to pool maps.
+
+    Raises:
+        ValueError: If ``prob`` is not a 2-D float map in [0, 1] (or holds
+            NaN), ``mask`` is not bool of the same shape, or ``thresholds`` is
+            not a positive int.
+
+    Example:
+        >>> prob = np.array([[0.25, 0.5], [0.75, 1.0]])
+        >>> mask = np.array([[False, True], [True, True]])
+        >>> count_stats(prob, mask, thresholds=3).tp
+        array([3, 3, 2])
+    """
+    thresholds = _check_thresholds(thresholds)
+    prob = _as_prob(prob, "prob")
+    mask = _as_mask(mask, "mask", prob.shape)
+    return _count(prob, mask, thresholds)
+
+
+def curve_from_counts(counts: Counts) -> tuple[np.ndarray, np.ndarray]:
+    """Precision and recall at each threshold from confusion counts.
+
+    ``P = TP / (TP + FP)``, or 1 where nothing is predicted;
+    ``R = TP / (TP + FN)``, or 0 where there are no positive pixels.
+
+    Args:
+        counts: Counts of one map or of pooled maps, arrays (T,).
+
+    Returns:
+        ``(precision, recall)``, float64 arrays (T,).
+    """
+    tp, fp, fn = (np.asarray(c, dtype=np.float64) for c in counts)
+    predicted = tp + fp
+    positives = tp + fn
+    precision = np.divide(tp, predicted, out=np.ones_like(tp), where=predicted > 0)
+    recall = np.divide(tp, positives, out=np.zeros_like(tp), where=positives > 0)
+    return precision, recall
+
+
+def _readonly(a: np.ndarray) -> np.ndarray:
+    a = np.array(a, dtype=np.float64)
+    a.setflags(write=False)
+    return a
+
+
+def _check_beta2(beta2: float) -> float:
+    if isinstance(beta2, bool) or not isinstance(beta2, (int, float, np.integer, np.floating)):
+        raise ValueError(f"beta2 must be a positive number, got {beta2!r}")
+    if not np.isfinite(beta2) or beta2 <= 0:
+        raise ValueError(f"beta2 must be a positive finite number, got {beta2}")
+    return float(beta2)
+
+
+@dataclass(frozen=True, eq=False)
+class Score:
+    """A precision/recall curve and its summary numbers.
+
+    Attributes:
+        max_f: Maximum F-score over the thresholds (MF).
+        ap: Average precision, ``sum_k (R_k - R_{k+1}) P_k``.
+        best_threshold: The threshold where F reaches ``max_f`` (the lowest
+            one on ties; ``t_1`` when every F is 0).
+        thresholds: Thresholds ``t_k``, increasing, float64 (T,).
+        precision: Precision at each threshold, float64 (T,).
+        recall: Recall at each threshold, float64 (T,).
+        f: F-score at each threshold, float64 (T,).
+        beta2: The beta squared the F-scores use.
+        per_image: Whether the curves are averages over maps (True) or come
+            from pooled counts (False).
+        n_maps: The number of maps scored.
+    """
+
+    max_f: float
+    ap: float
+    best_threshold: float
+    thresholds: np.ndarray = field(repr=False)
+    precision: np.ndarray = field(repr=False)
+    recall: np.ndarray = field(repr=False)
+    f: np.ndarray = field(repr=False)
+    beta2: float = 1.0
+    per_image: bool = False
+    n_maps: int = 0
+
+    @classmethod
+    def from_curves(
+        cls,
+        precision: np.ndarray,
+        recall: np.ndarray,
+        *,
+        beta2: float = 1.0,
+        per_image: bool = False,
+        n_maps: int = 0,
+    ) -> Score:
+        """Reduce a precision/recall curve to F, MF and AP.
+
+        Args:
+            precision: Precision at each threshold, increasing thresholds (T,).
+            recall: Recall at each threshold (T,).
+            beta2: Weight of recall in F (beta squared), > 0.
+            per_image: Recorded on the result: whether the curves are
+                per-map averages.
+            n_maps: Recorded on the result: how many maps were scored.
+
+        Returns:
+            The :class:`Score`.
+
+        Raises:
+            ValueError: If the curves are not 1-D of equal length or
+                ``beta2`` is not positive.
+        """
+        beta2 = _check_beta2(beta2)
+        p = np.asarray(precision, dtype=np.float64)
+        r = np.asarray(recall, dtype=np.float64)
+        if p.ndim != 1 or p.shape != r.shape or p.size == 0:
+            raise ValueError(f"precision and recall must be non-empty 1-D arrays of equal length, got {p.shape} and {r.shape}")
+        denom = beta2 * p + r
+        f = np.divide((1.0 + beta2) * p * r, denom, out=np.zeros_like(p), where=(p + r) > 0)
+        best = int(np.argmax(f))
+        next_recall = np.append(r[1:], 0.0)
+        ap = float(np.sum((r - next_recall) * p))
+        t = threshold_values(p.size)
+        return cls(
+            max_f=float(f[best]),
+            ap=ap,
+            best_threshold=float(t[best]),
+            thresholds=t,
+            precision=_readonly(p),
+            recall=_readonly(r),
+            f=_readonly(f),
+            beta2=beta2,
+            per_image=bool(per_image),
+            n_maps=int(n_maps),
+        )
+
+    @classmethod
+    def from_counts(cls, counts: Counts, *, beta2: float = 1.0, n_maps: int = 0) -> Score:
+        """Score pooled counts (dataset-level precision and recall).
+
+        Args:
+            counts: TP/FP/FN summed over maps, arrays (T,).
+            beta2: Weight of recall in F (beta squared), > 0.
+            n_maps: Recorded on the result: how many maps were pooled.
+
+        Returns:
+            The pooled :class:`Score`.
+        """
+        precision, recall = curve_from_counts(counts)
+        return cls.from_curves(precision, recall, beta2=beta2, per_image=False, n_maps=n_maps)
+
+
+class ScoreAccumulator:
+    """Streams maps in, keeps the sufficient statistics, scores at the end.
+
+    Holds the pooled counts (for pooled scores) and the sums of the per-map
+    precision and recall curves (for per-image scores), so either mode can be
+    computed from the same pass and accumulators of several activities can be
+    merged.
+
+    Args:
+        thresholds: The number T of thresholds ``k / (T + 1)``.
+
+    Example:
+        >>> acc = ScoreAccumulator(thresholds=3)
+        >>> _ = acc.add(np.array([[0.8, 0.1]]), np.array([[True, False]]))
+        >>> acc.score().max_f
+        1.0
+    """
+
+    def __init__(self, *, thresholds: int = DEFAULT_THRESHOLDS) -> None:
+        self.thresholds = _check_thresholds(thresholds)
+        zeros = np.zeros(self.thresholds, dtype=np.int64)
+        self.counts = Counts(zeros, zeros.copy(), zeros.copy())
+        self.precision_sum = np.zeros(self.thresholds, dtype=np.float64)
+        self.recall_sum = np.zeros(self.thresholds, dtype=np.float64)
+        self.n_maps = 0
+
+    def add(self, prob: np.ndarray, mask: np.ndarray, *, name: str = "prob") -> Counts:
+        """Count one map and add it.
+
+        Args:
+            prob: Probability map in [0, 1], float (H, W).
+            mask: Ground truth, bool (H, W).
+            name: How error messages name the map (e.g. ``"probs[3]"``).
+
+        Returns:
+            The map's own :class:`Counts`.
+
+        Raises:
+            ValueError: As :func:`count_stats`.
+        """
+        prob = _as_prob(prob, name)
+        mask_name = name.replace("prob", "mask", 1) if name.startswith("prob") else f"mask of {name}"
+        mask = _as_mask(mask, mask_name, prob.shape)
+        counts = _count(prob, mask, self.thresholds)
+        self.add_counts(counts)
+        return counts
+
+    def add_counts(self, counts: Counts) -> None:
+        """Add the counts of one map computed elsewhere (e.g. a worker).
+
+        Args:
+            counts: Counts of a single map, arrays (T,).
+
+        Raises:
+            ValueError: If the counts do not have T entries.
+        """
+        arrays = [np.asarray(c, dtype=np.int64) for c in counts]
+        if any(a.shape != (self.thresholds,) for a in arrays):
+            raise ValueError(f"counts must hold arrays of shape ({self.thresholds},)")
+        for total, a in zip(self.counts, arrays, strict=True):
+            total += a
+        precision, recall = curve_from_counts(Counts(*arrays))
+        self.precision_sum += precision
+        self.recall_sum += recall
+        self.n_maps += 1
+
+    def merge(self, other: ScoreAccumulator) -> None:
+        """Add everything another accumulator has seen (e.g. another activity).
+
+        Args:
+            other: An accumulator with the same number of thresholds.
+
+        Raises:
+            ValueError: If the numbers of thresholds differ.
+        """
+        if other.thresholds != self.thresholds:
+            raise ValueError(f"other has {other.thresholds} thresholds, this accumulator {self.thresholds}")
+        for total, a in zip(self.counts, other.counts, strict=True):
+            total += a
+        self.precision_sum += other.precision_sum
+        self.recall_sum += other.recall_sum
+        self.n_maps += other.n_maps
+
+    def score(self, *, beta2: float = 1.0, per_image: bool = False) -> Score:
+        """Reduce the statistics to a :class:`Score`.
+
+        Args:
+            beta2: Weight of recall in F (beta squared), > 0.
+            per_image: Average per-map curves instead of pooling counts.
+
+        Returns:
+            The score.
+
+        Raises:
+            ValueError: If no map was added, or ``beta2`` is not positive.
+        """
+        if self.n_maps == 0:
+            raise ValueError("no maps were added; score at least one map")
+        if per_image:
+            return Score.from_curves(
+                self.precision_sum / self.n_maps,
+                self.recall_sum / self.n_maps,
+                beta2=beta2,
+                per_image=True,
+                n_maps=self.n_maps,
+            )
+        return Score.from_counts(self.counts, beta2=beta2, n_maps=self.n_maps)
+
+
+def score_maps(
+    probs: Iterable[np.ndarray],
+    masks: Iterable[np.ndarray],
+    *,
+    thresholds: int = DEFAULT_THRESHOLDS,
+    beta2: float = 1.0,
+    per_image: bool = False,
+) -> Score:
+    """Score probability maps against ground-truth masks (MF and AP).
+
+    Definitions (see the module docstring for the full statement):
+    thresholds ``t_k = k / (T + 1)``, ``k = 1..T`` (float64), a pixel is
+    positive at ``t_k`` when ``prob >= t_k``; pooled mode sums TP/FP/FN over
+    all pixels of all maps, ``P = TP / (TP + FP)`` (1 when nothing is
+    predicted), ``R = TP / (TP + FN)`` (0 when there are no positives);
+    ``F = (1 + beta2) P R / (beta2 P + R)`` (0 when ``P + R = 0``),
+    ``MF = max F``; ``AP = sum_k (R_k - R_{k+1}) P_k`` with increasing
+    thresholds and ``R_{T+1} = 0``; per-image mode averages P and R over maps
+    at each threshold before computing F and AP. Maps are never normalised.
+
+    Both arguments are consumed lazily, one pair at a time, so a generator
+    can stream a whole activity through without holding it in memory. Map
+    sizes may differ between pairs.
+
+    Args:
+        probs: Probability maps in [0, 1], float (H, W) each.
+        masks: Ground-truth masks, bool (H, W) each, the same size as the
+            paired map.
+        thresholds: The number T of thresholds (99 gives 0.01 .. 0.99).
+        beta2: Weight of recall in F (beta squared); 1 gives F1.
+        per_image: Average per-map curves instead of pooling pixel counts.
+
+    Returns:
+        The :class:`Score`.
+
+    Raises:
+        ValueError: If there are no maps, the two iterables differ in length,
+            a map is not a 2-D float map in [0, 1] (or holds NaN), a mask is
+            not bool or not the size of its map (the message names the index),
+            or ``thresholds`` / ``beta2`` are invalid.
+
+    Example:
+        >>> probs = [np.array([[0.9, 0.4, 0.2, 0.0]])]
+        >>> masks = [np.array([[True, True, False, False]])]
+        >>> s = score_maps(probs, masks)
+        >>> s.max_f, s.best_threshold
+        (1.0, 0.21)
+    """
+    beta2 = _check_beta2(beta2)
+    acc = ScoreAccumulator(thresholds=thresholds)
+    prob_iter, mask_iter = iter(probs), iter(masks)
+    sentinel = object()
+    index = 0
+    while True:
+        prob = next(prob_iter, sentinel)
+        mask = next(mask_iter, sentinel)
+        if prob is sentinel and mask is sentinel:
+            break
+        if prob is sentinel or mask is sentinel:
+            longer = "masks" if prob is sentinel else "probs"
+            raise ValueError(f"probs and masks differ in length: {longer} has more than {index} items")
+        acc.add(prob, mask, name=f"probs[{index}]")
+        index += 1
+    if index == 0:
+        raise ValueError("probs is empty: score at least one map")
+    return acc.score(beta2=beta2, per_image=per_image)

@@ -1,0 +1,196 @@
+"""Tests for egonet.clicks: superpixels and click -> soft mask."""
+
+import math
+
+import numpy as np
+import pytest
+
+from egonet.clicks import click_gaussian, project_to_regions, soft_mask, superpixels
+
+
+def stripes(h=8, w=8, n=4):
+    """Labels of n vertical stripes, int32 (h, w)."""
+    return np.repeat(np.arange(n, dtype=np.int32), w // n)[None, :].repeat(h, axis=0)
+
+
+def smooth_image(h=48, w=64, seed=0):
+    """Low-frequency colour blobs: something SLIC can segment into many regions."""
+    import cv2
+
+    rng = np.random.default_rng(seed)
+    small = rng.integers(0, 256, size=(4, 5, 3), dtype=np.uint8)
+    return cv2.resize(small, (w, h), interpolation=cv2.INTER_CUBIC)
+
+
+def two_colour_image(h=60, w=80):
+    img = np.zeros((h, w, 3), dtype=np.uint8)
+    img[:, w // 2 :] = (250, 240, 230)
+    img[:, : w // 2] = (10, 20, 30)
+    return img
+
+
+# --------------------------------------------------------------------------
+# soft_mask: hand-checkable cases.
+
+
+def test_hand_example_one_row():
+    # Click at (x=0, y=0), sigma 1, three pixels in one row: raw Gaussian
+    # [1, e^-0.5, e^-2]; regions [0, 1, 1] -> [1, (e^-0.5 + e^-2) / 2, same].
+    labels = np.array([[0, 1, 1]], dtype=np.int32)
+    out = soft_mask((1, 3), [(0.0, 0.0)], sigma=1.0, labels=labels)
+    mean = (math.exp(-0.5) + math.exp(-2.0)) / 2
+    np.testing.assert_allclose(out, [[1.0, mean, mean]], rtol=1e-6)
+    assert out.dtype == np.float32
+
+
+def test_region_constant_and_click_region_largest():
+    labels = stripes(8, 8, 4)
+    out = soft_mask((8, 8), [(5.0, 3.0)], sigma=3.0, labels=labels)  # column 5 is in stripe 2
+    for r in range(4):
+        region = out[labels == r]
+        assert np.all(region == region[0])
+    region_values = [out[labels == r][0] for r in range(4)]
+    assert int(np.argmax(region_values)) == 2
+    assert 0.0 < out.min() and out.max() <= 1.0
+
+
+def test_no_clicks_gives_zeros():
+    labels = stripes()
+    for clicks in ([], np.zeros((0, 2))):
+        out = soft_mask((8, 8), clicks, labels=labels)
+        assert out.shape == (8, 8) and out.dtype == np.float32
+        np.testing.assert_array_equal(out, 0.0)
+    np.testing.assert_array_equal(soft_mask((8, 8), [], labels=None), 0.0)
+
+
+def test_larger_sigma_spreads_further():
+    labels = stripes(8, 8, 4)
+    narrow = soft_mask((8, 8), [(0.0, 4.0)], sigma=2.0, labels=labels)
+    wide = soft_mask((8, 8), [(0.0, 4.0)], sigma=8.0, labels=labels)
+    far = labels == 3
+    assert np.all(wide[far] > narrow[far])
+
+
+def test_two_clicks_are_max_before_projection():
+    labels = stripes(8, 8, 2)
+    c1, c2 = (1.0, 1.0), (6.0, 6.0)
+    both = soft_mask((8, 8), [c1, c2], sigma=2.0, labels=labels)
+    g = np.maximum(click_gaussian((8, 8), [c1], sigma=2.0), click_gaussian((8, 8), [c2], sigma=2.0))
+    np.testing.assert_array_equal(both, project_to_regions(g, labels))
+    np.testing.assert_array_equal(click_gaussian((8, 8), [c1, c2], sigma=2.0), g)
+
+
+def test_one_region_per_pixel_equals_raw_gaussian():
+    h, w = 9, 13
+    labels = np.arange(h * w, dtype=np.int32).reshape(h, w)
+    clicks = [(3.0, 4.0), (10.5, 1.25)]
+    projected = soft_mask((h, w), clicks, sigma=2.5, labels=labels)
+    raw = soft_mask((h, w), clicks, sigma=2.5, labels=None)
+    np.testing.assert_array_equal(projected, raw)
+    rows, cols = np.mgrid[0:h, 0:w]
+    expected = np.max(
+        [np.exp(-((cols - x) ** 2 + (rows - y) ** 2) / (2 * 2.5**2)) for x, y in clicks],
+        axis=0,
+    )
+    np.testing.assert_allclose(raw, expected, rtol=1e-6, atol=1e-7)
+    assert raw[4, 3] == 1.0  # peak 1 at the click
+
+
+def test_click_on_frame_edge_accepted():
+    out = soft_mask((4, 6), [(-0.5, -0.5), (5.5, 3.5)], sigma=1.0, labels=None)
+    assert out.shape == (4, 6)
+
+
+def test_project_to_regions_non_contiguous_and_unsigned_labels():
+    values = np.array([[1.0, 3.0, 5.0, 7.0]], dtype=np.float32)
+    for dtype in (np.int64, np.uint16, np.uint64):
+        labels = np.array([[10, 10, 3, 3]], dtype=dtype)
+        np.testing.assert_array_equal(project_to_regions(values, labels), [[2.0, 2.0, 6.0, 6.0]])
+
+
+# --------------------------------------------------------------------------
+# soft_mask: validation.
+
+
+def test_soft_mask_validation():
+    labels = stripes()
+    with pytest.raises(ValueError, match="labels has shape"):
+        soft_mask((8, 9), [(1, 1)], labels=labels)
+    with pytest.raises(ValueError, match="sigma"):
+        soft_mask((8, 8), [(1, 1)], sigma=0.0, labels=labels)
+    with pytest.raises(ValueError, match="sigma"):
+        soft_mask((8, 8), [(1, 1)], sigma=float("nan"), labels=labels)
+    with pytest.raises(ValueError, match=r"clicks\[1\].*outside"):
+        soft_mask((8, 8), [(1, 1), (8.0, 2.0)], labels=labels)
+    with pytest.raises(ValueError, match=r"clicks\[0\].*outside"):
+        soft_mask((8, 8), [(1.0, -1.0)], labels=labels)
+    with pytest.raises(ValueError, match=r"clicks\[2\].*not finite"):
+        soft_mask((8, 8), [(1, 1), (2, 2), (float("nan"), 3)], labels=labels)
+    with pytest.raises(ValueError, match=r"\(N, 2\)"):
+        soft_mask((8, 8), (3.0, 4.0), labels=labels)  # one click not wrapped in a list
+    with pytest.raises(ValueError, match="shape"):
+        soft_mask((8, 0), [], labels=None)
+    with pytest.raises(ValueError, match="integer"):
+        soft_mask((8, 8), [(1, 1)], labels=labels.astype(np.float32))
+    with pytest.raises(ValueError, match="non-negative"):
+        soft_mask((8, 8), [(1, 1)], labels=labels - 1)
+    with pytest.raises(TypeError):
+        soft_mask((8, 8), [(1, 1)])  # labels must be given, None included
+
+
+# --------------------------------------------------------------------------
+# superpixels.
+
+
+@pytest.mark.parametrize("method", ["slic", "felzenszwalb"])
+def test_superpixels_labels_contiguous(method):
+    img = smooth_image(48, 64)
+    labels = superpixels(img, method=method, **({"n_segments": 30} if method == "slic" else {"scale": 20.0}))
+    assert labels.shape == (48, 64) and labels.dtype == np.int32
+    n = int(labels.max()) + 1
+    assert n > 3
+    np.testing.assert_array_equal(np.unique(labels), np.arange(n))
+
+
+@pytest.mark.parametrize("method", ["slic", "felzenszwalb"])
+@pytest.mark.parametrize("max_side", [None, 32])
+def test_superpixels_follow_colour_boundary(method, max_side):
+    img = two_colour_image(60, 80)
+    labels = superpixels(img, method=method, max_side=max_side)
+    assert labels.shape == (60, 80)
+    left, right = set(np.unique(labels[:, :40])), set(np.unique(labels[:, 40:]))
+    assert not left & right
+
+
+def test_superpixels_n_segments_controls_count():
+    img = smooth_image(60, 80, seed=1)
+    few = superpixels(img, n_segments=4).max() + 1
+    many = superpixels(img, n_segments=100).max() + 1
+    assert few < many
+
+
+def test_superpixels_validation():
+    img = two_colour_image()
+    with pytest.raises(ValueError, match="valid methods: slic, felzenszwalb"):
+        superpixels(img, method="mcg")
+    with pytest.raises(ValueError, match="scale does not apply"):
+        superpixels(img, method="slic", scale=50.0)
+    with pytest.raises(ValueError, match="n_segments does not apply"):
+        superpixels(img, method="felzenszwalb", n_segments=10)
+    with pytest.raises(ValueError, match="n_segments"):
+        superpixels(img, n_segments=0)
+    with pytest.raises(ValueError, match="image"):
+        superpixels(img.astype(np.float32))
+    with pytest.raises(ValueError, match="image"):
+        superpixels(img[:, :, 0])
+    with pytest.raises(ValueError, match="max_side"):
+        superpixels(img, max_side=2)
+
+
+def test_superpixels_feed_soft_mask():
+    img = two_colour_image(60, 80)
+    labels = superpixels(img, n_segments=12)
+    out = soft_mask((60, 80), [(60.0, 30.0)], sigma=10.0, labels=labels)
+    for r in np.unique(labels):
+        assert np.ptp(out[labels == r]) == 0
+    assert out[:, 40:].mean() > 10 * out[:, :40].mean()
