@@ -60,15 +60,16 @@ def create_app(test_config: dict | None = None) -> Flask:
     login_manager.login_view = "auth.login"
 
     from app import errors, security
-    from app.blueprints import api, auth, frames
+    from app.blueprints import api, auth, frames, label, navigation, scores, studies, study, training
     from app.cli import bp as cli_bp
 
     security.require_production_safety(app)
     errors.register(app)
     security.register(app)
     app.register_blueprint(auth.bp)
-    app.register_blueprint(frames.bp)
-    app.register_blueprint(api.bp)
+    for module in (frames, api, label, studies, study, training, scores):
+        app.register_blueprint(module.bp)
+    app.context_processor(navigation)
     app.register_blueprint(cli_bp)
 
     @login_manager.user_loader

@@ -12,6 +12,10 @@ class UserProblem(ValueError):
     """A user that cannot be created, with the reason."""
 
 
+def find_user(username: str) -> User | None:
+    return db.session.execute(db.select(User).filter_by(username=username.strip())).scalar_one_or_none()
+
+
 def create_user(username: str, role: Role | str, password: str | None = None) -> tuple[User, str | None]:
     """Create a user; return it and the generated password (None when one was given).
 
@@ -25,7 +29,7 @@ def create_user(username: str, role: Role | str, password: str | None = None) ->
         role = Role(role)
     except ValueError:
         raise UserProblem(f"unknown role {role!r}; use one of {', '.join(r.value for r in Role)}") from None
-    if db.session.execute(db.select(User.id).filter_by(username=username)).first():
+    if find_user(username) is not None:
         raise UserProblem(f"a user named {username!r} already exists")
     generated = None
     if role is Role.PARTICIPANT:
@@ -48,7 +52,7 @@ def authenticate(username: str, password: str) -> User | None:
     Participants have no password and never sign in here. The hash is checked
     even for unknown names, so timing does not reveal which names exist.
     """
-    user = db.session.execute(db.select(User).filter_by(username=username.strip())).scalar_one_or_none()
+    user = find_user(username)
     stored = user.password_hash if user is not None and user.password_hash else _DUMMY_HASH
     ok = check_password_hash(stored, password)
     if user is None or not ok or not user.active or user.role is Role.PARTICIPANT:

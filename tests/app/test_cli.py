@@ -51,6 +51,8 @@ def test_create_user_errors(ctx, runner):
     runner.invoke(args=["egonet", "create-user", "ana", "--role", "annotator", "--password", "s3cret-pass"])
     result = runner.invoke(args=["egonet", "create-user", "ana", "--role", "reviewer", "--password", "another-pass"])
     assert result.exit_code == 1 and "already exists" in result.output
+    result = runner.invoke(args=["egonet", "create-user", "ana", "--role", "annotator", "--if-missing"])
+    assert result.exit_code == 0 and "keeping it" in result.output
     result = runner.invoke(args=["egonet", "create-user", "bob", "--role", "wizard"])
     assert result.exit_code == 2 and "--role" in result.output
     result = runner.invoke(args=["egonet", "create-user", "bob", "--role", "admin", "--password", "short"])

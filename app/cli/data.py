@@ -1,47 +1,11 @@
-"""The ``flask egonet`` command group: thin wrappers over the services.
+"""Data commands: import, demo, create-user."""
 
-Every failure exits non-zero with a one-line reason (click's "Error: ...").
-"""
-
-import contextlib
 from pathlib import Path
 
 import click
-from flask import Blueprint
 
+from app.cli import bp, one_line_errors, progress_bar
 from app.models import Role, Status
-
-bp = Blueprint("egonet_cli", __name__, cli_group="egonet")
-
-
-@contextlib.contextmanager
-def one_line_errors():
-    """Turn the services' validation errors into click's one-line failure."""
-    try:
-        yield
-    except ValueError as exc:  # MediaError, ImportProblem, UserProblem are ValueErrors
-        raise click.ClickException(str(exc)) from None
-
-
-@contextlib.contextmanager
-def progress_bar(label: str):
-    """Yield (on_start, on_progress) callbacks that drive a click progress bar."""
-    state: dict = {}
-
-    def on_start(total: int) -> None:
-        state["bar"] = click.progressbar(length=total, label=label, show_eta=True, show_pos=True)
-        state["bar"].__enter__()
-
-    def on_progress(n: int) -> None:
-        if "bar" not in state:
-            on_start(0)
-        state["bar"].update(n)
-
-    try:
-        yield on_start, on_progress
-    finally:
-        if "bar" in state:
-            state["bar"].__exit__(None, None, None)
 
 
 @bp.cli.command("import")
@@ -115,11 +79,16 @@ def demo_command(frames_per_activity, seed, width, height):
 @click.argument("name")
 @click.option("--role", type=click.Choice([r.value for r in Role]), required=True)
 @click.option("--password", help="Password (prompted when omitted and a terminal is attached; generated otherwise).")
-def create_user_command(name, role, password):
+@click.option("--if-missing", is_flag=True, help="Do nothing (and succeed) when the user already exists.")
+def create_user_command(name, role, password, if_missing):
     """Create a user NAME with a role."""
     import sys
 
-    from app.services.users import create_user
+    from app.services.users import create_user, find_user
+
+    if if_missing and find_user(name) is not None:
+        click.echo(f"user {name!r} exists already; keeping it")
+        return
 
     if password is None and role != Role.PARTICIPANT and sys.stdin.isatty():
         password = click.prompt("Password (empty to generate one)", default="", hide_input=True, show_default=False)

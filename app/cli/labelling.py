@@ -1,0 +1,3 @@
+"""Labelling commands (export)."""
+
+from app.cli import bp  # noqa: F401

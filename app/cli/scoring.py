@@ -1,0 +1,3 @@
+"""Scoring commands (score)."""
+
+from app.cli import bp  # noqa: F401

@@ -1,0 +1,3 @@
+"""Human-study commands."""
+
+from app.cli import bp  # noqa: F401

@@ -1,0 +1,3 @@
+"""Training commands (train, predict, worker)."""
+
+from app.cli import bp  # noqa: F401

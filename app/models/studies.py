@@ -1,0 +1,1 @@
+"""Human studies: studies, their frames, participants, trials, clicks and events."""

@@ -1,0 +1,30 @@
+"""Dataset browsing, log-in and the read-only API."""
+
+from app.extensions import db
+from app.models import Activity, Frame
+from app.services.importing import import_path
+from tests.app.access import ALL, STAFF
+from tests.app.factories import image_folder
+
+RULES = {
+    "static": (None, 200),
+    "auth.login": (None, {"GET": 200, "POST": 400}),
+    "auth.logout": (ALL, 302),
+    "frames.index": (STAFF, 200),
+    "frames.activity": (STAFF, 200),
+    "frames.frame": (STAFF, 200),
+    "frames.thumbnail": (STAFF, 200),
+    "frames.depth": (STAFF, 200),
+    "frames.media_file": (STAFF, 200),
+    "api.activities": (STAFF, 200),
+    "api.activity_frames": (STAFF, 200),
+    "api.frame": (STAFF, 200),
+}
+
+
+def url_values(app, tmp_path) -> dict:
+    with app.app_context():
+        import_path(image_folder(tmp_path / "rec", n=2, depth=True), activity="cooking")
+        frame = db.session.execute(db.select(Frame)).scalars().first()
+        activity = db.session.execute(db.select(Activity)).scalar_one()
+        return {"frame_id": frame.id, "activity_id": activity.id, "name": frame.rgb_path, "filename": "css/app.css"}

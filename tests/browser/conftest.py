@@ -1,0 +1,98 @@
+"""A live server and Debian's Chromium driven by Playwright.
+
+The server is the real WSGI app served by Werkzeug in a background thread,
+on a migrated SQLite database in a temporary folder. Chromium comes from
+Debian (``apt-get install -y chromium``); Playwright's own browser download
+cannot work offline. Without Chromium these tests skip, unless
+``EGONET_REQUIRE_BROWSER=1`` (set by .ci/run) makes that a failure.
+"""
+
+import os
+import threading
+from pathlib import Path
+
+import pytest
+from flask_migrate import upgrade
+from werkzeug.serving import make_server
+
+from tests.app.conftest import make_app
+
+CHROMIUM = os.environ.get("EGONET_CHROMIUM", "/usr/bin/chromium")
+CHROMIUM_ARGS = [
+    "--no-sandbox",
+    "--disable-gpu",
+    "--disable-dev-shm-usage",
+    "--disable-quic",
+    "--no-first-run",
+    "--disable-background-networking",
+    "--disable-component-update",
+    "--disable-sync",
+]
+ARTIFACTS = Path(__file__).resolve().parents[2] / "test-results"
+
+
+@pytest.fixture
+def live_app(tmp_path):
+    app = make_app(f"sqlite:///{tmp_path / 'live.sqlite3'}", tmp_path)
+    with app.app_context():
+        upgrade()
+    return app
+
+
+@pytest.fixture
+def live_server(live_app):
+    """Serve ``live_app`` on a free loopback port; yield its base URL."""
+    server = make_server("127.0.0.1", 0, live_app, threaded=True)
+    thread = threading.Thread(target=server.serve_forever, daemon=True)
+    thread.start()
+    yield f"http://127.0.0.1:{server.server_port}"
+    server.shutdown()
+    thread.join(timeout=5)
+    server.server_close()
+
+
+@pytest.fixture(scope="session")
+def browser():
+    if not Path(CHROMIUM).exists():
+        if os.environ.get("EGONET_REQUIRE_BROWSER") == "1":
+            pytest.fail(f"Chromium not found at {CHROMIUM} (apt-get install -y chromium)")
+        pytest.skip(f"Chromium not found at {CHROMIUM} (apt-get install -y chromium)")
+    from playwright.sync_api import sync_playwright
+
+    with sync_playwright() as p:
+        browser = p.chromium.launch(executable_path=CHROMIUM, headless=True, args=CHROMIUM_ARGS)
+        yield browser
+        browser.close()
+
+
+@pytest.fixture
+def page(browser):
+    context = browser.new_context(viewport={"width": 1280, "height": 900})
+    page = context.new_page()
+    yield page
+    context.close()
+
+
+PASSWORD = "browser-test-password"
+
+
+def sign_in(page, live_app, base_url: str, *, username: str = "admin", role: str = "admin") -> None:
+    """Create a staff user and sign in through the real log-in form."""
+    from app.services.users import create_user, find_user
+
+    with live_app.app_context():
+        if find_user(username) is None:
+            create_user(username, role, PASSWORD)
+    page.goto(base_url + "/login")
+    page.fill("input[name=username]", username)
+    page.fill("input[name=password]", PASSWORD)
+    page.click("button[type=submit]")
+    page.wait_for_load_state("networkidle")
+
+
+def screenshot(page, name: str) -> Path:
+    """Save a full-page screenshot under test-results/ for a person to look at."""
+    ARTIFACTS.mkdir(exist_ok=True)
+    path = ARTIFACTS / f"{name}.png"
+    page.screenshot(path=str(path), full_page=True)
+    return path
