@@ -4,7 +4,10 @@ from collections.abc import Callable, Iterator
 
 from app.models import Status
 from app.services.importing import FrameItem, ImportReport, add_frames
+import cv2
+
 from egonet import synth
+from egonet.dhg import encode_dhg
 
 DEMO_AUTHOR = "demo"
 
@@ -20,7 +23,10 @@ def create_demo(
     """Render and import the demo frames of every activity.
 
     Each frame's ground-truth mask becomes a reviewed annotation by the
-    "demo" author. Frames are rendered deterministically from ``seed``, so
+    "demo" author. The DHG image uses the renderer's true height above the
+    floor, as a rig with an IMU would know it; imported frames without DHG
+    get the height estimated from depth (egonet.dhg.height_map), which needs
+    the floor in view. Frames are rendered deterministically from ``seed``, so
     running this twice with the same arguments adds nothing.
     """
     if frames_per_activity < 1:
@@ -29,8 +35,9 @@ def create_demo(
     def items(activity: str) -> Iterator[FrameItem]:
         for f in synth.render_activity(activity, frames_per_activity, seed=seed, width=width, height=height):
             name = f"{activity.replace(' ', '-')}-{seed}-{f.index:04d}"
+            dhg = encode_dhg(f.depth_m, f.height_m, cv2.cvtColor(f.rgb, cv2.COLOR_RGB2GRAY))
             yield FrameItem(
-                name, f.index, f"demo {name}", rgb=f.rgb, depth_m=f.depth_m, K=f.K, mask=f.mask, meta=dict(f.meta)
+                name, f.index, f"demo {name}", rgb=f.rgb, depth_m=f.depth_m, dhg=dhg, K=f.K, mask=f.mask, meta=dict(f.meta)
             )
 
     return [
