@@ -4,7 +4,15 @@ Slow and browser tests carry markers and are skipped unless ``--all`` is
 given (the README's test command and ``.ci/run`` give it).
 """
 
+import os
+import tempfile
+
 import pytest
+
+# The task queue is chosen when app.tasks is imported: give the test session
+# its own SQLite queue so it never touches instance/ (tests that need Redis
+# make their own Huey).
+os.environ.setdefault("EGONET_QUEUE_URL", f"sqlite:///{tempfile.mkdtemp(prefix='egonet-queue-')}/queue.sqlite3")
 
 
 def pytest_addoption(parser):
