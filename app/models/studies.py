@@ -1,1 +1,223 @@
-"""Human studies: studies, their frames, participants, trials, clicks and events."""
+"""Human studies: studies, their frames, participants, trials, clicks and events.
+
+A study draws frames (``StudyFrame``) once, when it is created. Each
+participant is a ``User`` with the participant role plus a ``Participant``
+row holding the access code, the optional single-use link and the session
+clock (``started_at``, ``deadline``, ``finished_at``, all stamped by the
+server). A participant's trials are created with the participant, in their
+own seeded order; a trial is pending until it has an ``outcome``.
+"""
+
+import enum
+from datetime import datetime
+from typing import Any
+
+from sqlalchemy import JSON, Enum, Float, ForeignKey, String, Text, UniqueConstraint
+from sqlalchemy.orm import Mapped, mapped_column, relationship
+
+from app.models.base import Base, UTCDateTime, utcnow
+from app.models.frames import Frame
+from app.models.users import User
+
+
+def _enum(cls):
+    return Enum(cls, native_enum=False, length=20, values_callable=lambda e: [m.value for m in e])
+
+
+class EntryKind(enum.StrEnum):
+    """How a participant enters: typing a code, or opening a single-use link (the code still works)."""
+
+    CODE = "code"
+    LINK = "link"
+
+
+class EndReason(enum.StrEnum):
+    COMPLETED = "completed"  # every trial answered
+    TIME_UP = "time_up"  # the session deadline passed
+    DECLINED = "declined"  # consent refused
+
+
+class Outcome(enum.StrEnum):
+    CLICKED = "clicked"  # one or more clicks, submitted in time
+    NONE = "none"  # "no action-object", submitted in time
+    TIMED_OUT = "timed_out"  # sent by the page when a limit ran out, with the clicks made until then
+    EXPIRED = "expired"  # no answer: nothing arrived in time, or time ran out before any click
+
+
+# Outcomes that carry an answer (clicks, possibly none): these give soft masks.
+ANSWERED = (Outcome.CLICKED, Outcome.NONE, Outcome.TIMED_OUT)
+
+
+class EventKind(enum.StrEnum):
+    BLUR = "blur"
+    FOCUS = "focus"
+    VISIBILITY = "visibility"  # detail: {"state": "hidden" | "visible"}
+    RESIZE = "resize"  # detail: {"width", "height"} of the window
+    UNDO = "undo"  # detail: {"x", "y"} of the removed click
+    RELOAD = "reload"  # server-side: the trial was served again (page reloaded)
+
+
+class Study(Base):
+    """A click study: its settings and, through ``frames``, the frames it drew.
+
+    ``superpixels`` holds the keyword options of ``egonet.clicks.superpixels``
+    (``method`` plus that method's options); ``sigma_px`` is the click
+    Gaussian's standard deviation at the frame's native resolution.
+    """
+
+    __tablename__ = "study"
+
+    id: Mapped[int] = mapped_column(primary_key=True)
+    name: Mapped[str] = mapped_column(String(200))
+    seed: Mapped[int]
+    frames_per_activity: Mapped[int]
+    time_limit_s: Mapped[int]
+    trial_limit_s: Mapped[int | None]
+    multiple_clicks: Mapped[bool] = mapped_column(default=True)
+    sigma_px: Mapped[float] = mapped_column(Float, default=60.0)
+    superpixels: Mapped[dict[str, Any]] = mapped_column(JSON, default=dict)
+    instructions: Mapped[str] = mapped_column(Text, default="")
+    consent: Mapped[str] = mapped_column(Text, default="")
+    created_by_id: Mapped[int | None] = mapped_column(ForeignKey("user.id"))
+    created_at: Mapped[datetime] = mapped_column(UTCDateTime(), default=utcnow)
+
+    created_by: Mapped[User | None] = relationship()
+    frames: Mapped[list["StudyFrame"]] = relationship(
+        back_populates="study", order_by="StudyFrame.position", cascade="all, delete-orphan", passive_deletes=True
+    )
+    participants: Mapped[list["Participant"]] = relationship(
+        back_populates="study", order_by="Participant.number", cascade="all, delete-orphan", passive_deletes=True
+    )
+
+
+class StudyFrame(Base):
+    """A frame drawn for a study; ``position`` is the draw order (activity by activity)."""
+
+    __tablename__ = "study_frame"
+    __table_args__ = (UniqueConstraint("study_id", "frame_id"), UniqueConstraint("study_id", "position"))
+
+    id: Mapped[int] = mapped_column(primary_key=True)
+    study_id: Mapped[int] = mapped_column(ForeignKey("study.id", ondelete="CASCADE"), index=True)
+    # No cascade: a frame that a study used cannot disappear under its results.
+    frame_id: Mapped[int] = mapped_column(ForeignKey("frame.id"), index=True)
+    position: Mapped[int]
+
+    study: Mapped[Study] = relationship(back_populates="frames")
+    frame: Mapped[Frame] = relationship()
+
+
+class Participant(Base):
+    """One person taking a study, signed in as ``user``.
+
+    ``deadline`` is ``started_at`` plus the study's time limit, stored when
+    the session starts so the limit in force cannot change under it.
+    ``order_seed`` is the seed the trial order was shuffled with.
+    """
+
+    __tablename__ = "study_participant"
+    __table_args__ = (UniqueConstraint("study_id", "number"),)
+
+    id: Mapped[int] = mapped_column(primary_key=True)
+    study_id: Mapped[int] = mapped_column(ForeignKey("study.id", ondelete="CASCADE"), index=True)
+    user_id: Mapped[int] = mapped_column(ForeignKey("user.id"), unique=True)
+    number: Mapped[int]
+    entry: Mapped[EntryKind] = mapped_column(_enum(EntryKind))
+    code: Mapped[str] = mapped_column(String(16), unique=True)
+    link_token: Mapped[str | None] = mapped_column(String(64), unique=True)
+    link_used_at: Mapped[datetime | None] = mapped_column(UTCDateTime())
+    order_seed: Mapped[int]
+    consented_at: Mapped[datetime | None] = mapped_column(UTCDateTime())
+    started_at: Mapped[datetime | None] = mapped_column(UTCDateTime())
+    deadline: Mapped[datetime | None] = mapped_column(UTCDateTime())
+    finished_at: Mapped[datetime | None] = mapped_column(UTCDateTime())
+    end_reason: Mapped[EndReason | None] = mapped_column(_enum(EndReason))
+    created_at: Mapped[datetime] = mapped_column(UTCDateTime(), default=utcnow)
+
+    study: Mapped[Study] = relationship(back_populates="participants")
+    user: Mapped[User] = relationship()
+    trials: Mapped[list["Trial"]] = relationship(
+        back_populates="participant", order_by="Trial.position", cascade="all, delete-orphan", passive_deletes=True
+    )
+
+    @property
+    def label(self) -> str:
+        return f"P{self.number:02d}"
+
+
+class Trial(Base):
+    """One frame shown to one participant.
+
+    ``shown_at`` and ``submitted_at`` are the server's clock; ``rt_ms`` and
+    the click times are the page's ``performance.now()`` since the frame was
+    painted. ``window_*`` and ``display_*`` are the window and the drawn
+    frame in CSS pixels when the answer was given.
+    """
+
+    __tablename__ = "study_trial"
+    __table_args__ = (UniqueConstraint("participant_id", "position"), UniqueConstraint("participant_id", "study_frame_id"))
+
+    id: Mapped[int] = mapped_column(primary_key=True)
+    participant_id: Mapped[int] = mapped_column(ForeignKey("study_participant.id", ondelete="CASCADE"), index=True)
+    study_frame_id: Mapped[int] = mapped_column(ForeignKey("study_frame.id", ondelete="CASCADE"), index=True)
+    position: Mapped[int]
+    shown_at: Mapped[datetime | None] = mapped_column(UTCDateTime())
+    submitted_at: Mapped[datetime | None] = mapped_column(UTCDateTime())
+    outcome: Mapped[Outcome | None] = mapped_column(_enum(Outcome))
+    rt_ms: Mapped[float | None] = mapped_column(Float)
+    window_width: Mapped[int | None]
+    window_height: Mapped[int | None]
+    display_width: Mapped[float | None] = mapped_column(Float)
+    display_height: Mapped[float | None] = mapped_column(Float)
+    pixel_ratio: Mapped[float | None] = mapped_column(Float)
+
+    participant: Mapped[Participant] = relationship(back_populates="trials")
+    study_frame: Mapped[StudyFrame] = relationship()
+    clicks: Mapped[list["Click"]] = relationship(
+        back_populates="trial", order_by="Click.position", cascade="all, delete-orphan", passive_deletes=True
+    )
+    events: Mapped[list["TrialEvent"]] = relationship(
+        back_populates="trial", order_by="[TrialEvent.position, TrialEvent.id]", cascade="all, delete-orphan", passive_deletes=True
+    )
+
+    @property
+    def frame(self) -> Frame:
+        return self.study_frame.frame
+
+
+class Click(Base):
+    """A click in the frame's native pixels (x = column, y = row, pixel centres at integers)."""
+
+    __tablename__ = "study_click"
+    __table_args__ = (UniqueConstraint("trial_id", "position"),)
+
+    id: Mapped[int] = mapped_column(primary_key=True)
+    trial_id: Mapped[int] = mapped_column(ForeignKey("study_trial.id", ondelete="CASCADE"), index=True)
+    position: Mapped[int]
+    x: Mapped[float] = mapped_column(Float)
+    y: Mapped[float] = mapped_column(Float)
+    rt_ms: Mapped[float] = mapped_column(Float)
+    received_at: Mapped[datetime] = mapped_column(UTCDateTime())
+
+    trial: Mapped[Trial] = relationship(back_populates="clicks")
+
+
+class TrialEvent(Base):
+    """Something that happened during a trial: focus, visibility, resize, undo, reload.
+
+    ``client_ms`` is the page's time since the frame was painted (None for
+    events the server records itself); ``server_at`` is when the server
+    received or recorded it. ``position`` orders a trial's events; it is not
+    unique, because a reload can be logged while the answer is being saved.
+    """
+
+    __tablename__ = "study_event"
+
+    id: Mapped[int] = mapped_column(primary_key=True)
+    trial_id: Mapped[int] = mapped_column(ForeignKey("study_trial.id", ondelete="CASCADE"), index=True)
+    position: Mapped[int]
+    kind: Mapped[EventKind] = mapped_column(_enum(EventKind))
+    client_ms: Mapped[float | None] = mapped_column(Float)
+    server_at: Mapped[datetime] = mapped_column(UTCDateTime())
+    detail: Mapped[dict[str, Any]] = mapped_column(JSON, default=dict)
+
+    trial: Mapped[Trial] = relationship(back_populates="events")

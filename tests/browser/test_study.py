@@ -1,0 +1,168 @@
+"""A human study in real Chromium: the admin builds it, a participant takes it, the admin sees the masks."""
+
+import pytest
+
+from app.extensions import db
+from app.models import Activity
+from app.models.studies import EndReason, EventKind, Outcome, Participant, Study
+from app.services import studies
+from app.services.demo import create_demo
+from tests.browser.conftest import screenshot, sign_in
+
+pytestmark = pytest.mark.browser
+
+LOADED = "img => img.complete && img.naturalWidth > 0"
+
+
+def wait_for_trial(page, position: int) -> None:
+    """Wait until trial ``position`` is painted (the page marks it once its frame is on screen)."""
+    page.wait_for_selector(f'#trial-app[data-painted="{position}"]')
+
+
+def click_frame(page, u: float, v: float) -> None:
+    """Click at fractions (u, v) of the drawn frame."""
+    box = page.locator("#stage img.frame").bounding_box()
+    page.mouse.click(box["x"] + u * box["width"], box["y"] + v * box["height"])
+
+
+def test_participant_session_with_reload_and_admin_results(live_app, live_server, page, browser):
+    with live_app.app_context():
+        create_demo(frames_per_activity=3, seed=1, width=320, height=240)
+        activity_ids = {a.name: a.id for a in db.session.execute(db.select(Activity)).scalars()}
+
+    # The admin builds a study: 2 frames from each of 2 activities, a short time limit, links.
+    sign_in(page, live_app, live_server)
+    page.goto(live_server + "/studies/new")
+    assert "3 eligible" in page.inner_text(".activity-choices")
+    page.fill("input[name=name]", "browser study")
+    page.check(f"input[name=activities][value='{activity_ids['cooking']}']")
+    page.check(f"input[name=activities][value='{activity_ids['hotel']}']")
+    page.fill("input[name=frames_per_activity]", "2")
+    page.fill("input[name=time_limit_min]", "3")
+    screenshot(page, "study-admin-new")
+    page.click(".study-form button[type=submit]")
+    page.wait_for_load_state("networkidle")
+    assert "4 frames drawn" in page.inner_text(".flash")
+    page.fill("input[name=count]", "2")
+    page.select_option("select[name=entry]", "link")
+    page.click("text=Add participants")
+    page.wait_for_load_state("networkidle")
+    links = [page.locator("input.link").nth(i).input_value() for i in range(2)]
+    assert all("/s/l/" in link for link in links)
+    screenshot(page, "study-admin-detail")
+
+    # The participant, in their own browser context, opens the link once.
+    context = browser.new_context(viewport={"width": 1280, "height": 800})
+    person = context.new_page()
+    person.goto(links[0])
+    assert person.url.endswith("/s/consent")
+    screenshot(person, "study-consent")
+    person.click("#agree")
+    assert person.url.endswith("/s/instructions")
+    assert "Backspace" in person.inner_text("table.keys")
+    assert person.locator(".prose p").count() == 3  # the default text's paragraphs, sent back by the form
+    screenshot(person, "study-instructions")
+    person.click("#start")
+    wait_for_trial(person, 1)
+    assert person.inner_text("#progress-text") == "Photo 1 of 4"
+    assert person.locator("#stage img.frame").evaluate(LOADED)
+
+    # Trial 1: two clicks, undo one, click again, Enter.
+    click_frame(person, 0.5, 0.5)
+    click_frame(person, 0.1, 0.1)
+    person.keyboard.press("Backspace")
+    click_frame(person, 0.75, 0.25)
+    assert person.locator(".marker").count() == 2
+    screenshot(person, "study-trial-clicks")
+    person.keyboard.press("Enter")
+    wait_for_trial(person, 2)
+    assert person.locator(".marker").count() == 0
+
+    # Trial 2: a click, then a reload: the page resumes at trial 2, without the unsent click.
+    click_frame(person, 0.3, 0.6)
+    person.reload()
+    wait_for_trial(person, 2)
+    assert person.inner_text("#progress-text") == "Photo 2 of 4" and person.locator(".marker").count() == 0
+    screenshot(person, "study-after-reload")
+    person.keyboard.press("n")
+    wait_for_trial(person, 3)
+
+    # Trial 3: the Next button; trial 4: Enter. The window is resized on the way.
+    click_frame(person, 0.2, 0.8)
+    person.set_viewport_size({"width": 900, "height": 700})
+    person.wait_for_timeout(400)
+    person.click("#next")
+    wait_for_trial(person, 4)
+    click_frame(person, 0.9, 0.9)
+    person.keyboard.press("Enter")
+    person.wait_for_url("**/s/done")
+    assert "You answered all 4 photos" in person.inner_text("#thanks")
+    screenshot(person, "study-done")
+
+    with live_app.app_context():
+        study = db.session.execute(db.select(Study).filter_by(name="browser study")).scalar_one()
+        participant = study.participants[0]
+        assert participant.end_reason is EndReason.COMPLETED and participant.link_used_at is not None
+        trials = participant.trials
+        assert [t.outcome for t in trials] == [Outcome.CLICKED, Outcome.NONE, Outcome.CLICKED, Outcome.CLICKED]
+        first = trials[0]
+        w, h = first.frame.width, first.frame.height
+        (x0, y0), (x1, y1) = [(c.x, c.y) for c in first.clicks]
+        assert abs(x0 - (0.5 * w - 0.5)) <= 0.5 and abs(y0 - (0.5 * h - 0.5)) <= 0.5  # native pixels
+        assert abs(x1 - (0.75 * w - 0.5)) <= 0.5 and abs(y1 - (0.25 * h - 0.5)) <= 0.5
+        assert 0 < first.clicks[0].rt_ms < first.clicks[1].rt_ms <= first.rt_ms
+        assert first.window_width == 1280 and first.display_height > 0
+        assert [e.kind for e in first.events] == [EventKind.UNDO]
+        assert EventKind.RELOAD in [e.kind for e in trials[1].events] and trials[1].clicks == []
+        assert EventKind.RESIZE in [e.kind for e in trials[2].events] and trials[2].window_width == 900
+        study_id, participant_id = study.id, participant.id
+        first_frame = first.study_frame_id
+    context.close()
+
+    # The admin sees progress, the participant's soft masks and the mean maps.
+    page.goto(f"{live_server}/studies/{study_id}")
+    assert "completed" in page.inner_text("#participants") and "4 / 4" in page.inner_text("#participants")
+    page.goto(f"{live_server}/studies/{study_id}/participants/{participant_id}")
+    page.wait_for_load_state("networkidle")
+    overlays = page.locator(".trial-tile img")
+    assert overlays.count() == 4
+    for i in range(4):
+        overlays.nth(i).scroll_into_view_if_needed()
+        page.wait_for_function("img => img.complete && img.naturalWidth > 0", arg=overlays.nth(i).element_handle())
+    screenshot(page, "study-admin-participant")
+    page.goto(f"{live_server}/studies/{study_id}/frames")
+    page.wait_for_load_state("networkidle")
+    assert page.locator(".trial-grid img").count() == 4
+    screenshot(page, "study-admin-mean-maps")
+    page.goto(f"{live_server}/studies/{study_id}/frames/{first_frame}")
+    page.wait_for_load_state("networkidle")
+    assert page.locator("#mean-map").evaluate(LOADED)
+    screenshot(page, "study-admin-frame")
+
+
+def test_time_runs_out_on_screen(live_app, live_server, page):
+    with live_app.app_context():
+        create_demo(frames_per_activity=2, seed=2, width=320, height=240)
+        cooking = db.session.execute(db.select(Activity).filter_by(name="cooking")).scalar_one()
+        study = studies.create_study(name="short", activity_ids=[cooking.id], frames_per_activity=2, time_limit_s=4)
+        code = studies.format_code(studies.add_participants(study, count=1)[0].code)
+
+    page.goto(live_server + "/s/")
+    screenshot(page, "study-entry")
+    page.fill("input[name=code]", code.lower())  # as typed
+    page.click("main button[type=submit]")
+    page.click("#agree")
+    page.click("#start")
+    wait_for_trial(page, 1)
+    click_frame(page, 0.4, 0.4)  # a click, but no Next before the time is up
+    assert page.inner_text("#time-left") in ("0:04", "0:03")
+    screenshot(page, "study-time-running")
+    page.wait_for_url("**/s/done", timeout=15_000)
+    assert "The time is up. You answered 1 of 2" in page.inner_text("#thanks")
+    screenshot(page, "study-time-up")
+    with live_app.app_context():
+        participant = db.session.execute(db.select(Participant)).scalar_one()
+        assert participant.end_reason is EndReason.TIME_UP
+        first, second = participant.trials
+        assert first.outcome is Outcome.TIMED_OUT and len(first.clicks) == 1
+        assert second.outcome in (None, Outcome.EXPIRED)
