@@ -58,6 +58,8 @@ def check_access():
     if role is None:
         if wants_json():
             return error_response(401, "unauthorized", "sign in first")
+        if Role.PARTICIPANT in allowed and Role.ADMIN not in allowed:
+            return redirect(url_for("study.entry"))  # participants enter with their code
         return redirect(url_for("auth.login", next=request.full_path.rstrip("?")))
     if role not in allowed:
         return error_response(403, "forbidden", f"the {role.value} role cannot use this")

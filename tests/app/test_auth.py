@@ -55,3 +55,9 @@ def test_production_refuses_the_development_key(tmp_path):
         create_app({"PRODUCTION": True, "SECRET_KEY": DEV_SECRET_KEY})
     app = create_app({"PRODUCTION": True, "SECRET_KEY": "x" * 40, "SQLALCHEMY_DATABASE_URI": "sqlite://"})
     assert app.config["SESSION_COOKIE_SECURE"] is True
+
+
+def test_signed_out_participant_pages_lead_to_the_study_entry(client):
+    response = client.get("/s/trials")
+    assert response.status_code == 302 and response.headers["Location"] == "/s/"
+    assert client.get("/studies/").headers["Location"].startswith("/login")
