@@ -14,15 +14,22 @@ Conventions:
     * Intrinsics are the 3x3 camera matrix K (float64).
 """
 
+import io as _io
 import json
+import warnings
 from pathlib import Path
 
 import cv2
 import numpy as np
+from PIL import Image, UnidentifiedImageError
 
 IMAGE_SUFFIXES = (".jpg", ".jpeg", ".png")
 VIDEO_SUFFIXES = (".mp4", ".avi", ".mov")
 DEPTH_SUFFIXES = (".png", ".npy", ".npz")
+
+# Images larger than this are refused before they are decoded, so a small
+# file that claims a huge size (a decompression bomb) costs nothing.
+MAX_PIXELS = 64_000_000
 
 
 class MediaError(ValueError):
@@ -34,8 +41,29 @@ class MediaError(ValueError):
         super().__init__(f"{path}: {reason}")
 
 
+def image_size(data: bytes, *, path: str | Path = "<bytes>") -> tuple[int, int]:
+    """(width, height) from an encoded image's header, without decoding it.
+
+    Raises:
+        MediaError: not an image, or more than ``MAX_PIXELS`` pixels.
+    """
+    try:
+        with warnings.catch_warnings():
+            warnings.simplefilter("ignore", Image.DecompressionBombWarning)  # we apply our own limit below
+            with Image.open(_io.BytesIO(data)) as probe:
+                width, height = probe.size
+    except Image.DecompressionBombError:
+        raise MediaError(path, f"image is larger than the limit of {MAX_PIXELS} pixels") from None
+    except (UnidentifiedImageError, OSError, ValueError):
+        raise MediaError(path, "not a readable image (corrupt or unknown format)") from None
+    if width * height > MAX_PIXELS:
+        raise MediaError(path, f"image of {width}x{height} pixels is larger than the limit of {MAX_PIXELS} pixels")
+    return width, height
+
+
 def decode_image(data: bytes, *, path: str | Path = "<bytes>") -> np.ndarray:
     """Decode encoded image bytes (JPEG or PNG) into RGB uint8 (H, W, 3)."""
+    image_size(data, path=path)
     buf = np.frombuffer(data, np.uint8)
     image = cv2.imdecode(buf, cv2.IMREAD_UNCHANGED) if buf.size else None
     if image is None:
@@ -80,7 +108,9 @@ def read_depth(path: str | Path) -> np.ndarray:
     path = Path(path)
     suffix = path.suffix.lower()
     if suffix == ".png":
-        raw = cv2.imdecode(np.frombuffer(read_bytes(path), np.uint8), cv2.IMREAD_UNCHANGED)
+        data = read_bytes(path)
+        image_size(data, path=path)
+        raw = cv2.imdecode(np.frombuffer(data, np.uint8), cv2.IMREAD_UNCHANGED)
         if raw is None:
             raise MediaError(path, "not a readable PNG (corrupt?)")
         if raw.dtype != np.uint16 or raw.ndim != 2:
@@ -122,7 +152,9 @@ def read_dhg(path: str | Path) -> np.ndarray:
 
     The file stores the channels in that order as an ordinary RGB image.
     """
-    image = cv2.imdecode(np.frombuffer(read_bytes(Path(path)), np.uint8), cv2.IMREAD_UNCHANGED)
+    data = read_bytes(Path(path))
+    image_size(data, path=path)
+    image = cv2.imdecode(np.frombuffer(data, np.uint8), cv2.IMREAD_UNCHANGED)
     if image is None:
         raise MediaError(path, "not a readable image (corrupt or unknown format)")
     if image.dtype != np.uint8 or image.ndim != 3 or image.shape[2] != 3:
@@ -138,6 +170,7 @@ def read_mask(path: str | Path) -> np.ndarray:
 
 def decode_mask(data: bytes, *, path: str | Path = "<bytes>") -> np.ndarray:
     """Decode binary mask PNG bytes into bool (H, W)."""
+    image_size(data, path=path)
     raw = cv2.imdecode(np.frombuffer(data, np.uint8), cv2.IMREAD_UNCHANGED) if data else None
     if raw is None:
         raise MediaError(path, "not a readable PNG (corrupt?)")

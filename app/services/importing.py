@@ -7,10 +7,14 @@ created are removed, so nothing is half-imported. Re-importing the same
 files adds nothing (the RGB file's hash is unique within a sequence).
 """
 
+import contextlib
 import re
+import stat
+import tempfile
+import zipfile
 from collections.abc import Callable, Iterable, Iterator
 from dataclasses import dataclass, field
-from pathlib import Path
+from pathlib import Path, PurePosixPath
 
 import cv2
 import numpy as np
@@ -20,6 +24,11 @@ from app.extensions import db
 from app.models import Activity, Annotation, Frame, Instance, Role, Sequence, Status, User
 from app.services import media
 from egonet import io
+
+# Zip archives are unpacked to a temporary folder first, within these limits.
+ZIP_MAX_BYTES = 20 * 1024**3
+ZIP_MAX_MEMBERS = 200_000
+ZIP_MAX_RATIO = 200  # a member inflating more than this is a zip bomb, not a photo
 
 # Sub-folders recognised inside an import folder.
 RGB_DIRS = ("rgb", "color", "colour", "images")
@@ -97,7 +106,7 @@ def discover(
     if path.is_file():
         if path.suffix.lower() not in io.VIDEO_SUFFIXES:
             raise ImportProblem(
-                f"{path}: unknown format {path.suffix!r} (give a folder of images or a video: "
+                f"{path}: unknown format {path.suffix!r} (give a folder of images, a .zip of one, or a video: "
                 f"{', '.join(io.VIDEO_SUFFIXES)})"
             )
         source = Source(name=path.stem, video=path)
@@ -149,6 +158,23 @@ def import_path(
     """
     if stride < 1:
         raise ImportProblem(f"--stride must be >= 1, got {stride}")
+    path = Path(path)
+    if path.suffix.lower() == ".zip":
+        with unpacked(path) as folder:
+            return import_path(
+                folder,
+                activity=activity,
+                sequence=sequence or path.stem,
+                stride=stride,
+                depth_dir=depth_dir,
+                dhg_dir=dhg_dir,
+                masks_dir=masks_dir,
+                intrinsics=intrinsics,
+                mask_author=mask_author,
+                mask_status=mask_status,
+                on_start=on_start,
+                on_progress=on_progress,
+            )
     source = discover(path, depth_dir=depth_dir, dhg_dir=dhg_dir, masks_dir=masks_dir, intrinsics=intrinsics)
     K = io.read_intrinsics(source.intrinsics) if source.intrinsics else None
     companions = {
@@ -190,6 +216,53 @@ def import_path(
         mask_status=mask_status,
         on_progress=on_progress,
     )
+
+
+@contextlib.contextmanager
+def unpacked(archive: Path) -> Iterator[Path]:
+    """Unpack a zip archive to a temporary folder, refusing anything unsafe.
+
+    Refused: members with absolute paths or ``..`` (path traversal), links,
+    more than ZIP_MAX_MEMBERS members, more than ZIP_MAX_BYTES in all, or a
+    member that inflates more than ZIP_MAX_RATIO times (a zip bomb). The
+    folder is removed afterwards. A single top-level folder is entered.
+    """
+    try:
+        zf = zipfile.ZipFile(archive)
+    except (zipfile.BadZipFile, OSError) as exc:
+        raise io.MediaError(archive, f"not a readable zip archive ({exc})") from None
+    with zf, tempfile.TemporaryDirectory(prefix="egonet-import-") as tmp:
+        members = zf.infolist()
+        if len(members) > ZIP_MAX_MEMBERS:
+            raise io.MediaError(archive, f"holds {len(members)} files, more than {ZIP_MAX_MEMBERS}")
+        total = 0
+        for info in members:
+            name = PurePosixPath(info.filename)
+            if name.is_absolute() or ".." in name.parts or re.match(r"^[A-Za-z]:", info.filename):
+                raise io.MediaError(archive, f"unsafe path {info.filename!r} in the archive")
+            if stat.S_ISLNK(info.external_attr >> 16):
+                raise io.MediaError(archive, f"{info.filename!r} is a link; links are not imported")
+            total += info.file_size
+            if total > ZIP_MAX_BYTES:
+                raise io.MediaError(archive, f"unpacks to more than {ZIP_MAX_BYTES} bytes")
+            if info.file_size > 1024**2 and info.file_size > ZIP_MAX_RATIO * max(info.compress_size, 1):
+                raise io.MediaError(archive, f"{info.filename!r} inflates {info.file_size // max(info.compress_size, 1)}x: refused")
+        for info in members:
+            if info.is_dir() or PurePosixPath(info.filename).name.startswith(("__MACOSX", ".")):
+                continue
+            if "__MACOSX" in PurePosixPath(info.filename).parts:
+                continue
+            target = Path(tmp, *PurePosixPath(info.filename).parts)
+            target.parent.mkdir(parents=True, exist_ok=True)
+            with zf.open(info) as src, open(target, "wb") as dst:
+                copied = 0
+                while chunk := src.read(1 << 20):
+                    copied += len(chunk)
+                    if copied > info.file_size:  # the header lied about the size
+                        raise io.MediaError(archive, f"{info.filename!r} is larger than its header says")
+                    dst.write(chunk)
+        entries = [p for p in Path(tmp).iterdir()]
+        yield entries[0] if len(entries) == 1 and entries[0].is_dir() else Path(tmp)
 
 
 def add_frames(
