@@ -66,8 +66,19 @@ def check_access():
     return None
 
 
+def check_json_body():
+    """before_request hook: a JSON body must be a JSON object, else 400 before any view runs."""
+    if request.method in ("POST", "PUT", "PATCH", "DELETE") and request.is_json and request.get_data(cache=True):
+        body = request.get_json(silent=True)
+        if not isinstance(body, dict):
+            reason = "not valid JSON" if body is None else "must be a JSON object"
+            return error_response(400, "bad_request", f"the request body is {reason}", {"body": reason})
+    return None
+
+
 def register(app: Flask) -> None:
     app.before_request(check_access)
+    app.before_request(check_json_body)
 
 
 def require_production_safety(app: Flask) -> None:

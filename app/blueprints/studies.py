@@ -9,7 +9,7 @@ import json
 
 from flask import Blueprint, Response, flash, redirect, render_template, request, stream_with_context, url_for
 from flask_login import current_user
-from flask_wtf import FlaskForm
+from app.forms import Form
 from wtforms import (
     BooleanField,
     FloatField,
@@ -38,7 +38,7 @@ PER_PAGE = 60
 FORM_FIELDS = {"time_limit_s": "time_limit_min"}
 
 
-class StudyForm(FlaskForm):
+class StudyForm(Form):
     name = StringField("Name", validators=[DataRequired(), Length(max=200)])
     activities = SelectMultipleField(
         "Activities",
@@ -63,7 +63,7 @@ class StudyForm(FlaskForm):
     consent = TextAreaField("Consent", default=studies.DEFAULT_CONSENT, validators=[Length(max=20_000)])
 
 
-class ParticipantsForm(FlaskForm):
+class ParticipantsForm(Form):
     count = IntegerField("How many", default=5, validators=[InputRequired(), NumberRange(1, 500)])
     entry = SelectField("Entry", choices=[SelectChoice("code", "access codes"), SelectChoice("link", "single-use links (and codes)")], default="code")
 

@@ -11,7 +11,7 @@ participant's own trials; ground truth never leaves the server.
 
 from flask import Blueprint, redirect, render_template, request, send_file, url_for
 from flask_login import current_user, login_user
-from flask_wtf import FlaskForm
+from app.forms import Form
 from werkzeug.wrappers import Response
 from wtforms import StringField
 from wtforms.validators import DataRequired, Length
@@ -60,7 +60,7 @@ ANSWER = {
 }
 
 
-class CodeForm(FlaskForm):
+class CodeForm(Form):
     code = StringField("Access code", validators=[DataRequired(), Length(max=32)])
 
 

@@ -7,7 +7,7 @@ so none can escape the check.
 
 import pytest
 
-from tests.app.access import ALL, core, label, scores, studies, training
+from tests.app.access import ALL, all_url_values, core, label, scores, studies, training
 
 AREAS = (core, label, studies, training, scores)
 EXPECTED = {endpoint: rule for area in AREAS for endpoint, rule in area.RULES.items()}
@@ -20,10 +20,7 @@ def test_every_route_is_in_the_matrix(app):
 
 @pytest.fixture
 def url_values(app, tmp_path):
-    values = {}
-    for area in AREAS:
-        values.update(area.url_values(app, tmp_path))
-    return values
+    return all_url_values(app, tmp_path)
 
 
 @pytest.mark.parametrize("role", [None, *sorted(ALL)])

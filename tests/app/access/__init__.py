@@ -11,3 +11,13 @@ from app.models import Role
 STAFF = frozenset({Role.ADMIN, Role.ANNOTATOR, Role.REVIEWER})
 ALL = STAFF | {Role.PARTICIPANT}
 ADMIN = frozenset({Role.ADMIN})
+
+
+def all_url_values(app, tmp_path) -> dict:
+    """URL values from every area (each creates the objects its routes need)."""
+    from tests.app.access import core, label, scores, studies, training
+
+    values: dict = {}
+    for area in (core, label, studies, training, scores):
+        values.update(area.url_values(app, tmp_path))
+    return values
