@@ -105,3 +105,21 @@ def _same(value: str, password: str) -> str:
     if value != password:
         raise click.UsageError("the passwords do not match")
     return value
+
+
+@bp.cli.command("media-check")
+@click.option("--remove-orphans", is_flag=True, help="Delete media no row refers to (older than --grace).")
+@click.option("--grace", type=click.FloatRange(min=0), default=3600.0, show_default=True, help="Seconds an orphan must be old to be removed.")
+def media_check_command(remove_orphans, grace):
+    """Check that every referenced media file exists, and find orphans (left by a crash)."""
+    from app.services import media
+
+    report = media.check(remove_orphans=remove_orphans, grace_s=grace)
+    click.echo(
+        f"{report.files} files, {report.referenced} referenced, {len(report.missing)} missing, "
+        f"{len(report.orphans)} orphaned, {len(report.removed)} removed"
+    )
+    for rel in report.missing:
+        click.echo(f"missing: {rel}", err=True)
+    if report.missing:
+        raise click.ClickException(f"{len(report.missing)} referenced media files are missing")

@@ -63,9 +63,9 @@ class Frame(Base):
     width: Mapped[int]
     height: Mapped[int]
     content_hash: Mapped[str] = mapped_column(String(64), index=True)
-    rgb_path: Mapped[str] = mapped_column(String(200))
-    depth_path: Mapped[str | None] = mapped_column(String(200))
-    dhg_path: Mapped[str | None] = mapped_column(String(200))
+    rgb_path: Mapped[str] = mapped_column(String(200), info={"media": True})
+    depth_path: Mapped[str | None] = mapped_column(String(200), info={"media": True})
+    dhg_path: Mapped[str | None] = mapped_column(String(200), info={"media": True})
     fx: Mapped[float | None] = mapped_column(Float)
     fy: Mapped[float | None] = mapped_column(Float)
     cx: Mapped[float | None] = mapped_column(Float)

@@ -9,6 +9,8 @@ bytes twice is a no-op. The database stores the relative path.
 import hashlib
 import os
 import tempfile
+import time
+from dataclasses import dataclass, field
 from pathlib import Path
 
 from flask import current_app
@@ -61,3 +63,56 @@ def store(data: bytes, suffix: str, *, written: list[Path] | None = None) -> str
 
 def read(relative: str) -> bytes:
     return absolute_path(relative).read_bytes()
+
+
+@dataclass
+class MediaReport:
+    referenced: int = 0
+    files: int = 0
+    missing: list[str] = field(default_factory=list)
+    orphans: list[str] = field(default_factory=list)
+    removed: list[str] = field(default_factory=list)
+
+
+def referenced_paths() -> set[str]:
+    """Every media path the database refers to (columns marked ``info={"media": True}``)."""
+    from app.extensions import db
+
+    paths: set[str] = set()
+    for table in db.metadata.sorted_tables:
+        for column in table.columns:
+            if column.info.get("media"):
+                paths.update(p for p in db.session.execute(db.select(column).where(column.is_not(None))).scalars())
+    return paths
+
+
+def check(*, remove_orphans: bool = False, grace_s: float = 3600.0) -> MediaReport:
+    """Compare the media folder with the database.
+
+    Media are written before the transaction that refers to them commits, so
+    a crash in between leaves an unreferenced file (an orphan); it is never
+    a lost acknowledged write. Orphans older than ``grace_s`` (so not part of
+    a transaction still in flight) are removed when asked. A referenced file
+    that is missing is reported: that would be real damage.
+    """
+    referenced = referenced_paths()
+    root = media_root()
+    report = MediaReport(referenced=len(referenced))
+    present: set[str] = set()
+    now = time.time()
+    if root.exists():
+        for path in root.rglob("*"):
+            if not path.is_file():
+                continue
+            rel = path.relative_to(root).as_posix()
+            report.files += 1
+            present.add(rel)
+            if rel in referenced:
+                continue
+            stale = now - path.stat().st_mtime > grace_s
+            report.orphans.append(rel)
+            if remove_orphans and stale:
+                path.unlink(missing_ok=True)
+                report.removed.append(rel)
+    report.missing = sorted(referenced - present)
+    return report
