@@ -1,5 +1,390 @@
-"""Labelling pages and API: GrabCut-assisted action-object outlines."""
+"""Labelling pages and API: GrabCut-assisted action-object masks.
 
-from flask import Blueprint
+Who may do what:
+    * annotators and admins label: the labelling page, their own annotation
+      (read, save, mask upload) and the GrabCut operations;
+    * reviewers and admins review: the review page and accept / reject;
+    * all staff see the overview, read any annotation and its masks, and
+      download exports.
+
+Masks never travel inside JSON as base64: the page saves them as COCO RLE,
+reads them as PNG from their own URLs, and GrabCut answers with a PNG.
+"""
+
+import time
+
+from flask import Blueprint, Response, abort, flash, redirect, render_template, request, send_file, url_for
+from flask_login import current_user
+
+from app.errors import ApiError
+from app.extensions import db
+from app.models import Annotation, Frame, InstanceKind, Role, Status
+from app.security import roles
+from app.services import exchange
+from app.services import frames as frames_service
+from app.services import labelling, media
+from app.validation import Bool, Float, Int, List, Obj, Str, json_body
+from egonet import io as egonet_io
 
 bp = Blueprint("label", __name__)
+
+LABELLERS = (Role.ANNOTATOR, Role.ADMIN)
+REVIEWERS = (Role.REVIEWER, Role.ADMIN)
+
+INSTANCE = Obj(
+    {
+        "key": Str(min_len=1, max_len=40),
+        "kind": Str(choices=[k.value for k in InstanceKind], nullable=True, default=None),
+        "label": Str(max_len=120, nullable=True, default=None),
+        "mask": labelling.Rle(),
+    }
+)
+SAVE = {
+    "version": Int(min=0),
+    "instances": List(INSTANCE, max_len=labelling.MAX_INSTANCES),
+    "no_action_object": Bool(default=False),
+    "status": Str(choices=[s.value for s in labelling.AUTHOR_STATUSES], nullable=True, default=None),
+    "time_spent_delta_s": Float(min=0, max=labelling.MAX_TIME_DELTA_S, default=0.0),
+}
+POINT = List(Float(), min_len=2, max_len=2)
+TARGET = {"frame_id": Int(min=1), "instance": Str(min_len=1, max_len=40)}
+BOX = {**TARGET, "box": List(Float(), min_len=4, max_len=4)}
+STROKE = {
+    **TARGET,
+    "points": List(POINT, max_len=labelling.MAX_STROKE_POINTS),
+    "label": Str(choices=["fg", "bg"]),
+    "radius": Float(),
+}
+REVIEW = {
+    "version": Int(min=1),
+    "decision": Str(choices=["accept", "reject"]),
+    "comment": Str(max_len=5000, nullable=True, default=None),
+}
+
+
+def me():
+    """The signed-in user itself (not Flask-Login's proxy), for the services to store."""
+    return current_user._get_current_object()
+
+
+# --------------------------------------------------------------------------
+# Pages
+
+
+@bp.get("/label/")
+def index():
+    """The overview: an annotator's queue, a reviewer's queue (admins see both)."""
+    user = me()
+    queue = labelling.annotator_queue(user) if user.role in LABELLERS else None
+    reviews, waiting = labelling.review_queue() if user.role in REVIEWERS else (None, 0)
+    return render_template(
+        "label/index.html",
+        queue=queue,
+        reviews=reviews,
+        waiting=waiting,
+        activities=exchange.activity_names(),
+        statuses=[s for s in Status if s is not Status.TODO],
+        default_statuses=exchange.DEFAULT_STATUSES,
+    )
+
+
+def page_config(frame: Frame, *, mode: str, annotation: Annotation | None = None) -> dict:
+    """What the page script needs: the frame, its media and the API's URLs."""
+    config = {
+        "mode": mode,
+        "frame": {
+            "id": frame.id,
+            "width": frame.width,
+            "height": frame.height,
+            "rgb_url": url_for("frames.media_file", name=frame.rgb_path),
+            "depth_url": url_for("frames.depth", frame_id=frame.id) if frame.depth_path else None,
+            "dhg_url": url_for("frames.media_file", name=frame.dhg_path) if frame.dhg_path else None,
+        },
+        "urls": {
+            "grabcut": {
+                "box": url_for("label.grabcut_box"),
+                "stroke": url_for("label.grabcut_stroke"),
+                "undo": url_for("label.grabcut_undo"),
+                "mask": url_for("label.grabcut_mask"),
+            },
+        },
+    }
+    if mode == "label":
+        previous, following = frames_service.neighbours(frame)
+        config["urls"].update(
+            annotation=url_for("label.own_annotation", frame_id=frame.id),
+            time=url_for("label.add_time", frame_id=frame.id),
+            previous=url_for("label.frame", frame_id=previous) if previous else None,
+            next=url_for("label.frame", frame_id=following) if following else None,
+            next_unlabelled=url_for("label.next_unlabelled", after=frame.id),
+        )
+    else:
+        config["urls"].update(
+            annotation=url_for("label.annotation", annotation_id=annotation.id),
+            review=url_for("label.review_annotation", annotation_id=annotation.id),
+            next_review=url_for("label.next_review", after=annotation.id),
+        )
+    return config
+
+
+@bp.get("/label/frames/<int:frame_id>")
+@roles(*LABELLERS)
+def frame(frame_id: int):
+    fr = db.get_or_404(Frame, frame_id)
+    return render_template("label/label.html", frame=fr, label_config=page_config(fr, mode="label"), annotation=None)
+
+
+@bp.get("/label/next")
+@roles(*LABELLERS)
+def next_unlabelled():
+    """Go to the next frame the user should label (after ``after``, within ``activity``)."""
+    after = request.args.get("after", type=int)
+    activity = request.args.get("activity", type=int)
+    after_frame = db.session.get(Frame, after) if after else None
+    target = labelling.next_unlabelled(me(), after=after_frame, activity_id=activity)
+    if target is None:
+        flash("Nothing left to label here: every frame is labelled or being labelled by someone.", "info")
+        return redirect(url_for("label.index"))
+    return redirect(url_for("label.frame", frame_id=target))
+
+
+@bp.get("/label/annotations/<int:annotation_id>/review")
+@roles(*REVIEWERS)
+def review(annotation_id: int):
+    annotation = db.get_or_404(Annotation, annotation_id)
+    label_config = page_config(annotation.frame, mode="review", annotation=annotation)
+    return render_template("label/label.html", frame=annotation.frame, label_config=label_config, annotation=annotation)
+
+
+@bp.get("/label/review/next")
+@roles(*REVIEWERS)
+def next_review():
+    after = request.args.get("after", type=int)
+    target = labelling.next_to_review(after=db.session.get(Annotation, after) if after else None)
+    if target is None:
+        flash("The review queue is empty.", "info")
+        return redirect(url_for("label.index"))
+    return redirect(url_for("label.review", annotation_id=target))
+
+
+@bp.get("/label/export")
+def export():
+    """Download the masks as a zip: PNG per frame and/or COCO JSON (see exchange)."""
+    fmt = request.args.get("format", "both")
+    if fmt not in exchange.FORMATS:
+        abort(400, f"format must be one of {', '.join(exchange.FORMATS)}")
+    try:
+        statuses = [Status(s) for s in request.args.getlist("status")] or list(exchange.DEFAULT_STATUSES)
+    except ValueError:
+        abort(400, f"status must be among {', '.join(s.value for s in Status)}")
+    activities = [a for a in request.args.getlist("activity") if a]
+    try:
+        archive, count = exchange.export_zip(fmt=fmt, activities=activities, statuses=statuses)
+    except exchange.ExchangeProblem as exc:
+        abort(400, str(exc))
+    response = send_file(archive, mimetype="application/zip", as_attachment=True, download_name="egonet-masks.zip")
+    response.headers["X-Exported-Frames"] = str(count)
+    return response
+
+
+# --------------------------------------------------------------------------
+# API: the user's own annotation of a frame
+
+
+def annotation_json(annotation: Annotation | None, frame: Frame) -> dict:
+    """Metadata of an annotation (masks are at their URLs); a blank one at version 0."""
+    body = {
+        "frame_id": frame.id,
+        "width": frame.width,
+        "height": frame.height,
+        "id": None,
+        "author": None,
+        "version": 0,
+        "status": Status.TODO.value,
+        "no_action_object": False,
+        "time_spent_s": 0.0,
+        "review_comment": None,
+        "reviewer": None,
+        "reviewed_at": None,
+        "updated_at": None,
+        "mask_url": None,
+        "instances": [],
+    }
+    if annotation is None:
+        return body
+    body.update(
+        id=annotation.id,
+        author=annotation.author.username,
+        version=annotation.version,
+        status=annotation.status.value,
+        no_action_object=annotation.no_action_object,
+        time_spent_s=round(annotation.time_spent_s, 3),
+        review_comment=annotation.review_comment,
+        reviewer=annotation.reviewer.username if annotation.reviewer else None,
+        reviewed_at=annotation.reviewed_at.isoformat() if annotation.reviewed_at else None,
+        updated_at=annotation.updated_at.isoformat(),
+        mask_url=url_for("label.annotation_mask", annotation_id=annotation.id) if annotation.mask_path else None,
+        instances=[
+            {
+                "position": i.position,
+                "key": i.key,
+                "kind": i.kind.value if i.kind else None,
+                "label": i.label,
+                "mask_url": url_for("label.instance_mask", annotation_id=annotation.id, position=i.position),
+            }
+            for i in annotation.instances
+        ],
+    )
+    return body
+
+
+@bp.get("/api/label/frames/<int:frame_id>/annotation")
+@roles(*LABELLERS)
+def own_annotation(frame_id: int):
+    fr = labelling.get_frame(frame_id)
+    body = annotation_json(labelling.user_annotation(fr, me()), fr)
+    body["grabcut"] = labelling.grabcut_keys(fr, me())
+    return body
+
+
+@bp.put("/api/label/frames/<int:frame_id>/annotation")
+@roles(*LABELLERS)
+def save_annotation(frame_id: int):
+    """Save with a version check: 409 with ``current_version`` when stale."""
+    data = json_body(SAVE)
+    fr = labelling.get_frame(frame_id)
+    annotation = labelling.save_annotation(fr, me(), data)
+    return annotation_json(annotation, fr)
+
+
+@bp.post("/api/label/frames/<int:frame_id>/annotation/time")
+@roles(*LABELLERS)
+def add_time(frame_id: int):
+    """``{seconds}`` spent on the frame since the last save; no new version (204)."""
+    data = json_body({"seconds": Float(min=0, max=labelling.MAX_TIME_DELTA_S)})
+    fr = labelling.get_frame(frame_id)
+    if not labelling.add_time(fr, me(), data["seconds"]):
+        raise ApiError(404, "you have no annotation of this frame yet", fields={"frame_id": "no annotation"})
+    return "", 204
+
+
+# --------------------------------------------------------------------------
+# API: any annotation, by id
+
+
+@bp.get("/api/label/annotations/<int:annotation_id>")
+def annotation(annotation_id: int):
+    ann = labelling.get_annotation(annotation_id)
+    return annotation_json(ann, ann.frame)
+
+
+@bp.get("/api/label/annotations/<int:annotation_id>/mask.png")
+def annotation_mask(annotation_id: int):
+    """The union of the instances' masks (all black when nothing is drawn)."""
+    ann = labelling.get_annotation(annotation_id)
+    if ann.mask_path is None:
+        return png_response(labelling.empty_mask(ann.frame))
+    return _mask_file(ann.mask_path)
+
+
+@bp.get("/api/label/annotations/<int:annotation_id>/instances/<int:position>/mask.png")
+def instance_mask(annotation_id: int, position: int):
+    ann = labelling.get_annotation(annotation_id)
+    return _mask_file(labelling.instance_of(ann, position).mask_path)
+
+
+@bp.put("/api/label/annotations/<int:annotation_id>/instances/<int:position>/mask.png")
+@roles(*LABELLERS)
+def upload_instance_mask(annotation_id: int, position: int):
+    """Replace an instance's mask with the PNG body (``?version=N`` required)."""
+    version = request.args.get("version", type=int)
+    if version is None:
+        raise ApiError(400, "version: give the annotation's version as ?version=N", fields={"version": "is required"})
+    if request.mimetype != "image/png":
+        raise ApiError(415, "send the mask as a PNG body (Content-Type: image/png)", fields={"mask": "must be image/png"})
+    ann = labelling.get_annotation(annotation_id)
+    ann = labelling.upload_instance_mask(ann, me(), position=position, version=version, png=request.get_data())
+    return annotation_json(ann, ann.frame)
+
+
+@bp.post("/api/label/annotations/<int:annotation_id>/review")
+@roles(*REVIEWERS)
+def review_annotation(annotation_id: int):
+    data = json_body(REVIEW)
+    ann = labelling.get_annotation(annotation_id)
+    ann = labelling.review_annotation(
+        ann, me(), version=data["version"], decision=data["decision"], comment=data["comment"]
+    )
+    return annotation_json(ann, ann.frame)
+
+
+def _mask_file(relative: str):
+    # Revalidated on every use (ETag), since an instance's mask changes under the same URL.
+    return send_file(media.absolute_path(relative), mimetype="image/png", max_age=0, etag=True, conditional=True)
+
+
+# --------------------------------------------------------------------------
+# API: GrabCut, on the server, one session per user, frame and instance
+
+
+def png_response(mask, *, can_undo: bool | None = None, started: float | None = None) -> Response:
+    response = Response(egonet_io.encode_png(mask), mimetype="image/png")
+    response.headers["Cache-Control"] = "no-store"
+    if can_undo is not None:
+        response.headers["X-Can-Undo"] = "1" if can_undo else "0"
+    if started is not None:
+        response.headers["Server-Timing"] = f"grabcut;dur={1000 * (time.perf_counter() - started):.1f}"
+    return response
+
+
+def _target(data: dict) -> tuple[Frame, str]:
+    fr = labelling.get_frame(data["frame_id"], field="frame_id")
+    return fr, labelling.check_key(data["instance"])
+
+
+@bp.post("/api/label/grabcut/box")
+@roles(*LABELLERS)
+def grabcut_box():
+    """``{frame_id, instance, box: [x0, y0, x1, y1]}`` -> the object's first mask (PNG)."""
+    started = time.perf_counter()
+    data = json_body(BOX)
+    fr, key = _target(data)
+    box = labelling.check_box(fr, data["box"])
+    result = labelling.grabcut_box(fr, me(), key, box)
+    return png_response(result.mask, can_undo=result.can_undo, started=started)
+
+
+@bp.post("/api/label/grabcut/stroke")
+@roles(*LABELLERS)
+def grabcut_stroke():
+    """``{frame_id, instance, points: [[x, y], ...], label: fg|bg, radius}`` -> the updated mask (PNG)."""
+    started = time.perf_counter()
+    data = json_body(STROKE)
+    fr, key = _target(data)
+    labelling.check_stroke(fr, data["points"], data["radius"])
+    result = labelling.grabcut_stroke(fr, me(), key, points=data["points"], label=data["label"],
+                                      radius=data["radius"])
+    return png_response(result.mask, can_undo=result.can_undo, started=started)
+
+
+@bp.post("/api/label/grabcut/undo")
+@roles(*LABELLERS)
+def grabcut_undo():
+    """``{frame_id, instance}`` -> the mask before the last GrabCut operation (PNG)."""
+    started = time.perf_counter()
+    fr, key = _target(json_body(TARGET))
+    result = labelling.grabcut_undo(fr, me(), key)
+    return png_response(result.mask, can_undo=result.can_undo, started=started)
+
+
+@bp.get("/api/label/grabcut/mask.png")
+@roles(*LABELLERS)
+def grabcut_mask():
+    """``?frame_id=&instance=`` -> the session's current mask (PNG), 404 without a session."""
+    frame_id = request.args.get("frame_id", type=int)
+    if frame_id is None:
+        raise ApiError(400, "frame_id: give ?frame_id=N", fields={"frame_id": "is required"})
+    fr = labelling.get_frame(frame_id, field="frame_id")
+    key = labelling.check_key(request.args.get("instance", ""))
+    result = labelling.grabcut_mask(fr, me(), key)
+    return png_response(result.mask, can_undo=result.can_undo)

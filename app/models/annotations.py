@@ -1,9 +1,11 @@
-"""Action-object annotations: one per frame and author, with instances."""
+"""Action-object annotations: one per frame and author, with instances,
+and the resumable GrabCut sessions that help draw them."""
 
 import enum
+import uuid
 from datetime import datetime
 
-from sqlalchemy import Enum, Float, ForeignKey, String, Text, UniqueConstraint
+from sqlalchemy import Enum, Float, ForeignKey, LargeBinary, String, Text, UniqueConstraint
 from sqlalchemy.orm import Mapped, mapped_column, relationship
 
 from app.models.base import Base, UTCDateTime, utcnow
@@ -50,16 +52,20 @@ class Annotation(Base):
     frame_id: Mapped[int] = mapped_column(ForeignKey("frame.id", ondelete="CASCADE"), index=True)
     author_id: Mapped[int] = mapped_column(ForeignKey("user.id"), index=True)
     status: Mapped[Status] = mapped_column(_enum(Status), default=Status.TODO, index=True)
-    mask_path: Mapped[str | None] = mapped_column(String(200))
+    mask_path: Mapped[str | None] = mapped_column(String(200), info={"media": True})
     no_action_object: Mapped[bool] = mapped_column(default=False)
     version: Mapped[int] = mapped_column(default=1)
     time_spent_s: Mapped[float] = mapped_column(Float, default=0.0)
     review_comment: Mapped[str | None] = mapped_column(Text)
+    # Who accepted or rejected the annotation last, and when.
+    reviewer_id: Mapped[int | None] = mapped_column(ForeignKey("user.id"))
+    reviewed_at: Mapped[datetime | None] = mapped_column(UTCDateTime())
     created_at: Mapped[datetime] = mapped_column(UTCDateTime(), default=utcnow)
     updated_at: Mapped[datetime] = mapped_column(UTCDateTime(), default=utcnow, onupdate=utcnow)
 
     frame: Mapped[Frame] = relationship(back_populates="annotations")
-    author: Mapped[User] = relationship()
+    author: Mapped[User] = relationship(foreign_keys=[author_id])
+    reviewer: Mapped[User | None] = relationship(foreign_keys=[reviewer_id])
     instances: Mapped[list["Instance"]] = relationship(
         back_populates="annotation", order_by="Instance.position", cascade="all, delete-orphan", passive_deletes=True
     )
@@ -78,6 +84,35 @@ class Instance(Base):
     position: Mapped[int]
     kind: Mapped[InstanceKind | None] = mapped_column(_enum(InstanceKind))
     label: Mapped[str | None] = mapped_column(String(120))
-    mask_path: Mapped[str] = mapped_column(String(200))
+    mask_path: Mapped[str] = mapped_column(String(200), info={"media": True})
+    # A stable name the labelling page gives the instance: positions shift
+    # when an instance is deleted, keys do not (GrabCut sessions use them).
+    key: Mapped[str | None] = mapped_column(String(40))
 
     annotation: Mapped[Annotation] = relationship(back_populates="instances")
+
+
+class GrabCutState(Base):
+    """A GrabCut session (one per user, frame and instance key), saved after
+    every operation so it survives restarts and works across worker processes.
+
+    ``state`` is ``egonet.grabcut.GrabCutSession.state()`` written with
+    ``np.savez`` and zlib-compressed. ``revision`` serialises operations: each
+    one loads the row, works, and writes back only if no other operation has
+    written in between (SQLAlchemy adds the revision to the UPDATE). It is a
+    random token rather than a counter so that a worker may keep a session in
+    memory under its revision and know it is still the current one.
+    """
+
+    __tablename__ = "grabcut_state"
+    __table_args__ = (UniqueConstraint("user_id", "frame_id", "instance_key"),)
+
+    id: Mapped[int] = mapped_column(primary_key=True)
+    user_id: Mapped[int] = mapped_column(ForeignKey("user.id", ondelete="CASCADE"))
+    frame_id: Mapped[int] = mapped_column(ForeignKey("frame.id", ondelete="CASCADE"), index=True)
+    instance_key: Mapped[str] = mapped_column(String(40))
+    state: Mapped[bytes] = mapped_column(LargeBinary)
+    revision: Mapped[str] = mapped_column(String(32))
+    updated_at: Mapped[datetime] = mapped_column(UTCDateTime(), default=utcnow, onupdate=utcnow)
+
+    __mapper_args__ = {"version_id_col": revision, "version_id_generator": lambda _: uuid.uuid4().hex}

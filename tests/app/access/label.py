@@ -1,7 +1,61 @@
-"""Access rules of the label area (see __init__)."""
+"""Access rules of the label area (see __init__).
 
-RULES: dict = {}
+Annotators and admins label (the labelling page, their own annotation, GrabCut);
+reviewers and admins review; all staff see the overview, read annotations and
+their masks, and download exports. Bodiless writes answer 400 (the body or
+``?version=`` is missing), and so do the GrabCut mask without its query.
+"""
+
+from app.extensions import db
+from app.models import Annotation, Frame, Instance, Role, Status
+from app.services import media
+from app.services.importing import import_path
+from app.services.users import create_user
+from egonet import io
+from tests.app.access import STAFF
+from tests.app.factories import image_folder
+
+LABELLERS = frozenset({Role.ANNOTATOR, Role.ADMIN})
+REVIEWERS = frozenset({Role.REVIEWER, Role.ADMIN})
+
+RULES = {
+    "label.index": (STAFF, 200),
+    "label.frame": (LABELLERS, 200),
+    "label.next_unlabelled": (LABELLERS, 302),
+    "label.review": (REVIEWERS, 200),
+    "label.next_review": (REVIEWERS, 302),
+    "label.export": (STAFF, 200),
+    "label.own_annotation": (LABELLERS, 200),
+    "label.save_annotation": (LABELLERS, 400),
+    "label.add_time": (LABELLERS, 400),
+    "label.annotation": (STAFF, 200),
+    "label.annotation_mask": (STAFF, 200),
+    "label.instance_mask": (STAFF, 200),
+    "label.upload_instance_mask": (LABELLERS, 400),
+    "label.review_annotation": (REVIEWERS, 400),
+    "label.grabcut_box": (LABELLERS, 400),
+    "label.grabcut_stroke": (LABELLERS, 400),
+    "label.grabcut_undo": (LABELLERS, 400),
+    "label.grabcut_mask": (LABELLERS, 400),
+}
 
 
 def url_values(app, tmp_path) -> dict:
-    return {}
+    with app.app_context():
+        import_path(image_folder(tmp_path / "label-rec", n=2), activity="labelling")
+        frame = db.session.execute(db.select(Frame).order_by(Frame.id)).scalars().first()
+        author, _ = create_user("label-author", Role.ANNOTATOR, "label-author-password")
+        path = media.store(io.encode_png(_square(frame.height, frame.width)), ".png")
+        annotation = Annotation(frame=frame, author=author, status=Status.DONE, mask_path=path)
+        annotation.instances.append(Instance(position=0, key="a", mask_path=path))
+        db.session.add(annotation)
+        db.session.commit()
+        return {"frame_id": frame.id, "annotation_id": annotation.id, "position": 0}
+
+
+def _square(height: int, width: int):
+    import numpy as np
+
+    mask = np.zeros((height, width), bool)
+    mask[height // 4 : height // 2, width // 4 : width // 2] = True
+    return mask
