@@ -354,8 +354,7 @@ def import_annotations(
     if on_start:
         on_start(len(found))
     report = ImportReport(missing=missing)
-    written: list[Path] = []
-    try:
+    with media.transaction() as written:
         users: dict[str, User] = {}
         for item in found:
             if _write_item(item, replace=replace, users=users, written=written):
@@ -365,12 +364,6 @@ def import_annotations(
                 report.skipped += 1
             if on_progress:
                 on_progress(1)
-        db.session.commit()
-    except BaseException:
-        db.session.rollback()
-        for p in written:
-            p.unlink(missing_ok=True)
-        raise
     return report
 
 

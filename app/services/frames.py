@@ -1,7 +1,5 @@
 """Browsing the dataset: activities, frame grids, a frame and its media views."""
 
-import os
-import tempfile
 from dataclasses import dataclass
 from pathlib import Path
 
@@ -109,12 +107,7 @@ def _colour_depth(depth: np.ndarray) -> bytes:
 
 def _cached(name: str, make) -> Path:
     """Return a derived file under CACHE_ROOT, making it atomically on first use."""
-    root = Path(current_app.config["CACHE_ROOT"])
-    path = root / name
+    path = Path(current_app.config["CACHE_ROOT"]) / name
     if not path.exists():
-        root.mkdir(parents=True, exist_ok=True)
-        fd, tmp = tempfile.mkstemp(dir=root, prefix=".tmp-")
-        with os.fdopen(fd, "wb") as fh:
-            fh.write(make())
-        os.replace(tmp, path)
+        media.write_atomic(path, make())
     return path

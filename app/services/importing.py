@@ -283,8 +283,7 @@ def add_frames(
     if not sequence:
         raise ImportProblem("--sequence must not be empty")
     report = ImportReport(activity=activity, sequence=sequence)
-    written: list[Path] = []
-    try:
+    with media.transaction() as written:
         act = db.session.execute(db.select(Activity).filter_by(name=activity)).scalar_one_or_none()
         if act is None:
             act = Activity(name=activity)
@@ -310,12 +309,6 @@ def add_frames(
                     report.annotations += 1
             if on_progress:
                 on_progress(1)
-        db.session.commit()
-    except BaseException:
-        db.session.rollback()
-        for path in written:
-            path.unlink(missing_ok=True)
-        raise
     return report
 
 

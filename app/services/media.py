@@ -6,10 +6,12 @@ renamed into place, so a reader never sees half a file and writing the same
 bytes twice is a no-op. The database stores the relative path.
 """
 
+import contextlib
 import hashlib
 import os
 import tempfile
 import time
+from collections.abc import Iterator
 from dataclasses import dataclass, field
 from pathlib import Path
 
@@ -45,20 +47,52 @@ def store(data: bytes, suffix: str, *, written: list[Path] | None = None) -> str
     path = media_root() / rel
     if path.exists():
         return rel
+    write_atomic(path, data, durable=True)
+    if written is not None:
+        written.append(path)
+    return rel
+
+
+def write_atomic(path: Path, data: bytes, *, durable: bool = False) -> None:
+    """Write a file through a temporary file in the same folder and a rename.
+
+    Readers see the old file or the new one, never half of one. ``durable``
+    also flushes the data to disk before the rename (for media a committed
+    row will point at).
+    """
     path.parent.mkdir(parents=True, exist_ok=True)
-    fd, tmp = tempfile.mkstemp(dir=path.parent, prefix=".tmp-", suffix=suffix)
+    fd, tmp = tempfile.mkstemp(dir=path.parent, prefix=".tmp-", suffix=path.suffix)
     try:
         with os.fdopen(fd, "wb") as fh:
             fh.write(data)
-            fh.flush()
-            os.fsync(fh.fileno())
+            if durable:
+                fh.flush()
+                os.fsync(fh.fileno())
         os.replace(tmp, path)
     except BaseException:
         Path(tmp).unlink(missing_ok=True)
         raise
-    if written is not None:
-        written.append(path)
-    return rel
+
+
+@contextlib.contextmanager
+def transaction() -> Iterator[list[Path]]:
+    """One database transaction with the media it writes.
+
+    Yields the list that ``store(..., written=...)`` appends new files to.
+    Commits at the end; on any failure rolls back and removes the media this
+    block created, so nothing is half-kept.
+    """
+    from app.extensions import db
+
+    written: list[Path] = []
+    try:
+        yield written
+        db.session.commit()
+    except BaseException:
+        db.session.rollback()
+        for path in written:
+            path.unlink(missing_ok=True)
+        raise
 
 
 def read(relative: str) -> bytes:

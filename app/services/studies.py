@@ -30,10 +30,8 @@ import csv
 import hashlib
 import io as _io
 import json
-import os
 import random
 import secrets
-import tempfile
 import zipfile
 from collections import defaultdict
 from collections.abc import Iterable, Iterator
@@ -751,20 +749,8 @@ def superpixel_labels(frame: Frame, settings: dict[str, Any]) -> np.ndarray:
     stored = labels.astype(np.uint16) if labels.max() < 2**16 else labels
     buffer = _io.BytesIO()
     np.savez_compressed(buffer, labels=stored)
-    _write_atomic(path, buffer.getvalue())
+    media.write_atomic(path, buffer.getvalue())
     return stored
-
-
-def _write_atomic(path: Path, data: bytes) -> None:
-    path.parent.mkdir(parents=True, exist_ok=True)
-    fd, tmp = tempfile.mkstemp(dir=path.parent, prefix=".tmp-", suffix=path.suffix)
-    try:
-        with os.fdopen(fd, "wb") as fh:
-            fh.write(data)
-        os.replace(tmp, path)
-    except BaseException:
-        Path(tmp).unlink(missing_ok=True)
-        raise
 
 
 def precompute_superpixels(study: Study, *, on_progress=None) -> int:
@@ -1129,7 +1115,7 @@ def export_to_folder(study: Study, out: Path, *, on_start=None, on_progress=None
     written = []
 
     def write(path: Path, data: bytes) -> None:
-        _write_atomic(path, data)
+        media.write_atomic(path, data)
         written.append(path)
         if on_progress is not None:
             on_progress(1)
