@@ -178,7 +178,10 @@ def decode_mask(data: bytes, *, path: str | Path = "<bytes>") -> np.ndarray:
         if not (raw == raw[..., :1]).all():
             raise MediaError(path, "mask must be grayscale (0 and one other value)")
         raw = raw[..., 0]
-    values = np.unique(raw)
+    if raw.dtype == np.uint8:  # bincount is ~10x faster than unique on large masks
+        values = np.flatnonzero(np.bincount(raw.ravel(), minlength=256))
+    else:
+        values = np.unique(raw)
     if len(values) > 2 or (len(values) == 2 and values[0] != 0):
         raise MediaError(path, f"mask must be binary (0 and one other value), found values {values[:6].tolist()}")
     return raw > 0

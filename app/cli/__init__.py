@@ -23,12 +23,16 @@ def one_line_errors():
 
 
 @contextlib.contextmanager
-def progress_bar(label: str):
-    """Yield (on_start, on_progress) callbacks that drive a click progress bar."""
+def progress_bar(label: str, *, file=None):
+    """Yield (on_start, on_progress) callbacks that drive a click progress bar.
+
+    ``file`` defaults to stdout; commands whose stdout is data (CSV, JSON)
+    pass ``sys.stderr``.
+    """
     state: dict = {}
 
     def on_start(total: int) -> None:
-        state["bar"] = click.progressbar(length=total, label=label, show_eta=True, show_pos=True)
+        state["bar"] = click.progressbar(length=total, label=label, show_eta=True, show_pos=True, file=file)
         state["bar"].__enter__()
 
     def on_progress(n: int) -> None:
