@@ -55,3 +55,26 @@ def ping(value: int) -> int:
     """A job that only proves the queue round trip (used by tests and `flask egonet worker --check`)."""
     with app_context():
         return value + 1
+
+
+@huey.task()
+def train_run(run_id: int) -> None:
+    """Train a queued run (see app.services.training.execute_run)."""
+    with app_context():
+        from app.services.training import execute_run
+
+        execute_run(run_id)
+
+
+@huey.task()
+def predict_frames(checkpoint_id: int, frame_ids: list[int], device: str = "auto") -> int:
+    """Run a checkpoint on frames and store the predictions; returns how many."""
+    with app_context():
+        from app.extensions import db
+        from app.models.training import Checkpoint
+        from app.services.training import TrainingProblem, frames_for_prediction, predict
+
+        checkpoint = db.session.get(Checkpoint, checkpoint_id)
+        if checkpoint is None:
+            raise TrainingProblem(f"no checkpoint with id {checkpoint_id}")
+        return len(predict(checkpoint, frames_for_prediction(frame_ids=frame_ids), device=device))

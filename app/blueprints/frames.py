@@ -6,6 +6,7 @@ from app.extensions import db
 from app.models import Activity, Frame
 from app.services import frames as frames_service
 from app.services import media
+from app.services import training as training_service
 
 bp = Blueprint("frames", __name__)
 
@@ -33,7 +34,10 @@ def frame(frame_id: int):
     fr = db.get_or_404(Frame, frame_id)
     previous, following = frames_service.neighbours(fr)
     status = frames_service.frame_statuses([fr.id])[fr.id]
-    return render_template("frames/frame.html", frame=fr, status=status, previous=previous, following=following)
+    prediction = training_service.latest_prediction(fr.id)
+    return render_template(
+        "frames/frame.html", frame=fr, status=status, previous=previous, following=following, prediction=prediction
+    )
 
 
 @bp.get("/frames/<int:frame_id>/thumb.jpg")

@@ -1,5 +1,194 @@
-"""Training runs: start through the queue, watch progress, list checkpoints."""
+"""Training runs: start through the queue, watch progress, list checkpoints.
 
-from flask import Blueprint
+Staff see runs, checkpoints and predictions; only admins start, cancel or
+resume runs. A run never trains inside a request: starting one records the
+row and queues the job for ``flask egonet worker``. The index page polls
+``status`` for live progress.
+"""
+
+from flask import (
+    Blueprint,
+    flash,
+    redirect,
+    render_template,
+    request,
+    send_file,
+    url_for,
+)
+from flask_login import current_user
+from flask_wtf import FlaskForm
+from wtforms import (
+    BooleanField,
+    FloatField,
+    IntegerField,
+    SelectChoice,
+    SelectField,
+    SelectMultipleField,
+    StringField,
+)
+from wtforms.validators import InputRequired, Length, NumberRange, Optional
+from wtforms.widgets import CheckboxInput, ListWidget
+
+from app.errors import ApiError
+from app.extensions import db
+from app.models import Activity, Role
+from app.models.training import Prediction, TrainingRun
+from app.security import current_role, roles
+from app.services import training
 
 bp = Blueprint("training", __name__, url_prefix="/training")
+
+MODEL_CHOICES = [
+    SelectChoice("egonet-lite", "egonet-lite (fast on a CPU)"),
+    SelectChoice("egonet", "egonet (the paper's network, 138 M parameters: use a GPU)"),
+    SelectChoice("egonet-rgb", "egonet-rgb (ablation: RGB stream only)"),
+    SelectChoice("egonet-dhg", "egonet-dhg (ablation: DHG stream only)"),
+    SelectChoice("single-stream", "single-stream (ablation: early fusion)"),
+    SelectChoice("no-coords", "no-coords (ablation: no coordinate maps)"),
+    SelectChoice("no-embedding", "no-embedding (ablation: fc9 removed)"),
+]
+
+
+class RunForm(FlaskForm):
+    name = StringField("Name (optional)", validators=[Optional(), Length(max=200)])
+    model = SelectField("Model", choices=MODEL_CHOICES, default="egonet-lite")
+    folds = SelectField(
+        "Evaluation",
+        choices=[SelectChoice("loao", "leave one activity out (one model per activity)"), SelectChoice("single", "single split (last 20% of each activity)")],
+        default="loao",
+    )
+    epochs = IntegerField("Epochs", default=10, validators=[InputRequired(), NumberRange(1, training.MAX_EPOCHS)])
+    device = SelectField("Device", choices=[SelectChoice(d, d) for d in ("auto", "cpu", "cuda")], default="auto")
+    width = IntegerField("Training width", default=320, validators=[InputRequired(), NumberRange(8, 4096)])
+    height = IntegerField("Training height", default=240, validators=[InputRequired(), NumberRange(8, 4096)])
+    lr = FloatField("Learning rate (empty: the model's default)", validators=[Optional(), NumberRange(min=1e-9, max=100)])
+    batch_size = IntegerField("Batch size", default=4, validators=[InputRequired(), NumberRange(1, 512)])
+    seed = IntegerField("Seed", default=0, validators=[InputRequired(), NumberRange(0, 2**31 - 1)])
+    pretrained = BooleanField("Start egonet-lite from ImageNet weights")
+    activities = SelectMultipleField(
+        "Activities (none ticked: all)", coerce=int, widget=ListWidget(prefix_label=False), option_widget=CheckboxInput()
+    )
+
+
+def _form() -> RunForm:
+    form = RunForm()
+    activities = db.session.execute(db.select(Activity).order_by(Activity.name)).scalars()
+    form.activities.choices = [SelectChoice(a.id, a.name) for a in activities]
+    return form
+
+
+def _run(run_id: int) -> TrainingRun:
+    return db.get_or_404(TrainingRun, run_id)
+
+
+def run_json(run: TrainingRun) -> dict:
+    """What the page's poller shows of a run."""
+    return {
+        "id": run.id,
+        "status": run.status.value,
+        "progress": run.progress,
+        "loss": run.loss,
+        "eta_s": run.eta_s,
+        "message": run.message,
+        "mean": run.metrics.get("mean", {}),
+        "updated_at": run.updated_at.isoformat(),
+    }
+
+
+def _index(form: RunForm, status: int = 200):
+    return (
+        render_template(
+            "training/index.html",
+            runs=training.runs(),
+            checkpoints=training.checkpoints(),
+            form=form,
+            can_start=current_role() is Role.ADMIN,
+        ),
+        status,
+    )
+
+
+@bp.get("/")
+def index():
+    return _index(_form())
+
+
+@bp.post("/runs")
+@roles(Role.ADMIN)
+def start():
+    form = _form()
+    if form.validate_on_submit():
+        try:
+            run = training.start_run(
+                training.RunRequest(
+                    model=form.model.data,
+                    folds=form.folds.data,
+                    epochs=form.epochs.data,
+                    device=form.device.data,
+                    width=form.width.data,
+                    height=form.height.data,
+                    lr=form.lr.data,
+                    batch_size=form.batch_size.data,
+                    seed=form.seed.data,
+                    pretrained=form.pretrained.data,
+                    activity_ids=tuple(form.activities.data) or None,
+                    name=form.name.data,
+                ),
+                created_by=current_user._get_current_object(),
+            )
+        except training.TrainingProblem as exc:
+            target = getattr(form, {"size": "width"}.get(exc.field, exc.field or ""), None)
+            if target is not None:
+                target.errors = [*target.errors, str(exc)]
+            else:
+                flash(str(exc), "error")
+        else:
+            flash(f"Run {run.id} queued: the worker (flask egonet worker) will train it.")
+            return redirect(url_for("training.index"))
+    return _index(form, 400)
+
+
+@bp.get("/status")
+def status():
+    ids = request.args.get("ids", "")
+    try:
+        wanted = [int(x) for x in ids.split(",") if x.strip()]
+    except ValueError:
+        raise ApiError(400, "ids must be run ids separated by commas", fields={"ids": "must be integers"}) from None
+    query = db.select(TrainingRun).where(TrainingRun.id.in_(wanted)) if wanted else db.select(TrainingRun)
+    runs = db.session.execute(query.order_by(TrainingRun.id.desc()).limit(100)).scalars()
+    return {"runs": [run_json(run) for run in runs]}
+
+
+@bp.get("/runs/<int:run_id>")
+def detail(run_id: int):
+    run = _run(run_id)
+    return render_template(
+        "training/detail.html",
+        run=run,
+        predictions=training.frame_predictions(run),
+        can_start=current_role() is Role.ADMIN,
+    )
+
+
+@bp.post("/runs/<int:run_id>/cancel")
+@roles(Role.ADMIN)
+def cancel(run_id: int):
+    run = training.cancel_run(_run(run_id))
+    flash(f"Run {run.id} cancelled.")
+    return redirect(url_for("training.detail", run_id=run.id))
+
+
+@bp.post("/runs/<int:run_id>/resume")
+@roles(Role.ADMIN)
+def resume(run_id: int):
+    run = training.resume_run(_run(run_id))
+    flash(f"Run {run.id} queued again: finished folds are kept.")
+    return redirect(url_for("training.detail", run_id=run.id))
+
+
+@bp.get("/predictions/<int:prediction_id>.png")
+def prediction_overlay(prediction_id: int):
+    prediction = db.get_or_404(Prediction, prediction_id)
+    # Predicting a frame again replaces the map behind this id: revalidated (ETag), not cached for long.
+    return send_file(training.prediction_overlay(prediction), mimetype="image/png")

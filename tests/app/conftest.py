@@ -60,6 +60,7 @@ def make_app(database_url: str, tmp_path, **overrides):
         "SQLALCHEMY_DATABASE_URI": database_url,
         "MEDIA_ROOT": str(tmp_path / "media"),
         "CACHE_ROOT": str(tmp_path / "cache"),
+        "CHECKPOINT_ROOT": str(tmp_path / "checkpoints"),
         "SERVER_NAME": None,
     }
     config.update(overrides)

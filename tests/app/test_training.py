@@ -1,0 +1,341 @@
+"""Training runs: the service, the CLI, the pages and the prediction overlay.
+
+Runs train egonet-lite on a few demo frames at 32x24 for one epoch: enough
+to go through every step (folds, checkpoints, predictions), not to learn.
+"""
+
+import re
+
+import numpy as np
+import pytest
+import torch
+
+from app.extensions import db
+from app.models import Activity, Frame
+from app.models.training import Prediction, RunStatus, TrainingRun
+from app.services import training
+from app.services.demo import create_demo
+from egonet.train import load_checkpoint
+
+TINY = {"model": "egonet-lite", "epochs": 1, "width": 32, "height": 24, "batch_size": 2, "device": "cpu"}
+
+
+@pytest.fixture(autouse=True)
+def one_thread():
+    threads = torch.get_num_threads()
+    torch.set_num_threads(1)  # small models run several times faster so on a shared two-core machine
+    yield
+    torch.set_num_threads(threads)
+
+
+@pytest.fixture
+def app(app, tmp_path):
+    app.config["CHECKPOINT_ROOT"] = str(tmp_path / "checkpoints")
+    return app
+
+
+@pytest.fixture
+def demo(app):
+    """Two demo frames of each activity at 64x48, with reviewed ground truth; returns activity ids by name."""
+    with app.app_context():
+        create_demo(frames_per_activity=2, width=64, height=48)
+        return dict(db.session.execute(db.select(Activity.name, Activity.id)).all())
+
+
+def two_activities(demo) -> tuple[int, int]:
+    return demo["cooking"], demo["dining"]
+
+
+def newest_run() -> TrainingRun:
+    return db.session.execute(db.select(TrainingRun).order_by(TrainingRun.id.desc())).scalars().first()
+
+
+def held_out_ids(run: TrainingRun) -> list[int]:
+    return [i for c in run.checkpoints for i in c.test_frame_ids]
+
+
+def train_now(demo, **options) -> TrainingRun:
+    request = training.RunRequest(**(TINY | {"activity_ids": two_activities(demo)} | options))
+    return training.execute_run(training.create_run(request).id)
+
+
+# --------------------------------------------------------------------------- the service
+
+
+def test_a_run_records_a_checkpoint_per_fold_and_every_held_out_prediction(ctx, demo):
+    run = train_now(demo)
+    assert run.status is RunStatus.DONE and run.progress == 1.0 and run.finished_at is not None
+    assert [c.fold for c in run.checkpoints] == ["cooking", "dining"]
+    assert set(run.metrics["folds"]) == {"cooking", "dining"}
+    assert set(run.metrics["mean"]) == {"max_f", "ap", "aop_max_f", "aop_ap"}
+    for checkpoint in run.checkpoints:
+        state = load_checkpoint(training.checkpoint_root() / checkpoint.path)
+        assert state["fold"] == checkpoint.fold and state["test_keys"] == checkpoint.test_frame_ids
+        assert checkpoint.metrics["history"][0]["epoch"] == 1
+    assert (training.checkpoint_root() / f"run-{run.id}" / "config.json").exists()
+    # The scorer's interface: every held-out frame once, at its full size, in [0, 1].
+    assert training.completed_runs() == [run]
+    pairs = list(training.held_out_predictions(run))
+    held_out = sorted(held_out_ids(run))
+    assert sorted(frame.id for frame, _ in pairs) == held_out and len(held_out) == 4
+    for frame, probability in pairs:
+        assert isinstance(frame, Frame)
+        assert probability.shape == (frame.height, frame.width) == (48, 64) and probability.dtype == np.float32
+        assert 0.0 <= probability.min() and probability.max() <= 1.0
+
+
+def test_stored_maps_are_the_engine_maps_to_16_bits(ctx, demo):
+    run = train_now(demo, folds="single")
+    (checkpoint,) = run.checkpoints
+    made = training.predict(checkpoint, [db.session.get(Frame, i) for i in checkpoint.test_frame_ids], device="cpu")
+    stored = dict(training.held_out_predictions(run))
+    for prediction in made:
+        assert prediction.held_out
+        again = training.read_probability(prediction.path)
+        assert np.abs(again - stored[prediction.frame]).max() <= 1 / 65535 + 1e-7
+    # Predicting again replaces the checkpoint's earlier maps: still one per frame.
+    assert db.session.execute(db.select(db.func.count(Prediction.id))).scalar_one() == len(made)
+
+
+def test_completed_runs_are_the_done_ones_newest_first(ctx, demo):
+    first = train_now(demo, folds="single")
+    second = train_now(demo, folds="single")
+    queued = training.create_run(training.RunRequest(**TINY))
+    assert training.completed_runs() == [second, first]
+    assert queued not in training.completed_runs()
+
+
+@pytest.mark.parametrize(
+    ("options", "field", "message"),
+    [
+        ({"model": "resnet"}, "model", "unknown name 'resnet'"),
+        ({"epochs": 0}, "epochs", "epochs must be an integer"),
+        ({"width": 4}, "size", "width must be an integer >= 8"),
+        ({"folds": "kfold"}, "folds", "folds must be one of"),
+        ({"lr": -1.0}, "lr", "lr must be a number"),
+        ({"activity_ids": (999,)}, "activities", "no activity with id 999"),
+        ({"model": "egonet", "pretrained": True}, "pretrained", "egonet-lite only"),
+    ],
+)
+def test_bad_requests_name_the_field(ctx, demo, options, field, message):
+    with pytest.raises(training.TrainingProblem, match=message) as info:
+        training.create_run(training.RunRequest(**(TINY | options)))
+    assert info.value.field == field
+    assert db.session.execute(db.select(TrainingRun)).first() is None
+
+
+def test_too_little_data_is_refused_before_queueing(ctx, demo):
+    with pytest.raises(training.TrainingProblem, match="at least two activities") as info:
+        training.create_run(training.RunRequest(**TINY, activity_ids=(demo["cooking"],)))
+    assert info.value.field == "folds"
+
+
+def test_no_ground_truth_at_all_says_what_to_do(ctx):
+    with pytest.raises(training.TrainingProblem, match="flask egonet demo"):
+        training.create_run(training.RunRequest(**TINY))
+
+
+def test_frames_without_dhg_are_refused_for_models_that_read_it(ctx, demo, tmp_path):
+    from app.services.importing import import_path
+    from tests.app.factories import image_folder
+
+    import_path(image_folder(tmp_path / "plain", n=2, masks=True), activity="plain")
+    with pytest.raises(training.TrainingProblem, match="2 labelled frames have no DHG image"):
+        training.create_run(training.RunRequest(**TINY))
+
+
+def test_a_cancelled_run_stops_and_resumes_keeping_finished_folds(ctx, demo, monkeypatch):
+    run = training.create_run(training.RunRequest(**TINY, activity_ids=two_activities(demo)))
+    monkeypatch.setattr(training, "PROGRESS_INTERVAL_S", 0.0)
+
+    def cancel_in_second_fold(progress):
+        if progress.fold_index == 1 and progress.loss is not None:
+            training.cancel_run(db.session.get(TrainingRun, run.id))
+
+    run = training.execute_run(run.id, on_progress=cancel_in_second_fold)
+    assert run.status is RunStatus.CANCELLED and [c.fold for c in run.checkpoints] == ["cooking"]
+    with pytest.raises(Exception, match="cancelled already"):
+        training.cancel_run(run)
+
+    queued = []
+    monkeypatch.setattr("app.tasks.train_run", lambda run_id: queued.append(run_id))
+    training.resume_run(run)
+    assert run.status is RunStatus.QUEUED and queued == [run.id]
+    run = training.execute_run(run.id)
+    assert run.status is RunStatus.DONE and [c.fold for c in run.checkpoints] == ["cooking", "dining"]
+    with pytest.raises(Exception, match="only failed or cancelled"):
+        training.resume_run(run)
+
+
+def test_a_failure_is_recorded_on_the_run(ctx, demo, monkeypatch):
+    run = training.create_run(training.RunRequest(**TINY, activity_ids=two_activities(demo)))
+
+    def broken(*args, **kwargs):
+        raise RuntimeError("out of memory\nmore detail")
+
+    monkeypatch.setattr("egonet.train.cross_validate", broken)
+    with pytest.raises(RuntimeError):
+        training.execute_run(run.id)
+    db.session.refresh(run)
+    assert run.status is RunStatus.FAILED and run.message == "failed: out of memory"
+
+
+def test_a_run_cancelled_while_queued_is_never_trained(ctx, demo):
+    run = training.create_run(training.RunRequest(**TINY, activity_ids=two_activities(demo)))
+    training.cancel_run(run)
+    assert training.execute_run(run.id).status is RunStatus.CANCELLED
+    assert run.checkpoints == []
+
+
+# --------------------------------------------------------------------------- the CLI
+
+
+def test_cli_trains_predicts_and_resumes(app, demo, runner):
+    args = ["egonet", "train", "--folds", "loao", "--epochs", "1", "--size", "32x24", "--batch-size", "2",
+            "--device", "cpu", "--activities", "cooking", "--activities", "dining", "--name", "cli run"]
+    result = runner.invoke(args=args)
+    assert result.exit_code == 0, result.output
+    assert re.search(r"run \d+ \(cli run\): done", result.output)
+    assert re.search(r"cooking\s+MF \d\.\d{3}\s+AP \d\.\d{3}\s+\(action-object prior: MF \d\.\d{3}", result.output)
+    assert "mean" in result.output and "Training" in result.output  # the progress bar's label
+
+    with app.app_context():
+        run = newest_run()
+        assert run.status is RunStatus.DONE and run.created_by is None
+        cooking = next(c for c in run.checkpoints if c.fold == "cooking")
+        n_frames = db.session.execute(db.select(db.func.count(Frame.id))).scalar_one()
+
+    result = runner.invoke(args=["egonet", "predict", str(cooking.id), "--device", "cpu"])
+    assert result.exit_code == 0, result.output
+    assert f"{n_frames} predictions stored, 2 of held-out frames" in result.output
+
+    result = runner.invoke(args=["egonet", "train", "--resume", str(cooking.id), "--epochs", "2", "--device", "cpu"])
+    assert result.exit_code == 0, result.output
+    with app.app_context():
+        resumed = newest_run()
+        (checkpoint,) = resumed.checkpoints
+        assert resumed.status is RunStatus.DONE and checkpoint.fold == "cooking" and checkpoint.epochs == 2
+        assert resumed.config["resume_checkpoint"] == cooking.id
+
+
+def test_cli_refuses_bad_options_in_one_line(app, demo, runner):
+    cases = [
+        (["--size", "32"], "use WIDTHxHEIGHT"),
+        (["--activities", "nowhere"], "no activity named 'nowhere'"),
+        (["--activities", "cooking"], "at least two activities"),
+        (["--resume", "7"], "no checkpoint with id 7"),
+        (["--model", "resnet"], "unknown name 'resnet'"),
+    ]
+    for extra, message in cases:
+        result = runner.invoke(args=["egonet", "train", "--epochs", "1", *extra])
+        assert result.exit_code != 0 and message in result.output, (extra, result.output)
+        assert "Traceback" not in result.output
+    result = runner.invoke(args=["egonet", "predict", "3"])
+    assert result.exit_code != 0 and "no checkpoint with id 3" in result.output
+
+
+def test_cli_queues_a_run_for_the_worker(app, demo, runner, monkeypatch):
+    queued = []
+    monkeypatch.setattr("app.tasks.train_run", lambda run_id: queued.append(run_id))
+    result = runner.invoke(args=["egonet", "train", "--queue", "--folds", "single", "--epochs", "1"])
+    assert result.exit_code == 0, result.output
+    with app.app_context():
+        run = newest_run()
+        assert run.status is RunStatus.QUEUED and queued == [run.id]
+    assert f"run {run.id} queued" in result.output
+
+
+# --------------------------------------------------------------------------- pages
+
+
+def test_admins_start_runs_from_the_page(app, demo, admin_client, monkeypatch):
+    queued = []
+    monkeypatch.setattr("app.tasks.train_run", lambda run_id: queued.append(run_id))
+    page = admin_client.get("/training/")
+    assert page.status_code == 200 and b"Start a run" in page.data
+    form = {"model": "egonet-lite", "folds": "single", "epochs": "1", "device": "cpu", "width": "32", "height": "24",
+            "batch_size": "2", "seed": "3", "name": "from the page"}
+    response = admin_client.post("/training/runs", data=form)
+    assert response.status_code == 302
+    with app.app_context():
+        run = newest_run()
+        assert queued == [run.id] and run.name == "from the page" and run.status is RunStatus.QUEUED and run.seed == 3
+        assert run.created_by.username == "admin" and run.config["train"]["width"] == 32
+    page = admin_client.get("/training/")
+    assert b"from the page" in page.data and f"Run {run.id} queued".encode() in page.data
+
+
+def test_a_bad_form_is_shown_again_with_the_reason(app, demo, admin_client):
+    response = admin_client.post("/training/runs", data={"model": "egonet-lite", "folds": "loao", "epochs": "0", "device": "cpu",
+                                                         "width": "32", "height": "24", "batch_size": "2", "seed": "0",
+                                                         "activities": [str(demo["cooking"])]})
+    assert response.status_code == 400 and b"Number must be between 1" in response.data
+    response = admin_client.post("/training/runs", data={"model": "egonet-lite", "folds": "loao", "epochs": "1", "device": "cpu",
+                                                         "width": "32", "height": "24", "batch_size": "2", "seed": "0",
+                                                         "activities": [str(demo["cooking"])]})
+    assert response.status_code == 400 and b"at least two activities" in response.data
+    with app.app_context():
+        assert db.session.execute(db.select(TrainingRun)).first() is None
+
+
+def test_annotators_see_runs_but_cannot_start_them(app, demo, client, make_user):
+    client.login_as(make_user("annotator"))
+    page = client.get("/training/")
+    assert page.status_code == 200 and b"Start a run" not in page.data
+    assert client.post("/training/runs", data={"model": "egonet-lite"}).status_code == 403
+
+
+def test_progress_is_polled_as_json_and_runs_are_cancelled_from_the_page(app, demo, admin_client, monkeypatch):
+    monkeypatch.setattr("app.tasks.train_run", lambda run_id: None)
+    with app.app_context():
+        run_id = training.create_run(training.RunRequest(**TINY, activity_ids=two_activities(demo))).id
+    body = admin_client.get(f"/training/status?ids={run_id}").get_json()
+    assert body["runs"][0] | {"updated_at": None} == {
+        "id": run_id, "status": "queued", "progress": 0.0, "loss": None, "eta_s": None, "message": None, "mean": {}, "updated_at": None,
+    }
+    assert admin_client.get("/training/status?ids=x", headers={"Accept": "application/json"}).get_json()["fields"] == {"ids": "must be integers"}
+    assert admin_client.post(f"/training/runs/{run_id}/cancel").status_code == 302
+    response = admin_client.post(f"/training/runs/{run_id}/cancel", headers={"Accept": "application/json"})
+    assert response.status_code == 409 and "cancelled already" in response.get_json()["message"]
+    page = admin_client.get(f"/training/runs/{run_id}")
+    assert page.status_code == 200 and b"Resume" in page.data and b"cancelled" in page.data
+
+
+def test_run_page_shows_folds_and_the_frame_viewer_shows_the_heatmap(app, demo, admin_client):
+    with app.app_context():
+        run = train_now(demo)
+        frame_id = run.checkpoints[0].test_frame_ids[0]
+        held_out = held_out_ids(run)
+        prediction_id = db.session.execute(db.select(Prediction.id).where(Prediction.frame_id == frame_id)).scalar_one()
+    page = admin_client.get(f"/training/runs/{run.id}")
+    assert page.status_code == 200
+    assert b"Held-out predictions" in page.data and b"cooking" in page.data and b'id="folds"' in page.data
+    viewer = admin_client.get(f"/frames/{frame_id}")
+    assert f"/training/predictions/{prediction_id}.png".encode() in viewer.data and b'id="show-prediction"' in viewer.data
+    with admin_client.get(f"/training/predictions/{prediction_id}.png") as overlay:
+        assert overlay.status_code == 200 and overlay.mimetype == "image/png"
+        import cv2
+
+        image = cv2.imdecode(np.frombuffer(overlay.data, np.uint8), cv2.IMREAD_UNCHANGED)
+        assert image.shape == (48, 64, 4)  # colour and opacity at the frame's size
+    with app.app_context():
+        other = db.session.execute(db.select(Frame.id).where(Frame.id.notin_(held_out))).scalars().first()
+    assert b'id="show-prediction"' not in admin_client.get(f"/frames/{other}").data
+
+
+def test_cli_predict_chooses_frames_and_can_queue(app, demo, runner, monkeypatch):
+    with app.app_context():
+        run = train_now(demo, folds="single")
+        checkpoint_id = run.checkpoints[0].id
+        dining = sorted(f.id for f in training.frames_for_prediction(activity_names=["dining"]))
+    queued = []
+    monkeypatch.setattr("app.tasks.predict_frames", lambda *args: queued.append(args))
+    result = runner.invoke(args=["egonet", "predict", str(checkpoint_id), "--activity", "dining", "--queue", "--device", "cpu"])
+    assert result.exit_code == 0, result.output
+    assert queued == [(checkpoint_id, dining, "cpu")] and "2 frames queued" in result.output
+    result = runner.invoke(args=["egonet", "predict", str(checkpoint_id), "--frames", f"{dining[0]}", "--device", "cpu"])
+    assert result.exit_code == 0 and "1 predictions stored" in result.output
+    for extra, message in ((["--activity", "nowhere"], "no activity named 'nowhere'"), (["--frames", "99999"], "no frame with id 99999"),
+                           (["--frames", "a,b"], "give frame ids separated by commas")):
+        result = runner.invoke(args=["egonet", "predict", str(checkpoint_id), *extra])
+        assert result.exit_code != 0 and message in result.output, result.output
