@@ -75,7 +75,7 @@ class Server:
         self.log = open(instance / f"gunicorn-{self.port}.log", "ab")
         self.process = subprocess.Popen(
             [sys.executable, "-m", "gunicorn", "--workers", str(workers), "--threads", str(threads),
-             "--bind", f"127.0.0.1:{self.port}", "--timeout", "60", "app:create_app()"],
+             "--bind", f"127.0.0.1:{self.port}", "--timeout", "60", "--keep-alive", "30", "app:create_app()"],
             cwd=ROOT, env=env, stdout=self.log, stderr=subprocess.STDOUT, start_new_session=True,
         )
         self.wait_ready()
