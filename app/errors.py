@@ -11,6 +11,17 @@ from werkzeug.exceptions import HTTPException, InternalServerError
 from app.extensions import db
 
 
+class Problem(ValueError):
+    """A request a service cannot carry out; ``field`` names the bad input when there is one.
+
+    The CLI prints it as a one-line error; views turn it into a 400 naming the field.
+    """
+
+    def __init__(self, message: str, *, field: str | None = None):
+        super().__init__(message)
+        self.field = field
+
+
 class ApiError(Exception):
     """Raised by views and services to answer a 4xx with a message and fields."""
 

@@ -16,7 +16,6 @@ from flask import (
     url_for,
 )
 from flask_login import current_user
-from flask_wtf import FlaskForm
 from wtforms import (
     BooleanField,
     FloatField,
@@ -31,6 +30,7 @@ from wtforms.widgets import CheckboxInput, ListWidget
 
 from app.errors import ApiError
 from app.extensions import db
+from app.forms import Form
 from app.models import Activity, Role
 from app.models.training import Prediction, TrainingRun
 from app.security import current_role, roles
@@ -49,7 +49,7 @@ MODEL_CHOICES = [
 ]
 
 
-class RunForm(FlaskForm):
+class RunForm(Form):
     name = StringField("Name (optional)", validators=[Optional(), Length(max=200)])
     model = SelectField("Model", choices=MODEL_CHOICES, default="egonet-lite")
     folds = SelectField(

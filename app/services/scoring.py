@@ -53,15 +53,22 @@ import numpy as np
 from flask import current_app
 from sqlalchemy import func
 
+from app.errors import Problem
 from app.extensions import db
-from app.models import Activity, Annotation, Frame, Sequence as FrameSequence
+from app.models import Activity, Annotation, Frame
+from app.models import Sequence as FrameSequence
 from app.models.studies import ANSWERED, Participant, Study, Trial
 from app.models.training import Prediction, TrainingRun
 from app.services import ground_truth, media, training
 from app.services import studies as studies_service
 from egonet import io
 from egonet.baselines import ActionObjectPrior, CenterPrior, SpectralResidualSaliency
-from egonet.metrics import DEFAULT_THRESHOLDS, Counts, ScoreAccumulator, threshold_values
+from egonet.metrics import (
+    DEFAULT_THRESHOLDS,
+    Counts,
+    ScoreAccumulator,
+    threshold_values,
+)
 
 # Bump when scoring changes in a way that makes cached statistics wrong.
 SCORER_VERSION = 1
@@ -93,12 +100,8 @@ DEFINITION = (
 PALETTE = ("#1f77b4", "#d62728", "#2ca02c", "#ff7f0e", "#9467bd", "#8c564b", "#e377c2", "#17becf", "#bcbd22", "#7f7f7f")
 
 
-class ScoringProblem(ValueError):
+class ScoringProblem(Problem):
     """A score request that cannot go ahead; ``field`` names the bad input."""
-
-    def __init__(self, message: str, *, field: str | None = None):
-        super().__init__(message)
-        self.field = field
 
 
 # --------------------------------------------------------------------------

@@ -47,7 +47,7 @@ from sqlalchemy import func, update
 from sqlalchemy.exc import IntegrityError
 from sqlalchemy.orm import selectinload
 
-from app.errors import ApiError
+from app.errors import ApiError, Problem
 from app.extensions import db
 from app.models import Activity, Frame, Role, Sequence, User, utcnow
 from app.models.studies import (
@@ -100,12 +100,8 @@ MAX_CLICKS = 50
 MAX_EVENTS = 2000
 
 
-class StudyProblem(ValueError):
+class StudyProblem(Problem):
     """A study or participant request that cannot go ahead; ``field`` names the bad input."""
-
-    def __init__(self, message: str, *, field: str | None = None):
-        super().__init__(message)
-        self.field = field
 
 
 def new_seed() -> int:

@@ -31,7 +31,7 @@ import numpy as np
 from flask import current_app
 from sqlalchemy import update
 
-from app.errors import ApiError
+from app.errors import ApiError, Problem
 from app.extensions import db
 from app.models import Activity, Frame, Sequence, User, utcnow
 from app.models.training import (
@@ -53,12 +53,8 @@ PROGRESS_INTERVAL_S = 1.0
 MAX_EPOCHS = 10_000
 
 
-class TrainingProblem(ValueError):
+class TrainingProblem(Problem):
     """A run or prediction that cannot go ahead; ``field`` names the bad input."""
-
-    def __init__(self, message: str, *, field: str | None = None):
-        super().__init__(message)
-        self.field = field
 
 
 def checkpoint_root() -> Path:
