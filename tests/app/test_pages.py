@@ -25,6 +25,7 @@ def test_index_grid_viewer_and_media(app, admin_client, tmp_path):
     first = frames[0]
     viewer = client.get(f"/frames/{first['id']}")
     assert viewer.status_code == 200 and b"Depth" in viewer.data and b'id="next"' in viewer.data
+    assert f'href="/label/frames/{first["id"]}"'.encode() in viewer.data
     for url, mimetype in ((first["rgb_url"], "image/png"), (first["depth_url"], "image/png"), (f"/frames/{first['id']}/thumb.jpg", "image/jpeg")):
         with client.get(url) as response:
             assert response.status_code == 200 and len(response.data) > 100, url
