@@ -201,6 +201,8 @@ def main():
             stored = db.session.execute(db.select(Annotation).where(Annotation.frame_id == fid, Annotation.author_id.is_not(None)).order_by(Annotation.updated_at.desc())).scalars().first()
             if stored is None or stored.version < version or (stored.version == version and not np.array_equal(mask_of(stored), mask)):
                 lost += 1
+        db.session.remove()
+        db.engine.dispose()
     drop_schema(base_url, schema)
 
     total = sum(len(v) for v in stats.times.values())

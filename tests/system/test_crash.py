@@ -69,6 +69,9 @@ def deployment(tmp_path):
         codes = [p.code for p in people]
         frames = [(f.id, f.height, f.width) for f in db.session.execute(db.select(Frame).order_by(Frame.id)).scalars()]
     yield {"url": url, "app": app, "instance": tmp_path, "codes": codes, "frames": frames}
+    with app.app_context():
+        db.session.remove()
+        db.engine.dispose()  # close pooled connections before the schema goes
     drop_schema(POSTGRES_URL, schema)
 
 
