@@ -31,6 +31,8 @@ from typing import Protocol, runtime_checkable
 import cv2
 import numpy as np
 
+from egonet.io import check_rgb
+
 __all__ = [
     "BASELINES",
     "ActionObjectPrior",
@@ -61,12 +63,7 @@ class Predictor(Protocol):
 
 def _check_frame(rgb: np.ndarray, dhg: np.ndarray | None) -> tuple[int, int]:
     """Validate a predictor's inputs and return (H, W)."""
-    if not isinstance(rgb, np.ndarray) or rgb.dtype != np.uint8 or rgb.ndim != 3 or rgb.shape[2] != 3:
-        desc = f"{rgb.dtype} {rgb.shape}" if isinstance(rgb, np.ndarray) else type(rgb).__name__
-        raise ValueError(f"rgb must be a uint8 (H, W, 3) array, got {desc}")
-    h, w = rgb.shape[:2]
-    if h < 1 or w < 1:
-        raise ValueError(f"rgb must be at least 1x1, got shape {rgb.shape}")
+    h, w = check_rgb(rgb, "rgb")
     if dhg is not None:
         if not isinstance(dhg, np.ndarray) or dhg.dtype != np.uint8 or dhg.shape != rgb.shape:
             desc = f"{dhg.dtype} {dhg.shape}" if isinstance(dhg, np.ndarray) else type(dhg).__name__

@@ -35,6 +35,8 @@ from collections.abc import Sequence
 import cv2
 import numpy as np
 
+from egonet.io import check_rgb
+
 __all__ = ["DEFAULT_SIGMA", "click_gaussian", "project_to_regions", "soft_mask", "superpixels"]
 
 DEFAULT_SIGMA = 60.0
@@ -112,12 +114,7 @@ def superpixels(
     # study) does not need it.
     from skimage.segmentation import felzenszwalb, slic
 
-    if not isinstance(image, np.ndarray) or image.dtype != np.uint8 or image.ndim != 3 or image.shape[2] != 3:
-        desc = f"{image.dtype} {image.shape}" if isinstance(image, np.ndarray) else type(image).__name__
-        raise ValueError(f"image must be a uint8 (H, W, 3) RGB array, got {desc}")
-    h, w = image.shape[:2]
-    if h < 2 or w < 2:
-        raise ValueError(f"image must be at least 2x2, got {h}x{w}")
+    h, w = check_rgb(image, "image", min_side=2)
     if method not in SUPERPIXEL_METHODS:
         raise ValueError(f"unknown method {method!r}; valid methods: {', '.join(SUPERPIXEL_METHODS)}")
     slic_only = {"n_segments": n_segments, "compactness": compactness}

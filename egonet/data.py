@@ -47,6 +47,7 @@ import torch
 from torch.utils.data import Dataset
 
 from egonet import io
+from egonet.io import check_rgb
 
 __all__ = ["Augment", "FrameDataset", "Sample", "load_sample", "resize_frame"]
 
@@ -119,11 +120,11 @@ def load_sample(sample: Sample) -> tuple[np.ndarray, np.ndarray | None, np.ndarr
     """
     name = f"sample {sample.key!r}" if sample.key is not None else "sample"
     rgb = _read(sample.rgb, io.read_image)
-    _check_image(rgb, f"{name}: rgb")
+    check_rgb(rgb, f"{name}: rgb", min_side=MIN_SIDE)
     height, width = rgb.shape[:2]
     dhg = None if sample.dhg is None else _read(sample.dhg, io.read_dhg)
     if dhg is not None:
-        _check_image(dhg, f"{name}: dhg")
+        check_rgb(dhg, f"{name}: dhg", min_side=MIN_SIDE)
         if dhg.shape != rgb.shape:
             raise ValueError(f"{name}: dhg is {dhg.shape[1]}x{dhg.shape[0]}, the RGB frame {width}x{height}")
     if sample.mask is None:
@@ -311,11 +312,6 @@ def _read(source: object, reader) -> object:
     return source
 
 
-def _check_image(image: object, name: str) -> None:
-    if not isinstance(image, np.ndarray) or image.dtype != np.uint8 or image.ndim != 3 or image.shape[2] != 3:
-        raise ValueError(f"{name} must be a uint8 (H, W, 3) array, got {_describe(image)}")
-    if min(image.shape[:2]) < MIN_SIDE:
-        raise ValueError(f"{name} must be at least {MIN_SIDE}x{MIN_SIDE} pixels, got {image.shape[1]}x{image.shape[0]}")
 
 
 def _check_size(size: object) -> tuple[int, int]:

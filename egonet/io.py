@@ -41,6 +41,21 @@ class MediaError(ValueError):
         super().__init__(f"{path}: {reason}")
 
 
+def check_rgb(image: object, name: str, *, min_side: int = 1) -> tuple[int, int]:
+    """Check that ``image`` is a uint8 (H, W, 3) array with sides >= ``min_side``; return (H, W).
+
+    Raises:
+        ValueError: naming ``name`` and what was given instead.
+    """
+    if not isinstance(image, np.ndarray) or image.dtype != np.uint8 or image.ndim != 3 or image.shape[2] != 3:
+        desc = f"{image.dtype} {image.shape}" if isinstance(image, np.ndarray) else type(image).__name__
+        raise ValueError(f"{name} must be a uint8 (H, W, 3) RGB array, got {desc}")
+    h, w = image.shape[:2]
+    if h < min_side or w < min_side:
+        raise ValueError(f"{name} must be at least {min_side}x{min_side} pixels, got {w}x{h}")
+    return h, w
+
+
 def image_size(data: bytes, *, path: str | Path = "<bytes>") -> tuple[int, int]:
     """(width, height) from an encoded image's header, without decoding it.
 
