@@ -8,6 +8,12 @@ import os
 import tempfile
 
 import pytest
+from hypothesis import settings
+
+# No per-example time limit: on a shared 2-core machine one slow example is
+# noise, not a failure (performance is measured in bench/, never in tests).
+settings.register_profile("egonet", deadline=None)
+settings.load_profile("egonet")
 
 # The task queue is chosen when app.tasks is imported: give the test session
 # its own SQLite queue so it never touches instance/ (tests that need Redis

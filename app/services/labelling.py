@@ -621,8 +621,11 @@ class _Recent:
 # operation runs on it (so two threads never share one) and put back under
 # the new revision afterwards; since a revision is random and changes with
 # every write, a cached session is used only while the database still holds
-# exactly its state.
-_sessions = _Recent(size=6)
+# exactly its state. A client's keep-alive connection stays with one worker,
+# so an annotator's strokes usually find their session here; 16 cover the
+# annotators one worker serves at a time (about 8 MB each at 1280x960: the
+# frame, its mask and the ROI's guide).
+_sessions = _Recent(size=16)
 # Decoded frames by their (content-addressed, so never stale) media path:
 # a session restored in another worker then only needs its state decoded.
 _images = _Recent(size=4)

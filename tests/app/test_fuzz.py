@@ -37,7 +37,7 @@ queries = st.dictionaries(st.sampled_from(FIELDS + ["page", "activity", "runs", 
 
 @pytest.mark.slow
 @pytest.mark.parametrize("role", ["admin", "annotator", "reviewer", "participant"])
-@settings(max_examples=3, deadline=None, suppress_health_check=[HealthCheck.function_scoped_fixture, HealthCheck.too_slow])
+@settings(max_examples=3, suppress_health_check=[HealthCheck.function_scoped_fixture, HealthCheck.too_slow])
 @given(data=st.data())
 def test_no_endpoint_answers_500(app, client, make_user, tmp_path_factory, role, data):
     if not hasattr(app, "_fuzz_values"):

@@ -16,7 +16,9 @@ import uuid
 from pathlib import Path
 
 import httpx
+import numpy as np
 import sqlalchemy as sa
+from pycocotools import mask as coco_mask
 
 from app import create_app, normalise_database_url
 
@@ -103,6 +105,12 @@ class Server:
             os.killpg(self.process.pid, signal.SIGTERM)
             self.process.wait(timeout=30)
         self.log.close()
+
+
+def rle(mask: np.ndarray) -> dict:
+    """A bool mask as the labelling API's RLE (COCO's compressed counts)."""
+    encoded = coco_mask.encode(np.asfortranarray(mask.astype(np.uint8)))
+    return {"size": [int(v) for v in encoded["size"]], "counts": encoded["counts"].decode()}
 
 
 def csrf_token(client: httpx.Client, path: str = "/login") -> str:

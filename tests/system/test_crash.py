@@ -18,7 +18,6 @@ import httpx
 import numpy as np
 import pytest
 from flask_migrate import upgrade
-from pycocotools import mask as coco_mask
 
 from app.extensions import db
 from app.models import Activity, Annotation, Frame
@@ -28,7 +27,7 @@ from app.services import studies as study_service
 from app.services.demo import create_demo
 from app.services.ground_truth import mask_of
 from app.services.users import create_user
-from tests.system.harness import Server, drop_schema, make_app, participant_client, private_schema_url, staff_client
+from tests.system.harness import Server, drop_schema, make_app, participant_client, private_schema_url, rle, staff_client
 
 POSTGRES_URL = os.environ.get("EGONET_TEST_POSTGRES_URL")
 PASSWORD = "crash-test-password"
@@ -36,11 +35,6 @@ pytestmark = [
     pytest.mark.slow,
     pytest.mark.skipif(not POSTGRES_URL, reason="the crash test runs on PostgreSQL (EGONET_TEST_POSTGRES_URL)"),
 ]
-
-
-def rle(mask: np.ndarray) -> dict:
-    encoded = coco_mask.encode(np.asfortranarray(mask.astype(np.uint8)))
-    return {"size": [int(v) for v in encoded["size"]], "counts": encoded["counts"].decode()}
 
 
 def square(shape, step: int) -> np.ndarray:

@@ -1,0 +1,33 @@
+"""Many users at once on the production server: no errors, nothing lost.
+
+A short run of the load simulation (``tests/system/loadgen.py``; the
+latency figures come from ``bench/load.py``): annotators browse, run GrabCut
+boxes and strokes and save masks while participants answer trials, against
+gunicorn with several processes on PostgreSQL. Every request must succeed
+and every acknowledged save must be in the database afterwards.
+"""
+
+import os
+
+import pytest
+
+from tests.system.loadgen import BOX, STROKE, run_load
+
+POSTGRES_URL = os.environ.get("EGONET_TEST_POSTGRES_URL")
+pytestmark = [
+    pytest.mark.slow,
+    pytest.mark.skipif(not POSTGRES_URL, reason="the load test runs on PostgreSQL (EGONET_TEST_POSTGRES_URL)"),
+]
+
+
+def test_twenty_users_no_errors_nothing_lost(tmp_path):
+    annotators = 14
+    result = run_load(POSTGRES_URL, tmp_path, users=20, participants=6, duration=20, ramp=5,
+                      workers=2, threads=4, size=(320, 240))
+    stats = result.stats
+    assert sum(stats.errors.values()) == 0, stats.error_samples[:10]
+    assert result.lost == 0
+    # Every annotator finishes at least the cycle it started: a box, three strokes, a save.
+    assert result.saves >= annotators
+    assert len(stats.times[STROKE]) == 3 * len(stats.times[BOX]) >= 3 * annotators
+    assert len(stats.times["POST /s/api/trials/<id>"]) >= 6
