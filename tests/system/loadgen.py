@@ -24,6 +24,7 @@ import asyncio
 import random
 import time
 from collections import defaultdict
+from concurrent.futures import ThreadPoolExecutor
 from contextlib import closing
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -252,7 +253,10 @@ def run_load(
             async def run_all():
                 await asyncio.wait_for(asyncio.gather(*jobs), timeout=duration + 120)
 
-            asyncio.run(run_all())
+            # On a thread of its own: the caller may be running an event loop
+            # already (a pytest session with Playwright's sync API is).
+            with ThreadPoolExecutor(max_workers=1) as pool:
+                pool.submit(asyncio.run, run_all()).result()
             elapsed = time.perf_counter() - origin
         finally:
             server.stop()
