@@ -267,7 +267,9 @@ def test_torchrun_trains_on_two_processes_and_only_rank_zero_writes(tmp_path):
         out = {str(tmp_path / "out")!r}
         results = cross_validate(tiny_samples(6), TrainConfig(**(TINY | {{"batch_size": 4}}), epochs=2), out_dir=out,
                                  folds=[Fold("x", [0, 1, 2, 3], [4, 5])])
-        print(json.dumps({{"rank": rank, "world": int(os.environ["WORLD_SIZE"]), "max_f": results[0].metrics.get("max_f")}}))
+        # A file per rank: the two processes' stdout can interleave.
+        with open(os.path.join({str(tmp_path)!r}, f"rank{{rank}}.json"), "w") as f:
+            json.dump({{"rank": rank, "world": int(os.environ["WORLD_SIZE"]), "max_f": results[0].metrics.get("max_f")}}, f)
     """))
     env = dict(os.environ, OMP_NUM_THREADS="1")
     run = subprocess.run(
@@ -275,7 +277,7 @@ def test_torchrun_trains_on_two_processes_and_only_rank_zero_writes(tmp_path):
         cwd=tmp_path, env=env, capture_output=True, text=True, timeout=300, check=False,
     )
     assert run.returncode == 0, run.stderr[-3000:]
-    lines = [json.loads(line) for line in run.stdout.splitlines() if line.startswith("{")]
+    lines = [json.loads(path.read_text()) for path in sorted(tmp_path.glob("rank*.json"))]
     assert sorted((line["rank"], line["world"]) for line in lines) == [(0, 2), (1, 2)]
     assert [line["max_f"] is not None for line in sorted(lines, key=lambda x: x["rank"])] == [True, False]
     state = load_checkpoint(tmp_path / "out" / "x.pt")
