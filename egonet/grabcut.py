@@ -66,6 +66,8 @@ _BOX_ITERATIONS = 5  # graph-cut iterations for a new box (as plain GC_INIT_WITH
 _STROKE_ITERATIONS = 1  # re-estimation + cut per stroke
 _CONVERGED = 0.005  # stop iterating when a cut changes at most this fraction of undecided pixels
 _SAMPLES = 4000  # pixels per class for the initial k-means
+_SPARSE = 0.25  # a box whose first cut keeps less than this fraction of it is cut again (``_rescue``)
+_OUTSIDE_SAMPLES = 100_000  # most frame pixels read for the background model of that cut
 _GF_RADIUS = 4  # guided-filter window radius, low-resolution pixels
 _GF_EPS = 2e-4  # guided-filter regulariser, colours in [0, 1]
 _BAND = 2  # refined band: low-resolution pixels this close to the boundary
@@ -637,9 +639,12 @@ class GrabCutSession:
         pixels = guide.image.reshape(-1, 3)
         flat = gc.ravel()
         rng = np.random.default_rng(0)
-        models = np.concatenate([_fit_model(pixels[flat == cv2.GC_BGD], rng),
-                                 _fit_model(pixels[flat == cv2.GC_PR_FGD], rng)])
-        low, models = _cut(guide.image, gc, models, _BOX_ITERATIONS)
+        initial = np.concatenate([_fit_model(pixels[flat == cv2.GC_BGD], rng),
+                                  _fit_model(pixels[flat == cv2.GC_PR_FGD], rng)])
+        start = gc.copy()
+        low, models = _cut(guide.image, gc, initial, _BOX_ITERATIONS)
+        if low[rows, cols].mean() < _SPARSE:
+            low, models = self._rescue(box, guide, start, initial, low, models)
         snap = _Snapshot(box=box, strokes=(), models=models, low=low)
         self._commit(guide, snap, self._full_mask(guide, snap))
         return self.mask
@@ -864,6 +869,50 @@ class GrabCutSession:
         return session
 
     # --------------------------------------------------------------- helpers
+
+    def _rescue(self, box: tuple[int, int, int, int], guide: _Guide, start: np.ndarray, initial: np.ndarray,
+                low: np.ndarray, models: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """Cut a box whose first cut kept little of it again; the cut that keeps most wins.
+
+        That usually happens when the box cuts through an object that goes on
+        into the margin: the margin's colours, the background model, then
+        include the object's. Plain grabCut takes its background from the whole
+        frame outside the box, where that continuation is a small part. So:
+        first one cut with such a background model held fixed (and the box's
+        first foreground model); if that too keeps little, plain grabCut on the
+        whole frame at the work size, brought onto the ROI's grid.
+        """
+        geom = guide.geom
+        rows, cols = geom.box_low()
+        h, w = self.shape
+        rng = np.random.default_rng(0)
+        step = max(1, round(1 / min(geom.sx, geom.sy)), math.ceil(math.sqrt(h * w / _OUTSIDE_SAMPLES)))
+        outside = np.ones((h, w), bool)
+        outside[box[1] : box[3], box[0] : box[2]] = False
+        bgd = _fit_model(self._image[::step, ::step][outside[::step, ::step]], rng)
+        fgd = initial[1:2].copy()
+        gc = start.copy()
+        cv2.grabCut(guide.image, gc, None, bgd, fgd, 1, cv2.GC_EVAL_FREEZE_MODEL)
+        candidates = [(low, models), ((gc & 1).astype(bool), np.concatenate([bgd, fgd]))]
+        if candidates[1][0][rows, cols].mean() < _SPARSE:
+            scale = min(1.0, self._work_size / max(h, w))
+            whole = _Geometry(box, (0, 0, w, h), max(1, round(w * scale)), max(1, round(h * scale)))
+            image = cv2.resize(self._image, (whole.low_w, whole.low_h), interpolation=cv2.INTER_AREA)
+            r, c = whole.box_low()
+            gc = np.full((whole.low_h, whole.low_w), cv2.GC_BGD, np.uint8)
+            gc[r, c] = cv2.GC_PR_FGD
+            flat = gc.ravel()
+            pixels = image.reshape(-1, 3)
+            if (flat == cv2.GC_BGD).any():  # else the box covers the whole reduced frame
+                first = np.concatenate([_fit_model(pixels[flat == cv2.GC_BGD], rng),
+                                        _fit_model(pixels[flat == cv2.GC_PR_FGD], rng)])
+                cut, whole_models = _cut(image, gc, first, _BOX_ITERATIONS)
+                full = cv2.resize(cut.view(np.uint8), (w, h), interpolation=cv2.INTER_NEAREST)
+                rx0, ry0, rx1, ry1 = geom.roi
+                share = cv2.resize(full[ry0:ry1, rx0:rx1] * np.uint8(255), (geom.low_w, geom.low_h),
+                                   interpolation=cv2.INTER_AREA)
+                candidates.append((share >= 128, whole_models))
+        return max(candidates, key=lambda c: np.count_nonzero(c[0]))
 
     def _guide_for(self, box: tuple[int, int, int, int]) -> _Guide:
         """The low-resolution guide of ``box``'s ROI (cached for the current one)."""

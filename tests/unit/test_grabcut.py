@@ -9,6 +9,7 @@ import numpy as np
 import pytest
 
 import egonet.grabcut as grabcut
+from egonet import synth
 from egonet.grabcut import GrabCutSession, stroke_footprint
 
 
@@ -124,6 +125,22 @@ def test_box_recovers_object_640x480():
     assert _iou(s.box(*_box_of(truth, 25)), truth) > 0.95
     # The ROI was scaled down: the graph cut ran at reduced resolution.
     assert max(s._guide.geom.low_w, s._guide.geom.low_h) < 480
+
+
+def test_box_through_an_object_keeps_its_part_in_the_box():
+    # A demo frame where a box over the left part of a frying pan once came
+    # back empty: the pan goes on into the ROI's margin, so the margin's
+    # colours include the pan's (see GrabCutSession._rescue).
+    frame = list(synth.render_activity("cooking", 3, seed=0, width=320, height=240))[2]
+    x0, y0, x1, y1 = box = (77, 82, 159, 147)
+    part = np.zeros_like(frame.mask)
+    part[y0:y1, x0:x1] = frame.mask[y0:y1, x0:x1]
+    assert part.sum() > 0.3 * (x1 - x0) * (y1 - y0)
+    session = GrabCutSession(frame.rgb)
+    assert _iou(session.box(*box), part) > 0.9
+    resumed = GrabCutSession.from_state(frame.rgb, session.state())
+    stroke = [(120, 100), (130, 105)]
+    np.testing.assert_array_equal(resumed.stroke(stroke, "bg", 3), session.stroke(stroke, "bg", 3))
 
 
 def test_box_is_deterministic(scene):
