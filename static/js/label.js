@@ -400,6 +400,9 @@ function runGrabcut(kind, params) {
       inst.engine = mask;
       if (kind === "box") lostEngines.delete(key);
       commit({ kind, key, params });
+      if (kind === "box" && !mask.includes(1)) {
+        showMessage("GrabCut found no object in this box: draw it around the whole object, or mark the object with the Object brush (F).", "info");
+      }
     } finally {
       setBusy(-1);
       renderInstances(); // also when it failed: a new object may have been made for it

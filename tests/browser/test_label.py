@@ -53,6 +53,20 @@ def area(page) -> int:
     return page.evaluate("window.labelPage.instances()[0].area")
 
 
+def test_a_box_with_no_object_in_it_says_so(live_app, live_server, page):
+    frame_id, _ = object_frames(live_app)
+    sign_in(page, live_app, live_server, username="ann", role="annotator")
+    open_frame(page, live_server, frame_id)
+    drag(page, [(5, 180), (95, 235)])  # plain background under the object
+    page.wait_for_function("window.labelPage.instances().length === 1")
+    page.wait_for_selector("#busy", state="hidden")
+    assert area(page) == 0
+    message = page.locator("#message")
+    message.wait_for(state="visible")
+    assert "found no object in this box" in message.inner_text()
+    screenshot(page, "label-empty-box")
+
+
 def test_box_and_stroke_are_saved_and_come_back_after_a_reload(live_app, live_server, page):
     frame_id, _ = object_frames(live_app)
     sign_in(page, live_app, live_server, username="ann", role="annotator")
