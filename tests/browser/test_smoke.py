@@ -14,6 +14,8 @@ def test_grid_and_viewer_show_real_images(live_app, live_server, page):
     with live_app.app_context():
         create_demo(frames_per_activity=3, seed=1, width=160, height=120)
 
+    failed = []
+    page.on("response", lambda r: failed.append(f"{r.status} {r.url}") if r.status >= 400 else None)
     page.goto(live_server + "/")
     assert "/login" in page.url
     screenshot(page, "smoke-login")
@@ -42,3 +44,4 @@ def test_grid_and_viewer_show_real_images(live_app, live_server, page):
     page.wait_for_function(f"location.href !== {first_url!r}")
     page.wait_for_load_state("networkidle")
     assert page.locator("#view-rgb").evaluate(LOADED)
+    assert failed == [], "requests of these pages that failed"
