@@ -303,6 +303,14 @@ def _fit_model(pixels: np.ndarray, rng: np.random.Generator) -> np.ndarray:
     return np.concatenate([weights, means.ravel(), covs.ravel()])[None, :]
 
 
+def _first_models(image: np.ndarray, gc: np.ndarray, rng: np.random.Generator) -> np.ndarray:
+    """``(2, 65)`` background and foreground models of a box's first cut, from
+    its ``GC_BGD`` and ``GC_PR_FGD`` pixels."""
+    pixels = image.reshape(-1, 3)
+    flat = gc.ravel()
+    return np.concatenate([_fit_model(pixels[flat == cv2.GC_BGD], rng), _fit_model(pixels[flat == cv2.GC_PR_FGD], rng)])
+
+
 # --------------------------------------------------------------------------
 # Full-resolution refinement (fast guided filter, band only)
 
@@ -636,11 +644,7 @@ class GrabCutSession:
             raise ValueError("box: leaves no background in the frame around it; draw a tighter box")
         # Initial colour models from k-means on a fixed-seed sample of each side
         # (plain grabCut runs k-means on every pixel, which is most of its cost).
-        pixels = guide.image.reshape(-1, 3)
-        flat = gc.ravel()
-        rng = np.random.default_rng(0)
-        initial = np.concatenate([_fit_model(pixels[flat == cv2.GC_BGD], rng),
-                                  _fit_model(pixels[flat == cv2.GC_PR_FGD], rng)])
+        initial = _first_models(guide.image, gc, np.random.default_rng(0))
         start = gc.copy()
         low, models = _cut(guide.image, gc, initial, _BOX_ITERATIONS)
         if low[rows, cols].mean() < _SPARSE:
@@ -901,12 +905,8 @@ class GrabCutSession:
             r, c = whole.box_low()
             gc = np.full((whole.low_h, whole.low_w), cv2.GC_BGD, np.uint8)
             gc[r, c] = cv2.GC_PR_FGD
-            flat = gc.ravel()
-            pixels = image.reshape(-1, 3)
-            if (flat == cv2.GC_BGD).any():  # else the box covers the whole reduced frame
-                first = np.concatenate([_fit_model(pixels[flat == cv2.GC_BGD], rng),
-                                        _fit_model(pixels[flat == cv2.GC_PR_FGD], rng)])
-                cut, whole_models = _cut(image, gc, first, _BOX_ITERATIONS)
+            if (gc == cv2.GC_BGD).any():  # else the box covers the whole reduced frame
+                cut, whole_models = _cut(image, gc, _first_models(image, gc, rng), _BOX_ITERATIONS)
                 full = cv2.resize(cut.view(np.uint8), (w, h), interpolation=cv2.INTER_NEAREST)
                 rx0, ry0, rx1, ry1 = geom.roi
                 share = cv2.resize(full[ry0:ry1, rx0:rx1] * np.uint8(255), (geom.low_w, geom.low_h),
