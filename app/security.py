@@ -82,13 +82,14 @@ def register(app: Flask) -> None:
 
 
 def require_production_safety(app: Flask) -> None:
-    """Refuse to run in production with the development secret key."""
-    from app import DEV_SECRET_KEY
+    """In production: refuse a short secret key, send cookies over HTTPS only."""
+    from app import MIN_SECRET_KEY_LENGTH
 
     if app.config.get("PRODUCTION"):
-        if not app.config.get("SECRET_KEY") or app.config["SECRET_KEY"] == DEV_SECRET_KEY:
+        if len(app.config.get("SECRET_KEY") or "") < MIN_SECRET_KEY_LENGTH:
             raise RuntimeError(
-                "PRODUCTION is set but SECRET_KEY is the development key: set FLASK_SECRET_KEY to a long random value"
+                f"PRODUCTION is set but SECRET_KEY is shorter than {MIN_SECRET_KEY_LENGTH} characters: "
+                "set FLASK_SECRET_KEY to a long random value, or leave it unset to use instance/secret_key"
             )
         app.config["SESSION_COOKIE_SECURE"] = True
         app.config["REMEMBER_COOKIE_SECURE"] = True

@@ -64,7 +64,7 @@ def make_app(database_url: str, tmp_path, **overrides):
         "SERVER_NAME": None,
     }
     config.update(overrides)
-    app = create_app(config)
+    app = create_app(config, instance_path=str(tmp_path / "instance"))
     app.test_client_class = CSRFClient
     return app
 

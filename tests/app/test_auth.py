@@ -1,6 +1,6 @@
 import pytest
 
-from app import DEV_SECRET_KEY, create_app
+from app import create_app
 from tests.app.conftest import PASSWORD
 
 
@@ -50,10 +50,11 @@ def test_session_cookie_flags(client, make_user):
     assert "HttpOnly" in cookie and "SameSite=Lax" in cookie
 
 
-def test_production_refuses_the_development_key(tmp_path):
+def test_production_refuses_a_short_key(tmp_path):
     with pytest.raises(RuntimeError, match="SECRET_KEY"):
-        create_app({"PRODUCTION": True, "SECRET_KEY": DEV_SECRET_KEY})
-    app = create_app({"PRODUCTION": True, "SECRET_KEY": "x" * 40, "SQLALCHEMY_DATABASE_URI": "sqlite://"})
+        create_app({"PRODUCTION": True, "SECRET_KEY": "dev-only-change-me"}, instance_path=str(tmp_path))
+    app = create_app({"PRODUCTION": True, "SECRET_KEY": "x" * 40, "SQLALCHEMY_DATABASE_URI": "sqlite://"},
+                     instance_path=str(tmp_path))
     assert app.config["SESSION_COOKIE_SECURE"] is True
 
 
