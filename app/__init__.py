@@ -8,19 +8,39 @@ or migrates tables: ``flask db upgrade`` does that.
 
 import os
 import secrets
+from datetime import timedelta
 from pathlib import Path
 
 from flask import Flask
 from werkzeug.routing import IntegerConverter
 
-# Path ids are at most this (SQL BIGINT): larger ones match no route (404).
-MAX_ID = 2**63 - 1
+# Ids are at most this (SQL INTEGER, the id columns' type; PostgreSQL refuses
+# to compare them with anything larger): larger path ids match no route (404),
+# larger ids in bodies and queries are a 400 (app.validation).
+MAX_ID = 2**31 - 1
 SECRET_KEY_FILE = "secret_key"
 MIN_SECRET_KEY_LENGTH = 32
 
 
+def digits_up_to(limit: int) -> str:
+    """A regex for the decimal numbers from 0 to ``limit``: any with fewer
+    digits, or as many with a smaller digit after a common start."""
+    digits = str(limit)
+    options = [rf"\d{{1,{len(digits) - 1}}}"] if len(digits) > 1 else []
+    for i, d in enumerate(digits):
+        if d != "0":
+            options.append(rf"{digits[:i]}[0-{int(d) - 1}]\d{{{len(digits) - 1 - i}}}")
+    return "(?:" + "|".join(options + [digits]) + ")"
+
+
 class IdConverter(IntegerConverter):
-    """``<int:...>`` in URLs: a non-negative integer that fits a 64-bit column."""
+    """``<int:...>`` in URLs: a non-negative integer that fits an id column.
+
+    Its regex matches no larger number, so such a URL matches no route (404);
+    a check after matching would answer 405 where another method shares the path.
+    """
+
+    regex = digits_up_to(MAX_ID)
 
     def __init__(self, map, *args, **kwargs):
         kwargs.setdefault("max", MAX_ID)
@@ -80,7 +100,24 @@ def create_app(test_config: dict | None = None, *, instance_path: str | None = N
         # The token is bound to the session (which ends at log-out), not to
         # the clock: a page left open for hours can still save.
         WTF_CSRF_TIME_LIMIT=None,
+        # "Keep me signed in": two weeks, not Flask-Login's year; the cookie
+        # names the user's session token, so signing out ends it too.
+        REMEMBER_COOKIE_DURATION=timedelta(days=14),
+        REMEMBER_COOKIE_HTTPONLY=True,
+        REMEMBER_COOKIE_SAMESITE="Lax",
         FRAMES_PER_PAGE=120,
+        # What one request may cost: imported frames (and so GrabCut's) are at
+        # most MAX_FRAME_SIDE pixels a side; a stroke has at most so many
+        # points and so wide a brush (the labelling page's largest are 4000
+        # and 200), and one object's strokes may sweep at most so many pixels
+        # (labelling.stroke_pixels). GrabCut sessions and frames kept in a
+        # worker's memory are counted in bytes.
+        MAX_FRAME_SIDE=4096,
+        GRABCUT_MAX_STROKE_POINTS=4000,
+        GRABCUT_MAX_RADIUS=256,
+        GRABCUT_MAX_STROKE_PIXELS=250_000_000,
+        GRABCUT_CACHE_BYTES=256 * 1024**2,
+        GRABCUT_IMAGE_CACHE_BYTES=64 * 1024**2,
         PRODUCTION=False,
     )
     if test_config is None:
@@ -102,7 +139,7 @@ def create_app(test_config: dict | None = None, *, instance_path: str | None = N
     login_manager.login_view = "auth.login"
 
     from app import errors, security, throttle
-    from app.blueprints import api, auth, frames, label, navigation, scores, studies, study, training
+    from app.blueprints import api, auth, frames, label, navigation, scores, studies, study, training, users
     from app.cli import bp as cli_bp
 
     security.require_production_safety(app)
@@ -110,15 +147,16 @@ def create_app(test_config: dict | None = None, *, instance_path: str | None = N
     errors.register(app)
     security.register(app)
     app.register_blueprint(auth.bp)
-    for module in (frames, api, label, studies, study, training, scores):
+    for module in (frames, api, label, studies, study, training, scores, users):
         app.register_blueprint(module.bp)
     app.context_processor(navigation)
     app.register_blueprint(cli_bp)
 
     @login_manager.user_loader
     def load_user(user_id: str):
-        from app.models import User
+        # "<id>:<session token>" (User.get_id): only the current token signs in.
+        from app.services.users import user_for_session
 
-        return db.session.get(User, int(user_id)) if user_id.isdigit() else None
+        return user_for_session(user_id)
 
     return app

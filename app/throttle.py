@@ -1,20 +1,31 @@
 """Throttling of guesses: passwords, participant codes, single-use links.
 
 Flask-Limiter counts failed attempts per key (for log-in: the account and the
-client's address) in a fixed window. Only failures count (``deduct_when``),
-so people who type their password right are never slowed down; once
-``RATELIMIT_FAILURES`` failures are reached within the window, every attempt
-for that key is answered 429 with ``Retry-After`` until the window ends.
+client's address) in a fixed window that starts at the first failure. Only
+failures count (``deduct_when=failed``), so people who type their password
+right are never slowed down, and a success forgets the failures before it
+(``forgive``): the limit is on failures in a row. Once ``RATELIMIT_FAILURES``
+failures are reached within ``RATELIMIT_WINDOW``, every attempt for that key
+is answered 429 with ``Retry-After`` until the window ends, a correct
+password included.
 
 Storage: in memory (per server process) by default; Redis when
 ``RATELIMIT_STORAGE_URI`` is a ``redis://`` URL, or, when it is unset and
 ``EGONET_QUEUE_URL`` is one, that Redis (so several gunicorn processes and
 machines share the counts).
+
+The limiter is one object for the process (views are decorated with it at
+import). Each ``create_app`` gives it that app's switch, limits and a fresh
+store; a few Flask-Limiter settings (``RATELIMIT_KEY_PREFIX``,
+``RATELIMIT_STRATEGY``) keep the first app's value, which only matters to a
+process that makes several apps (the tests).
 """
 
+import math
 import os
+import time
 
-from flask import Flask, Response, request
+from flask import Flask, Response, current_app, request
 from flask_limiter import Limiter
 from flask_limiter.util import get_remote_address
 
@@ -30,6 +41,10 @@ def storage_uri(app: Flask) -> str:
 
 
 def init_app(app: Flask) -> None:
+    # Explicit, because Flask-Limiter keeps the last app's value on its one
+    # object: an app created with the limiter off must not switch it off for
+    # the next one.
+    app.config.setdefault("RATELIMIT_ENABLED", True)
     app.config.setdefault("RATELIMIT_FAILURES", 20)
     app.config.setdefault("RATELIMIT_WINDOW", "15 minutes")
     app.config["RATELIMIT_STORAGE_URI"] = storage_uri(app)
@@ -39,8 +54,6 @@ def init_app(app: Flask) -> None:
 
 def failures_limit() -> str:
     """The limit string from the config, e.g. ``20 per 15 minutes``."""
-    from flask import current_app
-
     return f"{current_app.config['RATELIMIT_FAILURES']} per {current_app.config['RATELIMIT_WINDOW']}"
 
 
@@ -49,5 +62,24 @@ def failed(response: Response) -> bool:
     return response.status_code in (401, 404)
 
 
+def forgive() -> None:
+    """Forget the failures counted so far for this request's keys: a success ends a run of failures.
+
+    Call it in a view once the attempt succeeded (no-op when the limiter is off).
+    """
+    for limit in limiter.current_limits:
+        limiter.limiter.clear(limit.limit, *limit.request_args)
+
+
 def address() -> str:
     return get_remote_address() or request.remote_addr or "unknown"
+
+
+def too_many_attempts() -> str:
+    """The message of the 429: when to try again, in words (``Retry-After`` has the seconds)."""
+    limit = limiter.current_limit
+    wait = max(1, math.ceil(limit.reset_at - time.time())) if limit is not None else None
+    if wait is None:
+        return "Too many failed attempts. Wait a while, then try again."
+    when = f"{wait} seconds" if wait < 90 else f"{round(wait / 60)} minutes"
+    return f"Too many failed attempts. Try again in {when}."

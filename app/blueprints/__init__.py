@@ -2,6 +2,7 @@
 
 from flask import current_app, request, url_for
 
+from app.models import Role
 from app.security import access_of, current_role
 
 # (label, endpoint): shown when the endpoint exists and the user's role may use it.
@@ -11,18 +12,25 @@ NAVIGATION = [
     ("Studies", "studies.index"),
     ("Training", "training.index"),
     ("Scores", "scores.index"),
+    ("Users", "users.index"),
 ]
+# The signed-in user's own page (their password), linked from their name in the top bar.
+ACCOUNT = "users.account"
+
+
+def _may_use(endpoint: str, role: Role | None) -> bool:
+    view = current_app.view_functions.get(endpoint)
+    if view is None or role is None:
+        return False
+    allowed = access_of(view)
+    return allowed is None or role in allowed
 
 
 def navigation() -> dict:
     role = current_role()
     items = []
     for label, endpoint in NAVIGATION:
-        view = current_app.view_functions.get(endpoint)
-        if view is None or role is None:
-            continue
-        allowed = access_of(view)
-        if allowed is None or role in allowed:
-            active = (request.endpoint or "").split(".")[0] == endpoint.split(".")[0]
+        if _may_use(endpoint, role):
+            active = (request.endpoint or "").split(".")[0] == endpoint.split(".")[0] and request.endpoint != ACCOUNT
             items.append({"label": label, "url": url_for(endpoint), "active": active})
-    return {"navigation": items}
+    return {"navigation": items, "account_url": url_for(ACCOUNT) if _may_use(ACCOUNT, role) else None}

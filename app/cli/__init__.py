@@ -48,4 +48,4 @@ def progress_bar(label: str, *, file=None):
 
 
 # Register the commands of every area on the group.
-from app.cli import data, labelling, scoring, studies, training  # noqa: E402, F401
+from app.cli import data, labelling, scoring, studies, training, users  # noqa: E402, F401

@@ -77,34 +77,41 @@ def demo_command(frames_per_activity, seed, width, height):
 
 @bp.cli.command("create-user")
 @click.argument("name")
-@click.option("--role", type=click.Choice([r.value for r in Role]), required=True)
+@click.option("--role", type=click.Choice([r.value for r in Role]), help="Role of the new user (required unless NAME exists).")
 @click.option("--password", help="Password (prompted when omitted and a terminal is attached; generated otherwise).")
 @click.option("--if-missing", is_flag=True, help="Do nothing (and succeed) when the user already exists.")
-def create_user_command(name, role, password, if_missing):
-    """Create a user NAME with a role."""
-    import sys
+@click.option("--reset-password", is_flag=True, help="When the user already exists, give them a new password (ending their sessions).")
+def create_user_command(name, role, password, if_missing, reset_password):
+    """Create a user NAME with a role (or, with --reset-password, renew an existing user's password).
 
-    from app.services.users import create_user, find_user
+    A generated password is printed once. Passwords need at least 10
+    characters and must not be easy to guess.
+    """
+    from app.cli.users import ask_password
+    from app.services.users import create_user, find_user, set_password
 
-    if if_missing and find_user(name) is not None:
+    if if_missing and reset_password:
+        raise click.UsageError("--if-missing keeps an existing user, --reset-password changes it: give one of them")
+    existing = find_user(name)
+    if existing is not None and if_missing:
         click.echo(f"user {name!r} exists already; keeping it")
         return
-
-    if password is None and role != Role.PARTICIPANT and sys.stdin.isatty():
-        password = click.prompt("Password (empty to generate one)", default="", hide_input=True, show_default=False)
-        if password:
-            click.prompt("Repeat", hide_input=True, confirmation_prompt=False, value_proc=lambda v: _same(v, password))
+    if existing is not None and reset_password:
+        if role is not None and role != existing.role.value:
+            raise click.ClickException(f"{existing.username!r} is {existing.role.value}, not {role}; change roles with set-role")
+        with one_line_errors():
+            generated = set_password(existing, password or ask_password(existing.role))
+        click.echo(f"new password for {existing.role.value} {existing.username!r}; their sessions have ended")
+        if generated:
+            click.echo(f"password: {generated}")
+        return
+    if role is None:
+        raise click.UsageError("Missing option '--role' (NAME is a new user).")
     with one_line_errors():
-        user, generated = create_user(name, role, password or None)
+        user, generated = create_user(name, role, password or ask_password(Role(role)))
     click.echo(f"created {user.role.value} {user.username!r}")
     if generated:
         click.echo(f"password: {generated}")
-
-
-def _same(value: str, password: str) -> str:
-    if value != password:
-        raise click.UsageError("the passwords do not match")
-    return value
 
 
 @bp.cli.command("media-check")

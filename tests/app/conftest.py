@@ -26,9 +26,12 @@ BACKENDS = ["sqlite"] + (["postgresql"] if POSTGRES_URL else [])
 class CSRFClient(FlaskClient):
     """A test client that behaves like the app's pages: it fetches the CSRF
     token from a page's meta tag once, and sends it as a header with every
-    state-changing request (CSRF stays on in tests)."""
+    state-changing request (CSRF stays on in tests). Signing in and out
+    start a new session with a new token, so after a POST to those pages it
+    fetches the token again, as the next page would carry it."""
 
     csrf_token: str | None = None
+    NEW_SESSION_PATHS = ("/login", "/logout", "/account")
 
     def fetch_csrf_token(self) -> str:
         page = self.get("/login")
@@ -41,15 +44,26 @@ class CSRFClient(FlaskClient):
             headers = dict(kwargs.pop("headers", None) or {})
             headers.setdefault("X-CSRFToken", self.csrf_token or self.fetch_csrf_token())
             kwargs["headers"] = headers
-        return super().open(*args, **kwargs)
+        response = super().open(*args, **kwargs)
+        if method == "POST" and args and isinstance(args[0], str) and args[0].startswith(self.NEW_SESSION_PATHS):
+            self.csrf_token = None
+        return response
 
     def login(self, username: str, password: str):
         return self.post("/login", data={"username": username, "password": password})
 
     def login_as(self, user) -> None:
-        """Sign in without a password (participants have none): set Flask-Login's session key."""
+        """Sign in without a password (participants have none): set Flask-Login's session key.
+
+        It holds ``user.get_id()``, id and session token; the token is read
+        from the database, so this works again after a log-out replaced it.
+        """
+        from app.models import User
+
+        with self.application.app_context():
+            user_id = db.session.get(User, user.id).get_id()
         with self.session_transaction() as session:
-            session["_user_id"] = str(user.id)
+            session["_user_id"] = user_id
             session["_fresh"] = True
 
 
@@ -108,6 +122,22 @@ def app(database_url, tmp_path):
             for table in reversed(db.metadata.sorted_tables):
                 conn.execute(table.delete())
         db.engine.dispose()
+
+
+@pytest.fixture
+def app_with(database_url, tmp_path):
+    """Make another app on the test's database with settings of its own, e.g.
+    ``app_with(RATELIMIT_FAILURES=3)``; its connections close after the test."""
+    made = []
+
+    def make(**overrides):
+        made.append(make_app(database_url, tmp_path, **overrides))
+        return made[-1]
+
+    yield make
+    for other in made:
+        with other.app_context():
+            db.engine.dispose()
 
 
 @pytest.fixture

@@ -56,7 +56,7 @@ def test_create_user_errors(ctx, runner):
     result = runner.invoke(args=["egonet", "create-user", "bob", "--role", "wizard"])
     assert result.exit_code == 2 and "--role" in result.output
     result = runner.invoke(args=["egonet", "create-user", "bob", "--role", "admin", "--password", "short"])
-    assert result.exit_code == 1 and "at least 8" in result.output
+    assert result.exit_code == 1 and "at least 10" in result.output
 
 
 def test_demo_command_creates_reviewed_ground_truth(ctx, runner):

@@ -12,7 +12,6 @@ import stat
 from flask.sessions import SecureCookieSessionInterface
 
 from app import SECRET_KEY_FILE, create_app
-from tests.app.conftest import make_app
 
 
 def forged_session_cookie(app, secret_key: str, session: dict) -> str:
@@ -42,8 +41,8 @@ def test_an_explicit_key_wins(tmp_path, monkeypatch):
     assert not (tmp_path / SECRET_KEY_FILE).exists()
 
 
-def test_a_cookie_forged_with_the_old_constant_is_refused(database_url, tmp_path, make_user):
-    app = make_app(database_url, tmp_path, SECRET_KEY=None)
+def test_a_cookie_forged_with_the_old_constant_is_refused(app_with, make_user):
+    app = app_with(SECRET_KEY=None)
     admin = make_user("admin", "admin")
     client = app.test_client()
     for key in ("dev-only-change-me", "test-secret"):

@@ -1,15 +1,23 @@
-"""Dataset browsing, log-in and the read-only API."""
+"""Dataset browsing, log-in, accounts and the read-only API."""
 
 from app.extensions import db
 from app.models import Activity, Frame
 from app.services.importing import import_path
-from tests.app.access import ALL, STAFF
+from app.services.users import create_user
+from tests.app.access import ADMIN, ALL, STAFF
 from tests.app.factories import image_folder
 
 RULES = {
     "static": (None, 200),
     "auth.login": (None, {"GET": 200, "POST": 400}),
     "auth.logout": (ALL, 302),
+    "users.account": (STAFF, {"GET": 200, "POST": 400}),
+    "users.index": (ADMIN, 200),
+    "users.create": (ADMIN, 400),
+    "users.set_role": (ADMIN, 400),
+    "users.deactivate": (ADMIN, 302),
+    "users.activate": (ADMIN, 302),
+    "users.reset_password": (ADMIN, 200),
     "frames.index": (STAFF, 200),
     "frames.activity": (STAFF, 200),
     "frames.frame": (STAFF, 200),
@@ -19,6 +27,7 @@ RULES = {
     "api.activities": (STAFF, 200),
     "api.activity_frames": (STAFF, 200),
     "api.frame": (STAFF, 200),
+    "api.csrf_token": (None, 200),
 }
 
 
@@ -27,4 +36,6 @@ def url_values(app, tmp_path) -> dict:
         import_path(image_folder(tmp_path / "rec", n=2, depth=True), activity="cooking")
         frame = db.session.execute(db.select(Frame)).scalars().first()
         activity = db.session.execute(db.select(Activity)).scalar_one()
-        return {"frame_id": frame.id, "activity_id": activity.id, "name": frame.rgb_path, "filename": "css/app.css"}
+        account, _ = create_user("access-account", "annotator")
+        return {"frame_id": frame.id, "activity_id": activity.id, "name": frame.rgb_path, "filename": "css/app.css",
+                "user_id": account.id}
