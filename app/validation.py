@@ -5,6 +5,9 @@ the request's JSON and returns plain Python values, or raises a 400 ApiError
 whose ``fields`` name every bad field (``"clicks[2].x": "must be >= 0"``).
 Unknown fields are refused, so a misspelt option never does nothing.
 
+Integers fit a SQL INTEGER column unless a field says otherwise, so an id
+past ``app.MAX_ID`` is a 400, not a database error.
+
 Example::
 
     CLICK = Obj({"x": Float(min=0), "y": Float(min=0)})
@@ -18,6 +21,7 @@ from typing import Any
 
 from flask import request
 
+from app import MAX_ID
 from app.errors import ApiError
 
 MISSING = object()
@@ -39,8 +43,8 @@ class Field:
 
 @dataclass
 class Int(Field):
-    min: int | None = None
-    max: int | None = None
+    min: int | None = -MAX_ID - 1
+    max: int | None = MAX_ID
 
     def check(self, value):
         if isinstance(value, bool) or not isinstance(value, int):
@@ -60,7 +64,10 @@ class Float(Field):
     def check(self, value):
         if isinstance(value, bool) or not isinstance(value, int | float):
             raise Invalid("must be a number")
-        value = float(value)
+        try:
+            value = float(value)
+        except OverflowError:  # an integer past 1e308
+            raise Invalid("must be a finite number") from None
         if not math.isfinite(value):
             raise Invalid("must be a finite number")
         _check_range(value, self.min, self.max)
@@ -165,6 +172,24 @@ def validate(schema: dict[str, Field], data: Any) -> dict:
         first = next(iter(sorted(errors)))
         raise ApiError(400, f"invalid field {first}: {errors[first]}", fields=dict(sorted(errors.items())))
     return out
+
+
+def query_int(name: str, *, min: int | None = 1, max: int | None = MAX_ID) -> int | None:
+    """The query parameter ``name`` as an integer (an id, by default), or
+    None when it is absent or empty.
+
+    Raises:
+        ApiError: 400 naming ``name`` when it is not such an integer.
+    """
+    text = request.args.get(name, "")
+    if not text:
+        return None
+    try:
+        return Int(min=min, max=max).check(int(text))
+    except ValueError:
+        raise ApiError(400, f"{name}: must be an integer", fields={name: "must be an integer"}) from None
+    except Invalid as exc:
+        raise ApiError(400, f"{name}: {exc.reason}", fields={name: exc.reason}) from None
 
 
 def json_body(schema: dict[str, Field]) -> dict:

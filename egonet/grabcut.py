@@ -609,6 +609,26 @@ class GrabCutSession:
         """Whether ``undo`` has a previous state to restore."""
         return bool(self._history)
 
+    @property
+    def strokes(self) -> list[tuple[np.ndarray, str, float]]:
+        """The current object's strokes since its box, oldest first: ``(points (K, 2), label, radius)``."""
+        return [(s.points.copy(), "fg" if s.fg else "bg", s.radius) for s in self._now.strokes]
+
+    @property
+    def nbytes(self) -> int:
+        """Bytes held in the session's arrays: the frame's copy, the mask, the
+        ROI's guide, the undo levels and the cached stroke footprints."""
+        arrays = [self._image, self._mask]
+        if self._guide is not None:
+            g = self._guide
+            arrays += [g.image, g.colour, g.mean, g.inverse]
+            arrays += [hit[0] for hit in g._footprints.values() if hit is not None]
+        for snap in self._history + [self._now]:
+            arrays += [snap.models, snap.low, snap.mask_bits] + [s.points for s in snap.strokes]
+        arrays += [hit[0] for hit in self._footprints.values() if hit is not None]
+        unique = {id(a): a.nbytes for a in arrays if a is not None}  # undo levels share their strokes
+        return sum(unique.values())
+
     def box(self, x0: float, y0: float, x1: float, y1: float) -> np.ndarray:
         """Start a new object from a box and return its first mask.
 

@@ -13,7 +13,7 @@ reads them as PNG from their own URLs, and GrabCut answers with a PNG.
 
 import time
 
-from flask import Blueprint, Response, abort, flash, redirect, render_template, request, send_file, url_for
+from flask import Blueprint, Response, abort, current_app, flash, redirect, render_template, request, send_file, url_for
 from flask_login import current_user
 
 from app.errors import ApiError
@@ -23,7 +23,7 @@ from app.security import roles
 from app.services import exchange
 from app.services import frames as frames_service
 from app.services import labelling, media
-from app.validation import Bool, Float, Int, List, Obj, Str, json_body
+from app.validation import Bool, Float, Int, List, Obj, Str, json_body, query_int
 from egonet import io as egonet_io
 
 bp = Blueprint("label", __name__)
@@ -49,17 +49,21 @@ SAVE = {
 POINT = List(Float(), min_len=2, max_len=2)
 TARGET = {"frame_id": Int(min=1), "instance": Str(min_len=1, max_len=40)}
 BOX = {**TARGET, "box": List(Float(), min_len=4, max_len=4)}
-STROKE = {
-    **TARGET,
-    "points": List(POINT, max_len=labelling.MAX_STROKE_POINTS),
-    "label": Str(choices=["fg", "bg"]),
-    "radius": Float(),
-}
 REVIEW = {
     "version": Int(min=1),
     "decision": Str(choices=["accept", "reject"]),
     "comment": Str(max_len=5000, nullable=True, default=None),
 }
+
+
+def stroke_schema() -> dict:
+    """The stroke body, with as many points as GRABCUT_MAX_STROKE_POINTS allows."""
+    return {
+        **TARGET,
+        "points": List(POINT, max_len=current_app.config["GRABCUT_MAX_STROKE_POINTS"]),
+        "label": Str(choices=["fg", "bg"]),
+        "radius": Float(),
+    }
 
 
 def me():
@@ -138,8 +142,8 @@ def frame(frame_id: int):
 @roles(*LABELLERS)
 def next_unlabelled():
     """Go to the next frame the user should label (after ``after``, within ``activity``)."""
-    after = request.args.get("after", type=int)
-    activity = request.args.get("activity", type=int)
+    after = query_int("after")
+    activity = query_int("activity")
     after_frame = db.session.get(Frame, after) if after else None
     target = labelling.next_unlabelled(me(), after=after_frame, activity_id=activity)
     if target is None:
@@ -159,8 +163,8 @@ def review(annotation_id: int):
 @bp.get("/label/review/next")
 @roles(*REVIEWERS)
 def next_review():
-    after = request.args.get("after", type=int)
-    target = labelling.next_to_review(after=db.session.get(Annotation, after) if after else None)
+    after = query_int("after")
+    target = labelling.next_to_review(me(), after=db.session.get(Annotation, after) if after else None)
     if target is None:
         flash("The review queue is empty.", "info")
         return redirect(url_for("label.index"))
@@ -297,7 +301,7 @@ def instance_mask(annotation_id: int, position: int):
 @roles(*LABELLERS)
 def upload_instance_mask(annotation_id: int, position: int):
     """Replace an instance's mask with the PNG body (``?version=N`` required)."""
-    version = request.args.get("version", type=int)
+    version = query_int("version", min=0)
     if version is None:
         raise ApiError(400, "version: give the annotation's version as ?version=N", fields={"version": "is required"})
     if request.mimetype != "image/png":
@@ -359,7 +363,7 @@ def grabcut_box():
 def grabcut_stroke():
     """``{frame_id, instance, points: [[x, y], ...], label: fg|bg, radius}`` -> the updated mask (PNG)."""
     started = time.perf_counter()
-    data = json_body(STROKE)
+    data = json_body(stroke_schema())
     fr, key = _target(data)
     labelling.check_stroke(fr, data["points"], data["radius"])
     result = labelling.grabcut_stroke(fr, me(), key, points=data["points"], label=data["label"],
@@ -381,7 +385,7 @@ def grabcut_undo():
 @roles(*LABELLERS)
 def grabcut_mask():
     """``?frame_id=&instance=`` -> the session's current mask (PNG), 404 without a session."""
-    frame_id = request.args.get("frame_id", type=int)
+    frame_id = query_int("frame_id")
     if frame_id is None:
         raise ApiError(400, "frame_id: give ?frame_id=N", fields={"frame_id": "is required"})
     fr = labelling.get_frame(frame_id, field="frame_id")

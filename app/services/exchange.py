@@ -25,7 +25,6 @@ import json
 import os
 import shutil
 import tempfile
-import warnings
 import zipfile
 from collections.abc import Callable, Iterable
 from dataclasses import dataclass
@@ -40,7 +39,9 @@ from app.errors import ApiError
 from app.extensions import db
 from app.models import Activity, Annotation, Frame, Instance, InstanceKind, Role, Sequence, Status, User
 from app.services import media
-from app.services.labelling import decode_rle
+from app.services.importing import unpacked
+from app.services.labelling import Rle, coco_decode, decode_rle
+from app.validation import Invalid
 from egonet import io
 
 FORMATS = ("png", "coco", "both")
@@ -328,20 +329,15 @@ def import_annotations(
 
     Raises:
         ExchangeProblem: bad layout or content, naming the file.
-        egonet.io.MediaError: an unreadable mask file.
+        egonet.io.MediaError: an unreadable mask file, or a zip that
+            ``importing.unpacked`` refuses (naming the member).
     """
     path = Path(path)
     if not path.exists():
         raise ExchangeProblem(f"{path}: no such file or folder")
     if path.is_file() and path.suffix.lower() == ".zip":
-        with tempfile.TemporaryDirectory() as folder:
-            try:
-                with zipfile.ZipFile(path) as archive:
-                    _check_members(path, archive.namelist())
-                    archive.extractall(folder)
-            except zipfile.BadZipFile:
-                raise ExchangeProblem(f"{path}: not a readable zip file") from None
-            return import_annotations(Path(folder), author=author, status=status, replace=replace,
+        with unpacked(path) as folder:  # the frame import's checks: traversal, links, zip bombs
+            return import_annotations(folder, author=author, status=status, replace=replace,
                                       skip_missing=skip_missing, on_start=on_start, on_progress=on_progress)
     if path.is_file():
         items = _read_coco(path, author=author, status=status, skip_missing=skip_missing)
@@ -365,12 +361,6 @@ def import_annotations(
             if on_progress:
                 on_progress(1)
     return report
-
-
-def _check_members(path: Path, names: list[str]) -> None:
-    for name in names:
-        if name.startswith("/") or ".." in Path(name).parts:
-            raise ExchangeProblem(f"{path}: unsafe path {name!r} inside the zip")
 
 
 def _frames_by_name() -> dict[str, Frame]:
@@ -471,16 +461,15 @@ def _decode_segmentation(segmentation: object, frame: Frame, where: str) -> np.n
     if isinstance(segmentation, list):  # polygons
         try:
             rles = coco_mask.frPyObjects([list(map(float, p)) for p in segmentation], h, w)
-            with warnings.catch_warnings():
-                # pycocotools' decoder predates numpy 2's __array__(copy=...) and says so.
-                warnings.simplefilter("ignore", DeprecationWarning)
-                return coco_mask.decode(coco_mask.merge(rles)).astype(bool)
+            return coco_decode(coco_mask.merge(rles))
         except (TypeError, ValueError, IndexError) as exc:
             raise ExchangeProblem(f"{where}: unreadable polygon ({exc})") from None
     if not isinstance(segmentation, dict) or set(segmentation) != {"size", "counts"}:
         raise ExchangeProblem(f"{where}: segmentation must be RLE {{'size', 'counts'}} or polygons")
     try:
-        return decode_rle(segmentation, (h, w), field="segmentation")
+        return decode_rle(Rle().check(segmentation), (h, w), field="segmentation")
+    except Invalid as exc:
+        raise ExchangeProblem(f"{where}: segmentation: {exc.reason}") from None
     except ApiError as exc:
         raise ExchangeProblem(f"{where}: {exc.message}") from None
 

@@ -1,23 +1,27 @@
 """Importing frames: folders of images, videos, depth, DHG, intrinsics and masks.
 
 One import is one transaction. Every file is decoded and checked before its
-row is added; media are written atomically under their content hash; if
-anything fails, the transaction is rolled back and the media files this run
-created are removed, so nothing is half-imported. Re-importing the same
+row is added (frames are at most MAX_FRAME_SIDE pixels a side, read from the
+header before decoding); media are written atomically under their content
+hash; if anything fails, the transaction is rolled back and the media files
+this run created are removed, so nothing is half-imported. Re-importing the same
 files adds nothing (the RGB file's hash is unique within a sequence).
 """
 
 import contextlib
 import re
+import shutil
 import stat
 import tempfile
 import zipfile
+import zlib
 from collections.abc import Callable, Iterable, Iterator
 from dataclasses import dataclass, field
 from pathlib import Path, PurePosixPath
 
 import cv2
 import numpy as np
+from flask import current_app
 from sqlalchemy.exc import IntegrityError
 
 from app.extensions import db
@@ -223,9 +227,11 @@ def unpacked(archive: Path) -> Iterator[Path]:
     """Unpack a zip archive to a temporary folder, refusing anything unsafe.
 
     Refused: members with absolute paths or ``..`` (path traversal), links,
-    more than ZIP_MAX_MEMBERS members, more than ZIP_MAX_BYTES in all, or a
-    member that inflates more than ZIP_MAX_RATIO times (a zip bomb). The
-    folder is removed afterwards. A single top-level folder is entered.
+    more than ZIP_MAX_MEMBERS members, more than ZIP_MAX_BYTES in all, a
+    member that inflates more than ZIP_MAX_RATIO times (a zip bomb), or one
+    whose data does not match its header (zipfile reads no more than the
+    header's size, so the limits above hold). The folder is removed
+    afterwards. A single top-level folder is entered.
     """
     try:
         zf = zipfile.ZipFile(archive)
@@ -254,13 +260,11 @@ def unpacked(archive: Path) -> Iterator[Path]:
                 continue
             target = Path(tmp, *PurePosixPath(info.filename).parts)
             target.parent.mkdir(parents=True, exist_ok=True)
-            with zf.open(info) as src, open(target, "wb") as dst:
-                copied = 0
-                while chunk := src.read(1 << 20):
-                    copied += len(chunk)
-                    if copied > info.file_size:  # the header lied about the size
-                        raise io.MediaError(archive, f"{info.filename!r} is larger than its header says")
-                    dst.write(chunk)
+            try:
+                with zf.open(info) as src, open(target, "wb") as dst:
+                    shutil.copyfileobj(src, dst, 1 << 20)
+            except (zipfile.BadZipFile, zlib.error, EOFError) as exc:
+                raise io.MediaError(archive, f"{info.filename!r} does not match its header ({exc})") from None
         entries = [p for p in Path(tmp).iterdir()]
         yield entries[0] if len(entries) == 1 and entries[0].is_dir() else Path(tmp)
 
@@ -316,9 +320,11 @@ def _add_frame(seq: Sequence, item: FrameItem, known: set[str], written: list[Pa
     name = item.source_name
     if isinstance(item.rgb, np.ndarray):
         rgb = item.rgb
+        _check_side(rgb.shape[1], rgb.shape[0], item.origin)
         data, suffix = io.encode_png(rgb), ".png"
     else:
         data, suffix = item.rgb, item.rgb_suffix
+        _check_side(*io.image_size(data, path=item.origin), item.origin)
         rgb = io.decode_image(data, path=item.origin)
     digest = media.sha256(data)
     if digest in known:
@@ -384,6 +390,13 @@ def _system_user(name: str) -> User:
         except IntegrityError:  # created concurrently by another import
             user = db.session.execute(db.select(User).filter_by(username=name)).scalar_one()
     return user
+
+
+def _check_side(width: int, height: int, origin: str) -> None:
+    side = current_app.config["MAX_FRAME_SIDE"]
+    if max(width, height) > side:
+        raise io.MediaError(origin, f"image of {width}x{height} pixels is larger than the limit of {side} pixels "
+                                    "a side (MAX_FRAME_SIDE)")
 
 
 def _check_size(array: np.ndarray, rgb: np.ndarray, what: str) -> None:

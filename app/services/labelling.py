@@ -23,9 +23,12 @@ strokes never interleave: an operation holds a lock file for its session
 (threads and processes of one machine wait for each other), on PostgreSQL
 it also locks the row, and the row's revision token catches any writer the
 locks cannot see (the operation is then redone on the winner's state). A
-worker keeps recent sessions in memory under their revision, which spares
-decoding the frame and the state when the same worker sees the next
-operation.
+worker keeps recent sessions in memory under their revision, within a budget
+of bytes, which spares decoding the frame and the state when the same worker
+sees the next operation. What one operation may cost is bounded: frames up to
+MAX_FRAME_SIDE pixels a side, strokes of up to GRABCUT_MAX_STROKE_POINTS
+points and GRABCUT_MAX_RADIUS, and the pixels all of an object's strokes
+sweep (a restored session paints them again) up to GRABCUT_MAX_STROKE_PIXELS.
 """
 
 import contextlib
@@ -33,6 +36,7 @@ import fcntl
 import io
 import re
 import threading
+import warnings
 import zlib
 from collections import OrderedDict
 from collections.abc import Callable
@@ -40,6 +44,7 @@ from dataclasses import dataclass
 from pathlib import Path
 
 import numpy as np
+import pycocotools.mask as coco_mask
 from flask import current_app
 from sqlalchemy import and_, exists, func, or_, tuple_
 from sqlalchemy.exc import IntegrityError
@@ -57,7 +62,6 @@ from egonet.grabcut import GrabCutSession
 # The statuses an annotator may ask for; review decisions set the others.
 AUTHOR_STATUSES = (Status.IN_PROGRESS, Status.DONE)
 MAX_INSTANCES = 50
-MAX_STROKE_POINTS = 5000
 MAX_TIME_DELTA_S = 3600.0
 KEY_PATTERN = re.compile(r"[A-Za-z0-9_-]{1,40}")
 
@@ -71,8 +75,8 @@ class Rle(Field):
 
     ``counts`` is COCO's compressed string or a list of run lengths; runs go
     down the columns (column-major), starting with background. The check
-    only looks at the shape of the value: ``decode_rle`` decodes it against
-    the frame's size.
+    only looks at the shape of the value: ``decode_rle`` checks the counts
+    against the frame's size, before any of them is decoded.
     """
 
     def check(self, value):
@@ -81,51 +85,109 @@ class Rle(Field):
         size = value["size"]
         if not (isinstance(size, list) and len(size) == 2 and all(type(v) is int and v > 0 for v in size)):
             raise Invalid("size must be [height, width] in pixels")
-        counts = value["counts"]
-        if isinstance(counts, list):
-            if not all(type(v) is int and v >= 0 for v in counts):
-                raise Invalid("counts must be non-negative integers")
-        elif not isinstance(counts, str):
+        if not isinstance(value["counts"], str | list):
             raise Invalid("counts must be a string (COCO compressed) or a list of run lengths")
         return value
 
 
-def rle_counts_from_string(text: str) -> list[int]:
-    """Run lengths from COCO's compressed string (pycocotools' rleFrString).
+def max_rle_chars(pixels: int) -> int:
+    """The longest compressed counts string of a mask of ``pixels`` pixels.
 
-    Each count is written in 5-bit groups (6 bits per character, offset by
-    48, with a continuation bit and a sign bit), and from the fourth count on
-    as the difference to the count two places before.
+    pycocotools and the page write each count in as few characters as it
+    takes, and no empty run but the first, so a mask has at most pixels + 1
+    counts of at least one character each. A count written as a difference
+    ``d`` in k >= 2 characters has ``|d| >= 2**(5k - 6)``, and the
+    differences add up to at most 2 * pixels (each is at most the sum of
+    the two runs it compares), so at most 2 * pixels / 2**(5k - 6) counts
+    take a k-th character: 2 * pixels * (1/16 + 1/512 + ...) = 4 * pixels / 31
+    characters beyond one per count.
+    """
+    return pixels + 1 + 4 * pixels // 31
+
+
+def _count_chars(pixels: int) -> int:
+    """The most characters one count of such a mask takes (a difference in [-pixels, pixels])."""
+    k = 1
+    while 2 ** (5 * k - 1) <= pixels:
+        k += 1
+    return k
+
+
+def _string_runs(text: str, pixels: int) -> np.ndarray:
+    """Run lengths from COCO's compressed string, checked: pycocotools leaves
+    the rest of the mask uninitialised when the runs fall short, and older
+    versions read past a string that ends inside a number.
+
+    Each count is written in 5-bit groups, least significant first (6 bits
+    per character offset by 48: 0x20 says another group follows, 0x10 of the
+    last group is the sign), from the fourth count on as the difference to
+    the count two places before.
 
     Raises:
-        ValueError: characters outside the encoding or a negative run.
+        ValueError: the reason, for ``counts``.
     """
-    counts: list[int] = []
-    p, n = 0, len(text)
-    while p < n:
-        x, k, more = 0, 0, True
-        while more:
-            if p >= n:
-                raise ValueError("counts: the string ends inside a number")
-            c = ord(text[p]) - 48
-            if not 0 <= c < 64:
-                raise ValueError(f"counts: character {text[p]!r} is not part of COCO's RLE alphabet")
-            x |= (c & 0x1F) << (5 * k)
-            more = bool(c & 0x20)
-            p += 1
-            k += 1
-            if not more and c & 0x10:
-                x -= 1 << (5 * k)
-        if len(counts) > 2:
-            x += counts[-2]
-        if x < 0:
-            raise ValueError("counts: a run length is negative")
-        counts.append(x)
-    return counts
+    if len(text) > max_rle_chars(pixels):
+        raise ValueError(f"{len(text)} characters, more than a mask of {pixels} pixels takes "
+                         f"({max_rle_chars(pixels)} at most)")
+    codes = np.frombuffer(text.encode("ascii", "replace"), np.uint8) - np.uint8(48)  # the alphabet is 0..63
+    if not text.isascii() or (codes >= 64).any():
+        wide = np.frombuffer(text.encode("utf-32-le", "surrogatepass"), np.uint32)
+        first = text[np.argmax((wide < 48) | (wide >= 112))]
+        raise ValueError(f"character {first!r} is not part of COCO's RLE alphabet")
+    if not codes.size:
+        return codes.astype(np.int64)
+    last = (codes & 0x20) == 0  # the last character of a number
+    if not last[-1]:
+        raise ValueError("the string ends inside a number")
+    ends = np.flatnonzero(last)
+    widths = np.empty_like(ends)
+    widths[0] = ends[0] + 1
+    np.subtract(ends[1:], ends[:-1], out=widths[1:])
+    if widths.max() > _count_chars(pixels):
+        raise ValueError(f"a number of {widths.max()} characters; no count of this mask takes more than "
+                         f"{_count_chars(pixels)}")
+    if len(ends) > pixels + 1:
+        raise ValueError(f"{len(ends)} runs, more than a mask of {pixels} pixels has ({pixels + 1} at most)")
+    # Horner's rule from each number's last (most significant) group back, on
+    # the numbers that still have groups left.
+    values = (codes[ends] & 0x1F).astype(np.int64)
+    longer = np.flatnonzero(widths > 1)
+    for j in range(1, int(widths.max())):
+        longer = longer[widths[longer] > j]
+        values[longer] = (values[longer] << 5) | (codes[ends[longer] - j] & 0x1F)
+    negative = np.flatnonzero(codes[ends] & 0x10)
+    values[negative] -= np.left_shift(1, 5 * widths[negative])
+    runs = values.copy()
+    runs[1::2] = np.cumsum(values[1::2])  # counts[i] = values[i] + counts[i - 2] from i = 3 on
+    runs[2::2] = np.cumsum(values[2::2])
+    return runs
+
+
+def _list_runs(counts: list, pixels: int) -> np.ndarray:
+    if len(counts) > pixels + 1:  # before looking at each
+        raise ValueError(f"{len(counts)} runs, more than a mask of {pixels} pixels has ({pixels + 1} at most)")
+    if not set(map(type, counts)) <= {int}:
+        raise ValueError("must be non-negative integers")
+    try:
+        return np.array(counts, np.int64)
+    except OverflowError:
+        raise ValueError(f"a run is longer than the mask's {pixels} pixels") from None
+
+
+def coco_decode(rle: dict) -> np.ndarray:
+    """A bool ``(H, W)`` mask from a compressed COCO RLE, with pycocotools."""
+    with warnings.catch_warnings():
+        # pycocotools' decoder predates numpy 2's __array__(copy=...) and says so.
+        warnings.simplefilter("ignore", DeprecationWarning)
+        return np.ascontiguousarray(coco_mask.decode(rle), dtype=bool)
 
 
 def decode_rle(rle: dict, shape: tuple[int, int], *, field: str) -> np.ndarray:
     """A bool ``(H, W)`` mask from a checked ``Rle`` value.
+
+    The counts are checked (length, alphabet, signs, total) before
+    pycocotools decodes them, so a hostile string costs no more than a
+    frame's worth of work.
 
     Raises:
         ApiError: 400 naming ``field`` when the size is not the frame's or
@@ -138,42 +200,43 @@ def decode_rle(rle: dict, shape: tuple[int, int], *, field: str) -> np.ndarray:
             f"{field}: the mask is {rle['size'][1]}x{rle['size'][0]}, the frame {w}x{h}",
             fields={f"{field}.size": f"must be [{h}, {w}] (the frame's height and width)"},
         )
-    counts = rle["counts"]
+    counts, where = rle["counts"], f"{field}.counts"
+    try:
+        runs = _string_runs(counts, h * w) if isinstance(counts, str) else _list_runs(counts, h * w)
+        if (runs < 0).any():
+            raise ValueError("a run length is negative")
+    except ValueError as exc:
+        raise ApiError(400, f"{where}: {exc}", fields={where: str(exc)}) from None
+    total = int(runs.sum())
+    if total != h * w:
+        raise ApiError(400, f"{where}: the runs cover {total} pixels, the mask has {h * w}",
+                       fields={where: f"must add up to {h * w} pixels"})
     if isinstance(counts, str):
-        try:
-            counts = rle_counts_from_string(counts)
-        except ValueError as exc:
-            raise ApiError(400, f"{field}.{exc}", fields={f"{field}.counts": str(exc).split(": ", 1)[1]}) from None
-    if sum(counts) != h * w:
-        raise ApiError(
-            400,
-            f"{field}.counts: the runs cover {sum(counts)} pixels, the mask has {h * w}",
-            fields={f"{field}.counts": f"must add up to {h * w} pixels"},
-        )
-    values = np.arange(len(counts)) % 2 == 1
-    flat = np.repeat(values, counts)
-    # Runs go down the columns: reshape as (W, H) and transpose.
-    return np.ascontiguousarray(flat.reshape(w, h).T)
+        return coco_decode({"size": [h, w], "counts": counts.encode()})
+    return coco_decode(coco_mask.frPyObjects({"size": [h, w], "counts": counts}, h, w))
 
 
 def decode_mask_png(data: bytes, shape: tuple[int, int], *, field: str = "mask") -> np.ndarray:
     """A bool mask from PNG bytes that must be binary and of the frame's size.
 
+    The size is read from the PNG's header first, so a PNG of another size
+    (or a decompression bomb) is refused without being decoded.
+
     Raises:
         ApiError: 400 naming ``field``.
     """
     try:
-        mask = egonet_io.decode_mask(data, path=field)
+        width, height = egonet_io.image_size(data, path=field)
+        if (height, width) != shape:
+            got = f"{width}x{height}"
+            raise ApiError(
+                400,
+                f"{field}: the PNG is {got}, the frame {shape[1]}x{shape[0]}",
+                fields={field: f"must be {shape[1]}x{shape[0]} like the frame, got {got}"},
+            )
+        return egonet_io.decode_mask(data, path=field)
     except egonet_io.MediaError as exc:
         raise ApiError(400, str(exc), fields={field: exc.reason}) from None
-    if mask.shape != shape:
-        got = f"{mask.shape[1]}x{mask.shape[0]}"
-        raise ApiError(
-            400,
-            f"{field}: the PNG is {got}, the frame {shape[1]}x{shape[0]}",
-            fields={field: f"must be {shape[1]}x{shape[0]} like the frame, got {got}"},
-        )
-    return mask
 
 
 # --------------------------------------------------------------------------
@@ -295,12 +358,12 @@ def upload_instance_mask(annotation: Annotation, user: User, *, position: int, v
     instances adds one); only the annotation's author may.
 
     Raises:
-        ApiError: 400 for a PNG that is not binary or not the frame's size,
-            403 for someone else's annotation, 404 for an unknown position,
-            409 for a stale ``version``.
+        ApiError: 403 for someone else's annotation, 409 for a stale
+            ``version``, 404 for an unknown position, 400 for a PNG that is
+            not binary or not the frame's size (in that order: the PNG is
+            decoded last).
     """
     frame = annotation.frame
-    mask = decode_mask_png(png, (frame.height, frame.width))
     if annotation.author_id != user.id:
         raise ApiError(403, "only its author can change an annotation")
     if version != annotation.version:
@@ -309,6 +372,7 @@ def upload_instance_mask(annotation: Annotation, user: User, *, position: int, v
     if not 0 <= position <= len(current):
         raise ApiError(404, f"there is no instance {position} (the annotation has {len(current)})",
                        fields={"position": f"must be 0-{len(current)}"})
+    mask = decode_mask_png(png, (frame.height, frame.width))
     specs = [_spec_of(instance) for instance in current]
     path = media.store(egonet_io.encode_png(mask), ".png")
     if position == len(specs):
@@ -453,9 +517,12 @@ def review_annotation(annotation: Annotation, reviewer: User, *, version: int, d
     """Accept (reviewed) or reject (rejected, back to its author) a done annotation.
 
     Raises:
-        ApiError: 400 for a rejection without a comment, 409 when the
-            annotation is not done or ``version`` is stale.
+        ApiError: 403 for the reviewer's own annotation, 400 for a rejection
+            without a comment, 409 when the annotation is not done or
+            ``version`` is stale.
     """
+    if annotation.author_id == reviewer.id:
+        raise ApiError(403, "you cannot review your own annotation", fields={"annotation_id": "is your own"})
     comment = (comment or "").strip() or None
     if decision == "reject" and comment is None:
         raise ApiError(400, "comment: say what to fix when rejecting", fields={"comment": "required when rejecting"})
@@ -574,9 +641,14 @@ def review_queue(*, limit: int = 200) -> tuple[list[Annotation], int]:
     return rows, total
 
 
-def next_to_review(*, after: Annotation | None = None) -> int | None:
-    """The id of the oldest done annotation other than ``after``."""
-    query = db.select(Annotation.id).filter_by(status=Status.DONE).order_by(Annotation.updated_at, Annotation.id)
+def next_to_review(reviewer: User, *, after: Annotation | None = None) -> int | None:
+    """The id of the oldest done annotation other than ``after`` and the reviewer's own."""
+    query = (
+        db.select(Annotation.id)
+        .filter_by(status=Status.DONE)
+        .where(Annotation.author_id != reviewer.id)
+        .order_by(Annotation.updated_at, Annotation.id)
+    )
     if after is not None:
         query = query.where(Annotation.id != after.id)
     return db.session.execute(query.limit(1)).scalar_one_or_none()
@@ -593,28 +665,41 @@ class GrabCutResult:
 
 
 class _Recent:
-    """A few recently used objects of this worker, by key, least recent dropped first."""
+    """Recently used objects of this worker, by key, within a budget of bytes:
+    the least recently used go first, and one larger than the budget is not kept."""
 
-    def __init__(self, size: int):
-        self._size = size
-        self._items: OrderedDict = OrderedDict()
+    def __init__(self):
+        self._items: OrderedDict = OrderedDict()  # key -> (value, bytes), least recent first
         self._lock = threading.Lock()
+        self.nbytes = 0
+
+    def keys(self) -> list:
+        with self._lock:
+            return list(self._items)
 
     def get(self, key):
         with self._lock:
-            if key in self._items:
-                self._items.move_to_end(key)
-            return self._items.get(key)
+            if key not in self._items:
+                return None
+            self._items.move_to_end(key)
+            return self._items[key][0]
 
     def take(self, key):
         with self._lock:
-            return self._items.pop(key, None)
+            value, size = self._items.pop(key, (None, 0))
+            self.nbytes -= size
+            return value
 
-    def put(self, key, value) -> None:
+    def put(self, key, value, *, nbytes: int, budget: int) -> None:
         with self._lock:
-            self._items[key] = value
-            while len(self._items) > self._size:
-                self._items.popitem(last=False)
+            self.nbytes -= self._items.pop(key, (None, 0))[1]
+            if nbytes > budget:
+                return
+            self._items[key] = (value, nbytes)
+            self.nbytes += nbytes
+            while self.nbytes > budget:
+                _, (_, size) = self._items.popitem(last=False)
+                self.nbytes -= size
 
 
 # Sessions under their row's revision. A session is taken out while an
@@ -622,13 +707,14 @@ class _Recent:
 # the new revision afterwards; since a revision is random and changes with
 # every write, a cached session is used only while the database still holds
 # exactly its state. A client's keep-alive connection stays with one worker,
-# so an annotator's strokes usually find their session here; 16 cover the
-# annotators one worker serves at a time (about 8 MB each at 1280x960: the
-# frame, its mask and the ROI's guide).
-_sessions = _Recent(size=16)
-# Decoded frames by their (content-addressed, so never stale) media path:
-# a session restored in another worker then only needs its state decoded.
-_images = _Recent(size=4)
+# so an annotator's strokes usually find their session here. They are kept
+# within GRABCUT_CACHE_BYTES, counted by their arrays (8-10 MB each at
+# 1280x960: the frame's copy, the mask, the ROI's guide, the footprints).
+_sessions = _Recent()
+# Decoded frames by their (content-addressed, so never stale) media path,
+# within GRABCUT_IMAGE_CACHE_BYTES: a session restored in another worker then
+# only needs its state decoded.
+_images = _Recent()
 
 
 def _dump_state(session: GrabCutSession) -> bytes:
@@ -643,8 +729,12 @@ def _frame_image(frame: Frame) -> np.ndarray:
     image = _images.get(frame.rgb_path)
     if image is None:
         image = egonet_io.read_image(media.absolute_path(frame.rgb_path))
-        _images.put(frame.rgb_path, image)
+        _images.put(frame.rgb_path, image, nbytes=image.nbytes, budget=current_app.config["GRABCUT_IMAGE_CACHE_BYTES"])
     return image
+
+
+def _keep(revision: str, session: GrabCutSession) -> None:
+    _sessions.put(revision, session, nbytes=session.nbytes, budget=current_app.config["GRABCUT_CACHE_BYTES"])
 
 
 def _load_session(frame: Frame, blob: bytes) -> GrabCutSession:
@@ -679,14 +769,18 @@ def check_box(frame: Frame, box: list[float]) -> tuple[int, int, int, int]:
 
 
 def check_stroke(frame: Frame, points: list[list[float]], radius: float) -> None:
-    """A stroke with at least one point, a radius in (0, the frame's long side],
-    points no further than a frame's size outside it, touching the frame."""
+    """A stroke with at least one point, a radius in (0, GRABCUT_MAX_RADIUS],
+    points no further than a frame's size outside it, touching the frame.
+    (The request's schema holds the number of points to
+    GRABCUT_MAX_STROKE_POINTS; ``grabcut_stroke`` checks what the object's
+    strokes cost in all.)"""
     w, h = frame.width, frame.height
     if not points:
         raise ApiError(400, "points: a stroke needs at least one point", fields={"points": "must not be empty"})
-    if not 0 < radius <= max(w, h):
-        raise ApiError(400, f"radius: must be a positive number of pixels up to {max(w, h)}",
-                       fields={"radius": f"must be > 0 and <= {max(w, h)}"})
+    limit = current_app.config["GRABCUT_MAX_RADIUS"]
+    if not 0 < radius <= limit:
+        raise ApiError(400, f"radius: must be a positive number of pixels up to {limit:g}",
+                       fields={"radius": f"must be > 0 and <= {limit:g}"})
     for i, (x, y) in enumerate(points):
         if not (-w <= x <= 2 * w and -h <= y <= 2 * h):
             raise ApiError(400, f"points[{i}]: ({x}, {y}) is far outside the {w}x{h} frame",
@@ -697,14 +791,59 @@ def check_stroke(frame: Frame, points: list[list[float]], radius: float) -> None
         raise ApiError(400, "points: the stroke lies outside the frame", fields={"points": "outside the frame"})
 
 
+def stroke_pixels(shape: tuple[int, int], points: list | np.ndarray, radius: float) -> int:
+    """The pixels that painting a stroke visits: ``egonet.grabcut`` measures
+    the distance to each segment over the segment's box widened by the
+    radius, into a crop of the whole stroke's box (all clipped to the frame).
+    Its time and memory, and those of replaying the stroke when a worker
+    restores the session, follow this number."""
+    h, w = shape
+    p = np.asarray(points, np.float64).reshape(-1, 2)
+    starts, ends = (p, p) if len(p) == 1 else (p[:-1], p[1:])
+    lows = np.vstack([np.minimum(starts, ends), p.min(axis=0)])
+    highs = np.vstack([np.maximum(starts, ends), p.max(axis=0)])
+    x0 = np.clip(np.floor(lows[:, 0] - radius), 0, w)
+    y0 = np.clip(np.floor(lows[:, 1] - radius), 0, h)
+    x1 = np.clip(np.ceil(highs[:, 0] + radius) + 1, 0, w)
+    y1 = np.clip(np.ceil(highs[:, 1] + radius) + 1, 0, h)
+    return int((np.maximum(x1 - x0, 0) * np.maximum(y1 - y0, 0)).sum())
+
+
+def _check_frame_size(frame: Frame) -> None:
+    side = current_app.config["MAX_FRAME_SIDE"]
+    if max(frame.width, frame.height) > side:
+        raise ApiError(400, f"frame_id: frame {frame.id} is {frame.width}x{frame.height}, larger than GrabCut's "
+                            f"limit of {side} pixels a side; label it by hand or import it smaller",
+                       fields={"frame_id": f"larger than {side} pixels a side"})
+
+
+def _check_sweep(session: GrabCutSession, points: list, radius: float) -> None:
+    """Refuse a stroke that would take the object's strokes past GRABCUT_MAX_STROKE_PIXELS (see ``stroke_pixels``)."""
+    limit = current_app.config["GRABCUT_MAX_STROKE_PIXELS"]
+    new = stroke_pixels(session.shape, points, radius)
+    earlier = sum(stroke_pixels(session.shape, p, r) for p, _, r in session.strokes)
+    if new > limit:
+        raise ValueError(f"points: the stroke sweeps {new / 1e6:.1f} Mpx (its segments' boxes widened by the radius), "
+                         f"more than the limit of {limit / 1e6:.1f} Mpx; draw shorter strokes or use a smaller brush")
+    if earlier + new > limit:
+        raise ValueError(f"points: the object's strokes would sweep {(earlier + new) / 1e6:.1f} Mpx, more than the "
+                         f"limit of {limit / 1e6:.1f} Mpx; undo some of them or start the object again with a box")
+
+
 def grabcut_box(frame: Frame, user: User, key: str, box: tuple[int, int, int, int]) -> GrabCutResult:
     """Start (or restart) the object ``key`` from a box; see ``check_box``."""
     return _operate(frame, user, key, lambda s: s.box(*box), create=True)
 
 
 def grabcut_stroke(frame: Frame, user: User, key: str, *, points: list, label: str, radius: float) -> GrabCutResult:
-    """Add a corrective fg/bg stroke to the object ``key``; see ``check_stroke``."""
-    return _operate(frame, user, key, lambda s: s.stroke(points, label, radius), create=False)
+    """Add a corrective fg/bg stroke to the object ``key``; see ``check_stroke``.
+    The object's strokes in all may sweep at most GRABCUT_MAX_STROKE_PIXELS."""
+
+    def apply(session: GrabCutSession) -> np.ndarray:
+        _check_sweep(session, points, radius)
+        return session.stroke(points, label, radius)
+
+    return _operate(frame, user, key, apply, create=False)
 
 
 def grabcut_undo(frame: Frame, user: User, key: str) -> GrabCutResult:
@@ -714,11 +853,12 @@ def grabcut_undo(frame: Frame, user: User, key: str) -> GrabCutResult:
 
 def grabcut_mask(frame: Frame, user: User, key: str) -> GrabCutResult:
     """The session's current mask, without changing it."""
+    _check_frame_size(frame)
     row = _state_row(frame, user, key, lock=False)
     if row is None:
         raise ApiError(404, f"no GrabCut session for object {key!r} on this frame", fields={"instance": "no session"})
     session = _sessions.take(row.revision) or _load_session(frame, row.state)
-    _sessions.put(row.revision, session)
+    _keep(row.revision, session)
     return GrabCutResult(session.mask, session.can_undo)
 
 
@@ -745,6 +885,7 @@ def _session_lock(frame: Frame, user: User, key: str):
 
 
 def _operate(frame: Frame, user: User, key: str, apply: Callable[[GrabCutSession], np.ndarray], *, create: bool) -> GrabCutResult:
+    _check_frame_size(frame)
     # The lock file serialises the workers of one machine; the revision check
     # below still catches a writer that it cannot see (another machine).
     with _session_lock(frame, user, key):
@@ -781,7 +922,7 @@ def _operate_locked(frame: Frame, user: User, key: str, apply: Callable[[GrabCut
             # Another operation on this session committed first: redo ours on its state.
             db.session.rollback()
             continue
-        _sessions.put(row.revision, session)
+        _keep(row.revision, session)
         return GrabCutResult(mask, session.can_undo)
     raise ApiError(409, "another GrabCut operation on this object is still running; try again",
                    fields={"instance": "busy"})

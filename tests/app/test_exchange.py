@@ -2,6 +2,7 @@
 
 import io as bytes_io
 import json
+import stat
 import warnings
 import zipfile
 from pathlib import Path
@@ -243,3 +244,48 @@ def test_export_and_import_problems_are_one_line(app, runner, tmp_path):
 def test_names_are_single_path_components(name):
     safe = exchange._safe(name)
     assert "/" not in safe and "\\" not in safe and not safe.startswith(".") and safe
+
+
+def _hostile_link(zf):
+    info = zipfile.ZipInfo("masks/cooking/rec/00009.png")
+    info.external_attr = (stat.S_IFLNK | 0o777) << 16
+    zf.writestr(info, "/etc/passwd")
+
+
+HOSTILE_MEMBERS = {
+    "traversal": (lambda zf: zf.writestr("masks/../../evil.png", b"x"), "unsafe path 'masks/../../evil.png'"),
+    "absolute": (lambda zf: zf.writestr("/tmp/evil.png", b"x"), "unsafe path '/tmp/evil.png'"),
+    "drive": (lambda zf: zf.writestr("C:/evil.png", b"x"), "unsafe path 'C:/evil.png'"),
+    "link": (_hostile_link, "'masks/cooking/rec/00009.png' is a link"),
+    "bomb": (lambda zf: zf.writestr("masks/pad.png", b"\0" * (50 * 1024**2), zipfile.ZIP_DEFLATED),
+             "'masks/pad.png' inflates"),
+}
+
+
+@pytest.mark.parametrize("kind", [*HOSTILE_MEMBERS, "lying header"])
+def test_hostile_zips_are_refused_naming_the_member_and_import_nothing(app, runner, tmp_path, kind):
+    from tests.app.test_import_safety import lie_about_size
+
+    labelled_dataset(app, recording(tmp_path / "rec"))
+    export = tmp_path / "out"
+    assert runner.invoke(args=["egonet", "export", "--out", str(export)]).exit_code == 0
+    with app.app_context():
+        db.session.execute(db.delete(Instance))
+        db.session.execute(db.delete(Annotation))
+        db.session.commit()
+    archive = tmp_path / "hostile.zip"
+    with zipfile.ZipFile(archive, "w", compression=zipfile.ZIP_DEFLATED) as zf:
+        for name, data in files(export).items():
+            zf.writestr(name, data)
+        if kind in HOSTILE_MEMBERS:
+            HOSTILE_MEMBERS[kind][0](zf)
+    if kind == "lying header":
+        lie_about_size(archive, "annotations.json", 100)
+    expect = HOSTILE_MEMBERS[kind][1] if kind in HOSTILE_MEMBERS else "'annotations.json' does not match its header"
+
+    result = runner.invoke(args=["egonet", "import-annotations", str(archive)])
+    assert result.exit_code != 0 and result.output.strip().count("\n") == 0, result.output
+    assert result.output.startswith("Error: ") and expect in result.output
+    with app.app_context():
+        assert db.session.execute(db.select(Annotation)).first() is None
+    assert not (tmp_path / "evil.png").exists()

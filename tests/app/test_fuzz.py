@@ -2,11 +2,13 @@
 
 For each role, hypothesis sends every state-changing endpoint (and every
 GET) malformed JSON, wrong types, huge numbers and strings, missing fields,
-coordinates far outside the frame, and random form fields. Any 500 fails.
-New routes are fuzzed automatically.
+coordinates far outside the frame, and random form fields, with ids in the
+path that are real, zero, negative or past what an id column holds. Any
+500 fails. New routes are fuzzed automatically.
 """
 
 import json
+import re
 
 import pytest
 from hypothesis import HealthCheck, given, settings
@@ -19,8 +21,11 @@ FIELDS = [
     "status", "kind", "instances", "comment", "events", "rt_ms", "name", "activities", "seed",
     "frames_per_activity", "time_limit_min", "sigma", "model", "epochs", "mask", "no_action_object",
     "time_spent_s", "decision", "window", "type", "t", "count", "code", "username", "password",
+    "frame_id", "instance", "box", "size", "counts",
 ]
-HUGE = st.sampled_from([10**30, -(10**30), 1e308, -1e308, 2**63, -1, 0, 1e-300, 99999999])
+HUGE = st.sampled_from([10**30, -(10**30), 1e308, -1e308, 10**400, 2**63, 2**31, -1, 0, 1e-300, 99999999])
+# A path id: the real one (None), or one that no row can have.
+PATH_IDS = st.none() | st.sampled_from([2**31 - 1, 2**31, 2**63, 2**64, 10**30, 0, -1])
 scalars = st.none() | st.booleans() | st.integers() | HUGE | st.floats(allow_nan=False) | st.text(max_size=300)
 values = st.recursive(scalars, lambda inner: st.lists(inner, max_size=5) | st.dictionaries(st.sampled_from(FIELDS), inner, max_size=5), max_leaves=25)
 objects = st.dictionaries(st.sampled_from(FIELDS) | st.text(max_size=10), values, max_size=8)
@@ -32,7 +37,8 @@ bodies = st.one_of(
     st.dictionaries(st.sampled_from(FIELDS), st.text(max_size=50), max_size=6).map(lambda d: ("form", d)),
     st.binary(max_size=200).map(lambda b: ("png", b)),
 )
-queries = st.dictionaries(st.sampled_from(FIELDS + ["page", "activity", "runs", "studies", "format"]), st.text(max_size=20) | st.integers().map(str), max_size=3)
+queries = st.dictionaries(st.sampled_from(FIELDS + ["page", "activity", "runs", "studies", "format", "after"]),
+                          st.text(max_size=20) | st.integers().map(str) | HUGE.map(str), max_size=3)
 
 
 @pytest.mark.slow
@@ -47,7 +53,8 @@ def test_no_endpoint_answers_500(app, client, make_user, tmp_path_factory, role,
     for rule in app.url_map.iter_rules():
         if rule.endpoint in ("static", "auth.logout"):
             continue
-        url = rule.build(values, append_unknown=False)[1]
+        ids = {name: data.draw(PATH_IDS) for name in re.findall(r"<int:(\w+)>", rule.rule)}
+        url = rule.build({**values, **{name: v for name, v in ids.items() if v is not None}}, append_unknown=False)[1]
         for method in sorted(rule.methods - {"HEAD", "OPTIONS"}):
             client.login_as(app._fuzz_user)
             if method == "GET":

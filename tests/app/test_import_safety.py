@@ -5,11 +5,12 @@ import struct
 import zipfile
 import zlib
 
+import numpy as np
 import pytest
 
 from app.extensions import db
 from app.models import Frame
-from app.services.importing import import_path
+from app.services.importing import FrameItem, add_frames, import_path
 from egonet import io
 from tests.app.factories import image_folder
 
@@ -83,3 +84,46 @@ def test_zip_links_and_bombs_are_refused(ctx, tmp_path):
     with pytest.raises(io.MediaError, match="not a readable zip"):
         import_path(tmp_path / "broken.zip", activity="cooking")
     assert nothing_imported()
+
+
+def lie_about_size(archive, name: str, size: int) -> None:
+    """Make both of the zip's headers for member ``name`` claim ``size`` bytes."""
+    with zipfile.ZipFile(archive) as zf:
+        local = zf.getinfo(name).header_offset
+    data = bytearray(archive.read_bytes())
+    struct.pack_into("<I", data, local + 22, size)
+    entry = data.find(b"PK\x01\x02")
+    while entry != -1:
+        (length,) = struct.unpack_from("<H", data, entry + 28)
+        if data[entry + 46 : entry + 46 + length] == name.encode():
+            struct.pack_into("<I", data, entry + 24, size)
+        entry = data.find(b"PK\x01\x02", entry + 1)
+    archive.write_bytes(bytes(data))
+
+
+def test_zip_member_larger_than_its_header_is_refused(ctx, tmp_path):
+    archive = tmp_path / "liar.zip"
+    png = io.encode_png(np.random.default_rng(0).integers(0, 255, (40, 40, 3), dtype=np.uint8))
+    with zipfile.ZipFile(archive, "w", compression=zipfile.ZIP_DEFLATED) as zf:
+        zf.writestr("rgb/00000.png", png)
+    lie_about_size(archive, "rgb/00000.png", 100)
+    with pytest.raises(io.MediaError, match=r"'rgb/00000.png' does not match its header"):
+        import_path(archive, activity="cooking")
+    assert nothing_imported()
+
+
+def test_frames_over_the_side_limit_are_refused_naming_the_file(app, runner, tmp_path):
+    app.config["MAX_FRAME_SIDE"] = 60
+    wide = image_folder(tmp_path / "wide", n=2, size=(48, 64))  # 64 px wide
+    result = runner.invoke(args=["egonet", "import", str(wide), "--activity", "cooking"])
+    assert result.exit_code != 0, result.output
+    (error,) = [line for line in result.output.splitlines() if line.startswith("Error: ")]  # after the progress bar's
+    assert error.endswith("00000.png: image of 64x48 pixels is larger than the limit of 60 pixels a side (MAX_FRAME_SIDE)")
+    with app.app_context():
+        # An array, as the demo and videos give their frames.
+        item = FrameItem("rendered", 0, "demo kitchen 0", rgb=np.zeros((61, 10, 3), np.uint8))
+        with pytest.raises(io.MediaError, match=r"demo kitchen 0: image of 10x61 pixels"):
+            add_frames(activity="kitchen", sequence="demo", items=[item])
+        assert nothing_imported()
+        app.config["MAX_FRAME_SIDE"] = 64
+        assert import_path(wide, activity="cooking").added == 2

@@ -1,5 +1,7 @@
 """The labelling API: saving with a version check, statuses, review, the queue, masks."""
 
+import re
+
 import numpy as np
 import pycocotools.mask as coco_mask
 import pytest
@@ -149,6 +151,14 @@ def test_statuses_no_action_object_and_time_spent(app, annotator):
         assert annotation.mask_path is not None and annotation.time_spent_s == pytest.approx(25.0)
 
 
+def broken_counts(change):
+    def apply(b):
+        mask = b["instances"][0]["mask"]
+        mask["counts"] = change(mask["counts"])
+
+    return apply
+
+
 BAD_SAVES = [
     (lambda b: b.update(version=-1), "version"),
     (lambda b: b.pop("version"), "version"),
@@ -165,6 +175,15 @@ BAD_SAVES = [
     (lambda b: b["instances"][0]["mask"].update(counts=[5, 5]), "instances[0].mask.counts"),
     (lambda b: b["instances"][0]["mask"].update(counts="\u00ff"), "instances[0].mask.counts"),
     (lambda b: b["instances"][0]["mask"].update(counts=[H * W - 1, 2]), "instances[0].mask.counts"),
+    (lambda b: b["instances"][0]["mask"].update(counts=[H * W + 1, -1]), "instances[0].mask.counts"),
+    (lambda b: b["instances"][0]["mask"].update(counts=[H * W, True]), "instances[0].mask.counts"),
+    (lambda b: b["instances"][0]["mask"].update(counts=[0] * (H * W + 2)), "instances[0].mask.counts"),
+    # The first instance's counts string, broken: ends inside a number, a negative run, one run too many, too short.
+    (broken_counts(lambda c: c + "P"), "instances[0].mask.counts"),
+    (broken_counts(lambda c: "@" + c[1:]), "instances[0].mask.counts"),
+    (broken_counts(lambda c: c + "1"), "instances[0].mask.counts"),
+    (broken_counts(lambda c: c[:-1]), "instances[0].mask.counts"),
+    (lambda b: b["instances"][0]["mask"].update(counts="1" * (H * W + 2)), "instances[0].mask.counts"),
 ]
 
 
@@ -182,28 +201,35 @@ def test_bad_save_bodies_are_400_naming_the_field(app, annotator):
 def test_uncompressed_rle_counts_are_accepted(app, annotator):
     frame_id, *_ = make_frames(app, n=1)
     mask = square(3, 7, 11, 13)
+    request = {"version": 0, "instances": [{"key": "a", "mask": {"size": [H, W], "counts": column_runs(mask)}}]}
+    saved = annotator.put(f"/api/label/frames/{frame_id}/annotation", json=request).get_json()
+    assert np.array_equal(get_png(annotator, saved["instances"][0]["mask_url"]), mask)
+
+
+def column_runs(mask: np.ndarray) -> list[int]:
+    """COCO's run lengths (down the columns, starting with background), counted by hand."""
     runs, value, run = [], False, 0
     for v in mask.T.ravel():
         if v != value:
             runs.append(run)
             run, value = 0, v
         run += 1
-    runs.append(run)
-    request = {"version": 0, "instances": [{"key": "a", "mask": {"size": [H, W], "counts": runs}}]}
-    saved = annotator.put(f"/api/label/frames/{frame_id}/annotation", json=request).get_json()
-    assert np.array_equal(get_png(annotator, saved["instances"][0]["mask_url"]), mask)
+    return runs + [run]
 
 
-def test_rle_string_parser_agrees_with_pycocotools():
+def test_rle_decoder_agrees_with_pycocotools_and_the_length_bound_holds():
     rng = np.random.default_rng(3)
-    for _ in range(30):
-        h, w = rng.integers(1, 40, 2)
-        mask = rng.random((h, w)) < rng.random()
-        encoded = coco_mask.encode(np.asfortranarray(mask.astype(np.uint8)))
-        counts = labelling.rle_counts_from_string(encoded["counts"].decode())
-        assert sum(counts) == h * w
-        decoded = labelling.decode_rle({"size": [int(h), int(w)], "counts": counts}, (h, w), field="m")
-        assert np.array_equal(decoded, mask)
+    masks = [rng.random((h, w)) < rng.random() for h, w in rng.integers(1, 40, (40, 2))]
+    # The longest strings: every run one pixel, and runs alternating short and long.
+    masks.append(np.indices((37, 23)).sum(axis=0) % 2 == 1)
+    masks.append(np.resize(np.repeat([False, True, False, True], [1, 1, 40, 3]), (45, 41)))
+    for mask in masks:
+        h, w = mask.shape
+        string = rle(mask)["counts"]
+        assert len(string) <= labelling.max_rle_chars(h * w)
+        for counts in (string, column_runs(mask)):
+            decoded = labelling.decode_rle({"size": [h, w], "counts": counts}, (h, w), field="m")
+            assert decoded.dtype == bool and decoded.flags.c_contiguous and np.array_equal(decoded, mask)
 
 
 def test_png_upload_of_an_instance_mask(app, annotator, make_user):
@@ -313,3 +339,28 @@ def test_pages_render_for_their_roles(app, client, make_user):
     assert client.get(f"/label/annotations/{saved['id']}/review").status_code == 403
     assert client.get("/label/frames/9999").status_code == 404
     assert client.get("/api/label/frames/9999/annotation").get_json()["fields"] == {"frame_id": "no such frame"}
+
+
+def test_nobody_reviews_their_own_annotation_admins_included(app, client, make_user):
+    frame_id, *_ = make_frames(app, n=1)
+    admin = make_user("admin", "boss")
+    client.login_as(admin)
+    url = f"/api/label/frames/{frame_id}/annotation"
+    done = client.put(url, json=body(0, square(0, 5, 0, 5), status="done")).get_json()
+    review_url = f"/api/label/annotations/{done['id']}/review"
+    for decision in ("accept", "reject"):
+        response = client.post(review_url, json={"version": done["version"], "decision": decision, "comment": "fine"})
+        assert response.status_code == 403 and response.get_json()["message"] == "you cannot review your own annotation"
+    with client.get("/label/review/next") as response:  # the queue skips one's own
+        assert response.status_code == 302 and response.location.endswith("/label/")
+    page = client.get(f"/label/annotations/{done['id']}/review").get_data(as_text=True)
+    assert "This is your own annotation" in page
+    assert re.search(r'id="accept"[^>]*disabled', page) and re.search(r'id="reject"[^>]*disabled', page)
+
+    other = app.test_client()
+    other.login_as(make_user("admin", "other-boss"))
+    assert "This is your own annotation" not in other.get(f"/label/annotations/{done['id']}/review").get_data(True)
+    with other.get("/label/review/next") as response:
+        assert response.location.endswith(f"/label/annotations/{done['id']}/review")
+    accepted = other.post(review_url, json={"version": done["version"], "decision": "accept"})
+    assert accepted.status_code == 200 and accepted.get_json()["status"] == "reviewed"

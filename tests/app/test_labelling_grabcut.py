@@ -21,11 +21,17 @@ def annotator(client, make_user):
     return client
 
 
+def forget_everything(app, monkeypatch):
+    """Every request from now on as if served by a new worker process: nothing kept in memory."""
+    monkeypatch.setattr(labelling, "_sessions", labelling._Recent())
+    monkeypatch.setattr(labelling, "_images", labelling._Recent())
+    monkeypatch.setitem(app.config, "GRABCUT_CACHE_BYTES", 0)
+    monkeypatch.setitem(app.config, "GRABCUT_IMAGE_CACHE_BYTES", 0)
+
+
 @pytest.fixture
-def fresh_workers(monkeypatch):
-    """Every request as if served by a new worker process: no session kept in memory."""
-    monkeypatch.setattr(labelling, "_sessions", labelling._Recent(size=0))
-    monkeypatch.setattr(labelling, "_images", labelling._Recent(size=0))
+def fresh_workers(app, monkeypatch):
+    forget_everything(app, monkeypatch)
 
 
 def call(client, op: str, **body):
@@ -132,8 +138,7 @@ def test_a_session_survives_a_restart_and_other_workers(app, annotator, monkeypa
         return [call(annotator, op, frame_id=frame_id, instance=instance, **args)[1] for op, args in steps]
 
     in_memory = run("warm")
-    monkeypatch.setattr(labelling, "_sessions", labelling._Recent(size=0))
-    monkeypatch.setattr(labelling, "_images", labelling._Recent(size=0))
+    forget_everything(app, monkeypatch)
     restarted = run("cold")
     for a, b in zip(in_memory, restarted):
         assert np.array_equal(a, b)
