@@ -56,5 +56,6 @@ def depth(frame_id: int):
 
 @bp.get("/media/<path:name>")
 def media_file(name: str):
-    # Content-addressed: a name never changes meaning, so it can be cached forever.
+    # Content-addressed: a name never changes meaning, so it can be cached forever
+    # (by the signed-in browser only: app.security marks it private).
     return send_from_directory(media.media_root(), name, max_age=365 * 86400)

@@ -1,12 +1,17 @@
 """The participant side of a human study: consent, instructions, timed trials.
 
 A participant enters with an access code (a public form) or a single-use
-link, which signs them in as their participant user. Every other page and
+link, which signs them in as their participant user. Opening the link shows
+a Start button; only pressing it (a POST) uses the link, so a link-preview
+bot that fetches it does not burn it. Wrong codes and unknown links are
+throttled per address, like log-in (``app.throttle``). Every other page and
 call needs that sign-in (``@roles(Role.PARTICIPANT)``) and goes through
 ``_participant`` / ``_owned_trial``, which load the caller's own enrolment
 and trial and refuse anything else, so one participant can never reach
 another's session. The only images served here are the frames of the
-participant's own trials; ground truth never leaves the server.
+participant's trial on screen and the next one; ground truth never leaves
+the server. Nothing here may be stored by the browser (``no-store``): Back
+after the end must not bring back a trial with its clock running.
 """
 
 from flask import Blueprint, redirect, render_template, request, send_file, url_for
@@ -23,6 +28,7 @@ from app.models.studies import EventKind, Participant, Trial
 from app.security import public, roles
 from app.services import media
 from app.services import studies
+from app.throttle import address, failed, failures_limit, limiter, too_many_attempts
 from app.validation import Bool, Float, Int, List, Obj, Str, json_body
 
 bp = Blueprint("study", __name__, url_prefix="/s")
@@ -60,8 +66,24 @@ ANSWER = {
 }
 
 
+# Wrong codes and unknown links count together, per address; past the limit
+# the entry form and links answer 429 until the window ends. A success does
+# not forgive earlier failures: with one code of their own, a guesser could
+# otherwise reset the count at will.
+guesses = limiter.shared_limit(
+    failures_limit, scope="study-entry", key_func=address, deduct_when=failed, error_message=too_many_attempts
+)
+
+
 class CodeForm(Form):
     code = StringField("Access code", validators=[DataRequired(), Length(max=32)])
+
+
+@bp.after_request
+def never_stored(response: Response) -> Response:
+    """after_request: no participant page, answer or frame is kept by the browser (see above)."""
+    response.headers["Cache-Control"] = "no-store"
+    return response
 
 
 def _participant() -> Participant:
@@ -93,6 +115,7 @@ def _sign_in(participant: Participant) -> Response:
 
 @bp.route("/", methods=["GET", "POST"])
 @public
+@guesses
 def entry():
     if request.method == "GET" and current_user.is_authenticated and current_user.role is Role.PARTICIPANT:
         participant = studies.participant_of(current_user)
@@ -111,9 +134,14 @@ def entry():
     return render_template("study/entry.html", form=form), status
 
 
-@bp.get("/l/<token>")
+@bp.route("/l/<token>", methods=["GET", "POST"])
 @public
+@guesses
 def link(token: str):
+    """A single-use link: GET shows the Start button, the POST it sends signs in and uses the link."""
+    if request.method == "GET":
+        participant = studies.link_participant(token)
+        return render_template("study/link.html", study=participant.study, trials=len(participant.trials))
     return _sign_in(studies.use_link(token))
 
 
@@ -237,12 +265,8 @@ def submit(trial_id: int):
 @bp.get("/trials/<int:trial_id>/image")
 @roles(Role.PARTICIPANT)
 def image(trial_id: int):
-    """The RGB frame of one of the participant's own trials (never depth, DHG or ground truth)."""
-    _, trial = _owned_trial(trial_id)
-    path = media.absolute_path(trial.frame.rgb_path)
+    """The RGB frame of the participant's trial on screen or the next one (never depth, DHG or ground truth)."""
+    participant, trial = _owned_trial(trial_id)
+    path = media.absolute_path(studies.trial_frame(participant, trial).rgb_path)
     mimetype = "image/jpeg" if path.suffix.lower() in (".jpg", ".jpeg") else "image/png"
-    response = send_file(path, mimetype=mimetype, max_age=3600)
-    # Private: the page preloads the next frame, but shared caches must not keep it.
-    response.cache_control.public = False
-    response.cache_control.private = True
-    return response
+    return send_file(path, mimetype=mimetype)

@@ -17,6 +17,8 @@ travel time: the page submits on its own when its countdown reaches zero, and
 that request arrives a little after the deadline. A later answer is refused
 with 409; past the session deadline the session ends (``time_up``), past a
 per-trial limit only that trial is closed (``expired``) and the next follows.
+While the session runs, the participant's page may fetch the frame on
+screen and the next one (``trial_frame``), no other.
 
 Soft masks: ``egonet.clicks.soft_mask`` on superpixels computed once per
 frame and cached under ``CACHE_ROOT/superpixels/<settings key>/`` as a
@@ -95,6 +97,8 @@ DEFAULT_CONSENT = (
 # Access codes: 8 characters without look-alikes (no 0/O, 1/I/L): 31^8, about 10^12.
 CODE_ALPHABET = "ABCDEFGHJKMNPQRSTUVWXYZ23456789"
 CODE_LENGTH = 8
+
+LINK_USED = "this study link has already been used; enter your access code instead"
 
 MAX_CLICKS = 50
 MAX_EVENTS = 2000
@@ -328,8 +332,8 @@ def participant_by_code(code: str) -> Participant | None:
     return db.session.execute(db.select(Participant).filter_by(code=cleaned)).scalar_one_or_none()
 
 
-def use_link(token: str) -> Participant:
-    """The participant whose single-use link this is, marking the link used.
+def link_participant(token: str) -> Participant:
+    """The participant whose single-use link this is, leaving the link unused.
 
     Raises:
         ApiError: 404 for an unknown link, 410 for one already used.
@@ -337,6 +341,18 @@ def use_link(token: str) -> Participant:
     participant = db.session.execute(db.select(Participant).filter_by(link_token=token)).scalar_one_or_none()
     if participant is None:
         raise ApiError(404, "this study link does not exist")
+    if participant.link_used_at is not None:
+        raise ApiError(410, LINK_USED)
+    return participant
+
+
+def use_link(token: str) -> Participant:
+    """The participant whose single-use link this is, marking the link used.
+
+    Raises:
+        ApiError: 404 for an unknown link, 410 for one already used.
+    """
+    participant = link_participant(token)
     claimed = db.session.execute(
         update(Participant)
         .where(Participant.id == participant.id, Participant.link_used_at.is_(None))
@@ -344,7 +360,7 @@ def use_link(token: str) -> Participant:
     )
     db.session.commit()
     if claimed.rowcount != 1:
-        raise ApiError(410, "this study link has already been used; enter your access code instead")
+        raise ApiError(410, LINK_USED)
     return participant
 
 
@@ -471,6 +487,23 @@ def _pending(participant: Participant, limit: int = 2) -> list[Trial]:
             .limit(limit)
         ).scalars()
     )
+
+
+def trial_frame(participant: Participant, trial: Trial) -> Frame:
+    """The frame of one of the participant's trials, if their page may fetch it now.
+
+    While the session runs, the page gets the frame on screen (the first
+    trial without an outcome) and the next one, to preload; never an earlier
+    frame, one further ahead, or any frame before the start or after the end.
+
+    Raises:
+        ApiError: 404 for any other frame.
+    """
+    if step(participant) != "trials" or now() >= participant.deadline:
+        raise ApiError(404, "no photo is shown before the session starts or after it ends")
+    if trial not in _pending(participant):
+        raise ApiError(404, "only the photo on screen and the next one can be fetched")
+    return trial.frame
 
 
 def _trial_deadline(trial: Trial, participant: Participant) -> datetime:

@@ -91,7 +91,8 @@ async function show(state) {
   say("");
   layout();
   ui.progressText.textContent = `Photo ${trial.position} of ${state.total}`;
-  ui.progressBar.style.width = `${(100 * state.done) / state.total}%`;
+  ui.progressBar.max = state.total;
+  ui.progressBar.value = state.done;
   ui.trialClock.hidden = trialEnd === null;
   updateButtons();
   tick();

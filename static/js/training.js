@@ -18,7 +18,7 @@ function render(row, run) {
   row.dataset.status = run.status;
   field("status").textContent = run.status;
   field("status").className = `status status-${run.status}`;
-  field("bar").style.width = `${(run.progress * 100).toFixed(1)}%`;
+  field("bar").value = run.progress;
   field("percent").textContent = `${Math.round(run.progress * 100)}%`;
   field("loss").textContent = run.loss === null ? "–" : run.loss.toFixed(4);
   field("eta").textContent = run.status === "running" ? formatDuration(run.eta_s) : "–";

@@ -1,5 +1,7 @@
 """Who reaches what in a study: participants see only their own session and frames, never ground truth."""
 
+import pytest
+
 from app.extensions import db
 from app.models import Annotation, User
 from app.models.studies import EntryKind, Participant, Study, Trial
@@ -39,7 +41,7 @@ def test_a_participant_reaches_only_their_own_trials(app, client, tmp_path):
     sign_in(client, app, ids["a1"]["user"])
     with client.get(f"/s/trials/{ids['a1']['trial']}/image") as own:
         assert own.status_code == 200 and own.mimetype == "image/png"
-        assert "private" in own.headers["Cache-Control"]
+        assert own.headers["Cache-Control"] == "no-store"
         with app.app_context():
             assert own.data == media.read(db.session.get(Trial, ids["a1"]["trial"]).frame.rgb_path)
     for other in ("a2", "b1"):  # the same study's other participant, and another study's
@@ -93,13 +95,29 @@ def test_codes_and_single_use_links(app, client, tmp_path):
     ids = two_studies(app, tmp_path)
     wrong = client.post("/s/", data={"code": "ZZZZ-ZZZZ"})
     assert wrong.status_code == 401 and b"not known" in wrong.data
-    first = client.get(f"/s/l/{ids['a2']['token']}")
-    assert first.status_code == 302 and first.headers["Location"].endswith("/s/trials")
+    link = f"/s/l/{ids['a2']['token']}"
+    # Opening the link (twice: a link-preview bot, then the participant) only shows the Start button.
+    for _ in range(2):
+        page = client.get(link)
+        assert page.status_code == 200 and b'id="start-link"' in page.data and b'name="csrf_token"' in page.data
+        assert client.get("/s/api/current", headers=JSON).status_code == 401  # not signed in
+    with app.app_context():
+        assert db.session.get(Participant, ids["a2"]["id"]).link_used_at is None
+    start = client.post(link)
+    assert start.status_code == 302 and start.headers["Location"].endswith("/s/trials")
     assert client.get("/s/api/current", headers=JSON).get_json()["trial"]["id"] == ids["a2"]["trial"]
+    with app.app_context():
+        assert db.session.get(Participant, ids["a2"]["id"]).link_used_at is not None
+    # Another browser cannot use it again, nor is it offered the button.
+    other = app.test_client()
+    again = other.post(link)
+    assert again.status_code == 410 and b"already been used" in again.data
+    assert other.get("/s/api/current", headers=JSON).status_code == 401
+    used = other.get(link)
+    assert used.status_code == 410 and b"already been used" in used.data and b"start-link" not in used.data
     client.post("/logout")
-    used = client.get(f"/s/l/{ids['a2']['token']}")
-    assert used.status_code == 410 and b"already been used" in used.data
     assert client.get("/s/l/not-a-token").status_code == 404
+    assert client.post("/s/l/not-a-token").status_code == 404
     # The code still works after the link, and brings the participant back where they were.
     back = client.post("/s/", data={"code": ids["a2"]["code"].lower()})
     assert back.headers["Location"].endswith("/s/trials")
@@ -121,3 +139,82 @@ def test_a_declined_consent_ends_the_session(app, client, tmp_path):
     assert b"chose not to take part" in done.data
     assert client.post("/s/start").headers["Location"].endswith("/s/done")
     assert client.get("/s/api/current", headers=JSON).get_json()["end_reason"] == "declined"
+
+
+def test_the_page_gets_only_the_frame_on_screen_and_the_next(app, client, tmp_path):
+    with app.app_context():
+        ids = build_study(tmp_path, frames=2, per_activity=2, participants=1)
+        participant = db.session.get(Participant, ids["participants"][0])
+        code, trials = participant.code, [t.id for t in participant.trials]  # in trial order
+
+    def fetchable():
+        statuses = []
+        for trial in trials:
+            with client.get(f"/s/trials/{trial}/image") as response:
+                statuses.append(response.status_code)
+        return statuses
+
+    client.post("/s/", data={"code": code})
+    assert fetchable() == [404, 404, 404, 404]  # before consent
+    client.post("/s/consent", data={"decision": "agree"})
+    assert fetchable() == [404, 404, 404, 404]  # before start
+    client.post("/s/start")
+    assert fetchable() == [200, 200, 404, 404]  # the first on screen, the second to preload
+    state = client.get("/s/api/current", headers=JSON).get_json()
+    assert (state["trial"]["id"], state["next"]["id"]) == (trials[0], trials[1])
+    refused = client.get(f"/s/trials/{trials[2]}/image", headers=JSON)
+    assert refused.status_code == 404 and refused.get_json()["error"] == "not_found"
+    client.post(state["trial"]["submit_url"], json={"clicks": [], "none": True}, headers=JSON)
+    assert fetchable() == [404, 200, 200, 404]  # the answered one is gone, the third comes
+    for _ in range(3):
+        state = client.get("/s/api/current", headers=JSON).get_json()
+        client.post(state["trial"]["submit_url"], json={"clicks": [], "none": True}, headers=JSON)
+    assert client.get("/s/api/current", headers=JSON).get_json()["step"] == "done"
+    assert fetchable() == [404, 404, 404, 404]  # after the end
+
+
+def test_participant_pages_are_never_stored(app, client, tmp_path):
+    with app.app_context():
+        ids = build_study(tmp_path, participants=1)
+        code = db.session.get(Participant, ids["participants"][0]).code
+    answers = [client.get("/s/"), client.post("/s/", data={"code": code}), client.get("/s/consent")]
+    answers += [client.post("/s/consent", data={"decision": "agree"}), client.get("/s/instructions"), client.post("/s/start")]
+    answers += [client.get("/s/trials"), state := client.get("/s/api/current", headers=JSON)]
+    with client.get(state.get_json()["trial"]["image_url"]) as image:
+        assert image.status_code == 200
+        answers.append(image)
+    answers.append(client.post(state.get_json()["trial"]["submit_url"], json={"clicks": [], "none": True}, headers=JSON))
+    answers.append(client.get("/s/trials/999/image"))
+    for response in answers:
+        assert response.headers["Cache-Control"] == "no-store", (response.request.path, response.status_code)
+        assert "Expires" not in response.headers
+
+
+@pytest.fixture
+def limited(app, app_with):
+    """The app with the limiter on, on the same tables (whatever the tests' default)."""
+    return app_with(RATELIMIT_ENABLED=True, RATELIMIT_FAILURES=20)
+
+
+def test_wrong_codes_and_unknown_links_are_throttled_per_address(limited, tmp_path):
+    with limited.app_context():
+        ids = build_study(tmp_path, participants=1, entry=EntryKind.LINK)
+        participant = db.session.get(Participant, ids["participants"][0])
+        code, token = participant.code, participant.link_token
+    client = limited.test_client()
+    statuses = []
+    for attempt in range(30):  # wrong codes and made-up links, alternately: they count together
+        response = client.post("/s/", data={"code": "ZZZZ-ZZZZ"}) if attempt % 2 else client.post(f"/s/l/guess{attempt}")
+        statuses.append(response.status_code)
+        if response.status_code == 429:
+            break
+    assert statuses[-1] == 429 and set(statuses[:-1]) == {401, 404}, statuses
+    assert int(response.headers["Retry-After"]) > 0 and b"Too many failed attempts" in response.data
+    # From that address even a right code and a real link wait; another address is not slowed down.
+    assert client.post("/s/", data={"code": code}).status_code == 429
+    assert client.get(f"/s/l/{token}").status_code == 429
+    elsewhere = limited.test_client()
+    elsewhere.environ_base["REMOTE_ADDR"] = "192.0.2.7"
+    assert elsewhere.post(f"/s/l/{token}").headers["Location"].endswith("/s/consent")
+    with limited.app_context():
+        assert db.session.get(Participant, ids["participants"][0]).link_used_at is not None

@@ -5,6 +5,12 @@ on a migrated SQLite database in a temporary folder. Chromium comes from
 Debian (``apt-get install -y chromium``); Playwright's own browser download
 cannot work offline. Without Chromium these tests skip, unless
 ``EGONET_REQUIRE_BROWSER=1`` (set by .ci/run) makes that a failure.
+
+Every browser context (the ``page`` fixture's and those a test opens with
+``browser.new_context``) records Content Security Policy violations, and a
+test with any fails: the app's pages must run with no inline script or style.
+Give ``wait_for_function`` a function (``"() => ..."``): Playwright runs a bare
+expression through ``eval`` in the page, which that policy refuses.
 """
 
 import os
@@ -29,6 +35,37 @@ CHROMIUM_ARGS = [
     "--disable-sync",
 ]
 ARTIFACTS = Path(__file__).resolve().parents[2] / "test-results"
+
+# Runs in every document before its own scripts (not subject to the page's CSP).
+REPORT_CSP_VIOLATIONS = """
+document.addEventListener("securitypolicyviolation", (event) => {
+  window.reportCspViolation(`${event.effectiveDirective} blocked ${event.blockedURI || "inline"}`
+    + ` on ${location.pathname} (${event.sourceFile || "page"}:${event.lineNumber})`);
+}, true);
+"""
+csp_violations: list[str] = []
+
+
+def watch_csp(context) -> None:
+    """Record the CSP violations of every page in ``context`` (the DOM event and the console's report)."""
+
+    def on_violation(text: str) -> None:
+        csp_violations.append(text)
+
+    def on_console(message) -> None:
+        if "Content Security Policy" in message.text:
+            csp_violations.append(message.text)
+
+    context.expose_function("reportCspViolation", on_violation)
+    context.add_init_script(REPORT_CSP_VIOLATIONS)
+    context.on("console", on_console)
+
+
+@pytest.fixture(autouse=True)
+def no_csp_violations():
+    csp_violations.clear()
+    yield
+    assert not csp_violations, "Content Security Policy violations:\n" + "\n".join(csp_violations)
 
 
 @pytest.fixture
@@ -61,6 +98,14 @@ def browser():
 
     with sync_playwright() as p:
         browser = p.chromium.launch(executable_path=CHROMIUM, headless=True, args=CHROMIUM_ARGS)
+        new_context = browser.new_context
+
+        def new_watched_context(**options):
+            context = new_context(**options)
+            watch_csp(context)
+            return context
+
+        browser.new_context = new_watched_context
         yield browser
         browser.close()
 

@@ -41,7 +41,7 @@ def test_grid_and_viewer_show_real_images(live_app, live_server, page):
 
     first_url = page.url
     page.keyboard.press("ArrowRight")
-    page.wait_for_function(f"location.href !== {first_url!r}")
+    page.wait_for_function(f"() => location.href !== {first_url!r}")
     page.wait_for_load_state("networkidle")
     assert page.locator("#view-rgb").evaluate(LOADED)
     assert failed == [], "requests of these pages that failed"

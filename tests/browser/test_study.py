@@ -49,12 +49,24 @@ def test_participant_session_with_reload_and_admin_results(live_app, live_server
     page.wait_for_load_state("networkidle")
     links = [page.locator("input.link").nth(i).input_value() for i in range(2)]
     assert all("/s/l/" in link for link in links)
+    page.locator("input.link").first.focus()  # selected, ready to copy
+    assert page.locator("input.link").first.evaluate("el => el.selectionStart === 0 && el.selectionEnd === el.value.length")
     screenshot(page, "study-admin-detail")
 
-    # The participant, in their own browser context, opens the link once.
+    # The participant, in their own browser context, opens the link: a Start button (a link
+    # preview that fetches the link does not use it up), which signs them in.
     context = browser.new_context(viewport={"width": 1280, "height": 800})
     person = context.new_page()
+    refused = []
+
+    def on_response(response) -> None:
+        if response.status >= 400:
+            refused.append(f"{response.status} {response.url}")
+
+    person.on("response", on_response)  # e.g. a frame the page may not fetch (only the current and the next)
     person.goto(links[0])
+    screenshot(person, "study-link")
+    person.click("#start-link")
     assert person.url.endswith("/s/consent")
     screenshot(person, "study-consent")
     person.click("#agree")
@@ -77,6 +89,7 @@ def test_participant_session_with_reload_and_admin_results(live_app, live_server
     person.keyboard.press("Enter")
     wait_for_trial(person, 2)
     assert person.locator(".marker").count() == 0
+    assert person.locator("#progress-bar").evaluate("bar => [bar.value, bar.max]") == [1, 4]
 
     # Trial 2: a click, then a reload: the page resumes at trial 2, without the unsent click.
     click_frame(person, 0.3, 0.6)
@@ -98,6 +111,11 @@ def test_participant_session_with_reload_and_admin_results(live_app, live_server
     person.wait_for_url("**/s/done")
     assert "You answered all 4 photos" in person.inner_text("#thanks")
     screenshot(person, "study-done")
+    # Back does not bring the last trial back with its clock running: the page is not stored.
+    person.go_back()
+    person.wait_for_url("**/s/done")
+    assert "You answered all 4 photos" in person.inner_text("#thanks")
+    assert refused == []
 
     with live_app.app_context():
         study = db.session.execute(db.select(Study).filter_by(name="browser study")).scalar_one()

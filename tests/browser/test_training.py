@@ -44,7 +44,7 @@ def test_queue_a_run_watch_it_and_see_a_heatmap(live_app, live_server, page, mon
         )
         db.session.commit()
         run_id = run.id
-    page.wait_for_function("document.querySelector('#runs [data-field=percent]').textContent === '42%'", timeout=10_000)
+    page.wait_for_function("() => document.querySelector('#runs [data-field=percent]').textContent === '42%'", timeout=10_000)
     assert row.locator("[data-field=loss]").inner_text() == "0.1234"
     assert row.locator("[data-field=eta]").inner_text() == "2 min 05 s"
     screenshot(page, "training-progress")
@@ -66,7 +66,7 @@ def test_queue_a_run_watch_it_and_see_a_heatmap(live_app, live_server, page, mon
         )
         db.session.commit()
         frame_id = frame.id
-    page.wait_for_function("document.querySelector('#checkpoints') !== null", timeout=10_000)
+    page.wait_for_function("() => document.querySelector('#checkpoints') !== null", timeout=10_000)
     assert page.locator("#runs [data-field=status]").first.text_content() == "done"
     assert "0.610" in page.locator("#runs").inner_text()
     screenshot(page, "training-done")

@@ -2,7 +2,8 @@
 
 Participant routes admit the participant role, then ``_participant`` /
 ``_owned_trial`` refuse anyone who is not enrolled (the matrix's participant
-user is not): 403. The link in ``url_values`` is already used: 410 for all.
+user is not): 403. The link in ``url_values`` is already used: 410 for all,
+for the page (GET) and for its Start button (POST).
 """
 
 from app.extensions import db
