@@ -6,6 +6,7 @@ API errors are ``{"error": <short name>, "message": <sentence>, "fields":
 """
 
 from flask import Flask, jsonify, render_template, request
+from flask_wtf.csrf import CSRFError
 from werkzeug.exceptions import HTTPException, InternalServerError
 
 from app.extensions import db
@@ -52,6 +53,11 @@ def register(app: Flask) -> None:
     def handle_api_error(exc: ApiError):
         name = {400: "bad_request", 404: "not_found", 409: "conflict", 413: "too_large"}.get(exc.status, "error")
         return error_response(exc.status, name, exc.message, exc.fields, **exc.extra)
+
+    @app.errorhandler(CSRFError)
+    def handle_csrf(exc: CSRFError):
+        # Its own name: a page told "csrf" fetches a fresh token and sends the request again.
+        return error_response(400, "csrf", exc.description)
 
     @app.errorhandler(HTTPException)
     def handle_http(exc: HTTPException):

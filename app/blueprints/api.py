@@ -1,9 +1,12 @@
-"""Read-only JSON views of the dataset (the labelling and study APIs build on these)."""
+"""Read-only JSON views of the dataset (the labelling and study APIs build on
+these), and a fresh CSRF token for pages whose token went stale."""
 
-from flask import Blueprint, url_for
+from flask import Blueprint, jsonify, url_for
+from flask_wtf.csrf import generate_csrf
 
 from app.extensions import db
 from app.models import Activity, Frame, Sequence
+from app.security import public
 from app.services import frames as frames_service
 
 bp = Blueprint("api", __name__, url_prefix="/api")
@@ -53,3 +56,14 @@ def activity_frames(activity_id: int):
 def frame(frame_id: int):
     fr = db.get_or_404(Frame, frame_id)
     return frame_json(fr, frames_service.frame_statuses([fr.id])[fr.id])
+
+
+@bp.get("/csrf-token")
+@public
+def csrf_token():
+    """The session's CSRF token (made if it has none). A page asks for it when a
+    save was refused for its token: the session changed while the page was open
+    (signed out and in again in another tab, or the server's key changed)."""
+    response = jsonify(csrf_token=generate_csrf())
+    response.headers["Cache-Control"] = "no-store"
+    return response

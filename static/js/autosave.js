@@ -1,22 +1,36 @@
 // Autosave: every change reaches the server within `maxWait` ms (plus the
-// request itself), however steadily the person keeps working.
+// request itself), however steadily the person keeps working, and the page
+// is never told "saved" before the server has acknowledged the latest change.
 //
 // changed() marks the document dirty; a save starts `delay` ms after the
 // last change, but never later than `maxWait` ms after the first unsaved
 // one. One save runs at a time; changes made meanwhile are saved right
-// after it. A failed save is retried after `retryDelay` ms, except a 409
-// (conflict: the page has to ask the person) and other 4xx answers (a
-// retry would fail the same way), which stop saving until resume().
+// after it. A failed save, by the answer:
+// - none (status 0), 5xx, 401 (signed out: the person can sign in again in
+//   another tab), 408, 429: tried again after `retryDelay` ms, doubling up to
+//   `maxRetryDelay`; changes made meanwhile go with that retry;
+// - 409 (conflict: the page has to ask the person): saving stops until
+//   resume() or reset();
+// - another 4xx: a retry would fail the same way; the next change or
+//   flush() tries again.
 //
 // States reported through onState: "saved", "pending", "saving", "error",
-// "conflict".
+// "conflict". In "error", `error` is what failed and `retryAt` when the
+// next try starts (null: none is due); saveText() puts it in words.
+
+const RETRIED = new Set([0, 401, 408, 429]);
+
+export function retried(status) {
+  return !status || RETRIED.has(status) || status >= 500;
+}
 
 export class Autosaver {
-  constructor({ save, delay = 500, maxWait = 1500, retryDelay = 3000, timers = globalThis, now = () => Date.now(), onState = () => {} }) {
+  constructor({ save, delay = 500, maxWait = 1500, retryDelay = 2000, maxRetryDelay = 30000, timers = globalThis, now = () => Date.now(), onState = () => {} }) {
     this.save = save;
     this.delay = delay;
     this.maxWait = maxWait;
     this.retryDelay = retryDelay;
+    this.maxRetryDelay = maxRetryDelay;
     this.timers = timers;
     this.now = now;
     this.onState = onState;
@@ -27,6 +41,9 @@ export class Autosaver {
     this.inFlight = null;
     this.stopped = false;
     this.state = "saved";
+    this.error = null; // the last failure, while not saved since
+    this.retryAt = null; // when the next try starts after a failure
+    this.failures = 0; // in a row
   }
 
   get dirty() {
@@ -36,7 +53,8 @@ export class Autosaver {
   changed() {
     this.revision++;
     if (this.firstUnsaved === null) this.firstUnsaved = this.now();
-    if (!this.stopped) this.schedule();
+    // Waiting to retry: the change goes with the retry, at its time.
+    if (!this.stopped && this.retryAt === null) this.schedule();
   }
 
   schedule() {
@@ -47,14 +65,15 @@ export class Autosaver {
     this.setState("pending");
   }
 
-  // Save now (if anything changed); resolves when the server has everything or saving failed.
+  // Save now (if anything changed), also while waiting to retry; resolves
+  // when the server has everything or saving failed.
   async flush() {
     this.cancelTimer();
     if (this.inFlight) await this.inFlight;
     if (this.dirty && !this.stopped) await this.run();
   }
 
-  // Start saving again after a conflict or a refused save.
+  // Start saving again after a conflict.
   resume() {
     this.stopped = false;
     if (this.dirty) this.schedule();
@@ -67,11 +86,13 @@ export class Autosaver {
     this.savedRevision = this.revision;
     this.firstUnsaved = null;
     this.stopped = false;
+    this.failures = 0;
+    this.error = null;
     this.setState("saved");
   }
 
   run() {
-    this.timer = null;
+    this.cancelTimer();
     if (this.inFlight || this.stopped || !this.dirty) return this.inFlight || Promise.resolve();
     const revision = this.revision;
     const since = this.firstUnsaved;
@@ -83,20 +104,12 @@ export class Autosaver {
       } catch (error) {
         this.inFlight = null;
         this.firstUnsaved = Math.min(since, this.firstUnsaved ?? since);
-        const status = error?.status;
-        if (status === 409) {
-          this.stopped = true;
-          this.setState("conflict");
-        } else if (status >= 400 && status < 500) {
-          this.stopped = true;
-          this.setState("error");
-        } else {
-          this.setState("error");
-          this.timer = this.timers.setTimeout(() => this.run(), this.retryDelay);
-        }
+        this.failed(error);
         return;
       }
       this.inFlight = null;
+      this.failures = 0;
+      this.error = null;
       this.savedRevision = Math.max(this.savedRevision, revision);
       if (this.dirty) this.schedule();
       else this.setState("saved");
@@ -104,16 +117,48 @@ export class Autosaver {
     return this.inFlight;
   }
 
+  failed(error) {
+    this.error = error;
+    if (error?.status === 409) {
+      this.stopped = true;
+      this.setState("conflict", { always: true });
+      return;
+    }
+    if (retried(error?.status)) {
+      const wait = Math.min(this.maxRetryDelay, this.retryDelay * 2 ** this.failures++);
+      this.retryAt = this.now() + wait;
+      this.timer = this.timers.setTimeout(() => this.run(), wait);
+    }
+    this.setState("error", { always: true });
+  }
+
   cancelTimer() {
     if (this.timer !== null) this.timers.clearTimeout(this.timer);
     this.timer = null;
+    this.retryAt = null;
   }
 
-  setState(state) {
-    if (state === this.state) return;
+  setState(state, { always = false } = {}) {
+    if (state === this.state && !always) return;
     this.state = state;
     this.onState(state);
   }
+}
+
+// The save indicator's words for the saver's state (`now` for the countdown).
+export function saveText({ state, error, retryAt }, now = Date.now()) {
+  if (state === "saved") return "All changes saved";
+  if (state === "pending") return "Unsaved changes…";
+  if (state === "saving") return "Saving…";
+  if (state === "conflict") return "Not saved: this frame was saved elsewhere";
+  const status = error?.status;
+  if (status === 401) return "Not saved: you are signed out — sign in again in another tab";
+  let reason = error?.message || "the save failed";
+  if (status === 0) reason = "the server could not be reached";
+  else if (status >= 500) reason = `the server failed (HTTP ${status})`;
+  else if (status === 400 && error.body?.error === "csrf") reason = "the page's security token was refused; reload the page";
+  if (retryAt === null || retryAt === undefined) return `Not saved: ${reason}`;
+  return `Not saved: ${reason}; retrying in ${Math.max(1, Math.ceil((retryAt - now) / 1000))}s`;
 }
 
 // Seconds of active work on a page: counted while the page is visible and

@@ -9,8 +9,8 @@
 // so manual paint and erase survive later strokes; undoing or redoing a
 // GrabCut step also steps the server's session, so the two stay in step.
 
-import { api, ApiError, csrfToken } from "./api.js";
-import { ActiveClock, Autosaver } from "./autosave.js";
+import { api, ApiError, request } from "./api.js";
+import { ActiveClock, Autosaver, retried, saveText } from "./autosave.js";
 import { dragBox, fit, pan, toImage, toPixel, toScreen, wheelFactor, zoomAt } from "./geometry.js";
 import { History } from "./history.js";
 import { decodeRuns, encodeCocoRle, encodeRuns, maskFromRGBA } from "./mask_codec.js";
@@ -363,19 +363,12 @@ async function decodeMaskPng(blob) {
 }
 
 async function fetchMask(url) {
-  const response = await fetch(url, { credentials: "same-origin", cache: "no-cache" });
-  if (!response.ok) throw new ApiError(response.status, await response.json().catch(() => null));
+  const response = await request("GET", url, undefined, { cache: "no-cache", headers: { Accept: "image/png" } });
   return decodeMaskPng(await response.blob());
 }
 
 async function grabcutCall(kind, body) {
-  const response = await fetch(config.urls.grabcut[kind], {
-    method: "POST",
-    credentials: "same-origin",
-    headers: { "Content-Type": "application/json", Accept: "image/png", "X-CSRFToken": csrfToken() },
-    body: JSON.stringify({ frame_id: config.frame.id, ...body }),
-  });
-  if (!response.ok) throw new ApiError(response.status, await response.json().catch(() => null));
+  const response = await request("POST", config.urls.grabcut[kind], { frame_id: config.frame.id, ...body }, { headers: { Accept: "image/png" } });
   return decodeMaskPng(await response.blob());
 }
 
@@ -403,6 +396,8 @@ function runGrabcut(kind, params) {
       if (kind === "box" && !mask.includes(1)) {
         showMessage("GrabCut found no object in this box: draw it around the whole object, or mark the object with the Object brush (F).", "info");
       }
+    } catch (err) {
+      showMessage(`GrabCut did not run: ${errorText(err)}`, "error");
     } finally {
       setBusy(-1);
       renderInstances(); // also when it failed: a new object may have been made for it
@@ -461,45 +456,34 @@ async function save() {
   const body = saveBody();
   const seconds = clock.take();
   body.time_spent_delta_s = Math.round(Math.min(seconds, 3600) * 1000) / 1000;
-  const fetchImpl = (url, init) =>
-    fetch(url, { ...init, keepalive: keepalive && init.body.length < 60000 });
   try {
-    const data = await api("PUT", config.urls.annotation, body, { fetchImpl });
+    const data = await api("PUT", config.urls.annotation, body, { keepalive });
     if (pendingStatus === body.status) pendingStatus = null;
     applyMeta(data);
   } catch (err) {
     clock.giveBack(seconds);
     if (err.status === 409) {
       showConflict(err.body.current_version);
-    } else if (err.status === 400 && body.status) {
+    } else if (err.status === 400 && err.body.error !== "csrf" && body.status) {
       // The status could not be set (nothing drawn, an empty object): say why, save the rest.
       pendingStatus = null;
       showMessage(err.message, "error");
       return save();
-    } else if (err.status) {
-      showMessage(errorText(err), "error");
+    } else if (!retried(err.status)) {
+      showMessage(errorText(err), "error"); // refused: the whole reason, fields too
     }
     throw err;
   }
 }
 
-const autosaver = new Autosaver({
-  save,
-  delay: 500,
-  maxWait: 1500,
-  onState: (state) => {
-    const el = $("#save-state");
-    if (!el) return;
-    el.dataset.state = state;
-    el.textContent = {
-      saved: "All changes saved",
-      pending: "Unsaved changes…",
-      saving: "Saving…",
-      error: "Not saved — retrying",
-      conflict: "Not saved — conflict",
-    }[state];
-  },
-});
+const autosaver = new Autosaver({ save, delay: 500, maxWait: 1500, onState: showSaveState });
+
+function showSaveState() {
+  const el = $("#save-state");
+  if (!el) return;
+  el.dataset.state = autosaver.state;
+  el.textContent = saveText(autosaver);
+}
 
 function applyMeta(data) {
   meta.version = data.version;
@@ -558,7 +542,13 @@ async function reloadTheirs() {
 }
 
 async function keepMine() {
-  const data = await api("GET", config.urls.annotation);
+  let data;
+  try {
+    data = await api("GET", config.urls.annotation);
+  } catch (err) {
+    showMessage(`Could not read the saved version: ${errorText(err)}`, "error");
+    return;
+  }
   meta.version = data.version;
   $("#conflict").hidden = true;
   autosaver.resume();
@@ -627,7 +617,7 @@ function renderInstances() {
     const [r, g, b] = inst.colour;
     li.innerHTML = `
       <button type="button" class="pick" title="Select (${k + 1})">
-        <span class="swatch" style="background: rgb(${r}, ${g}, ${b})"></span>
+        <span class="swatch"></span>
         <span class="name">Object ${k + 1}</span>
         <span class="area">${area ? `${((100 * area) / N).toFixed(1)}%` : "empty"}</span>
       </button>
@@ -638,6 +628,7 @@ function renderInstances() {
         <input class="label" placeholder="name (optional)" maxlength="120" aria-label="name" ${editable ? "" : "disabled"}>
         ${editable ? '<button type="button" class="delete" title="Delete object (Del)" aria-label="delete">✕</button>' : ""}
       </div>`;
+    li.querySelector(".swatch").style.background = `rgb(${r}, ${g}, ${b})`; // a style attribute would break the CSP
     li.querySelector(".kind").value = inst.kind || "";
     li.querySelector(".label").value = inst.label || "";
     li.querySelector(".pick").addEventListener("click", () => select(inst.key));
@@ -957,6 +948,7 @@ function wire() {
     setInterval(() => {
       clock.tick(document.visibilityState === "visible");
       updateTime();
+      if (autosaver.retryAt !== null) showSaveState(); // the countdown to the next try
     }, 1000);
     // Leaving or hiding the page: unsaved edits go now; so does the time
     // counted since the last save, on its own (it makes no new version).
@@ -966,19 +958,16 @@ function wire() {
         autosaver.flush().finally(() => (keepalive = false));
       } else if (meta.version > 0 && clock.pending >= 1) {
         const seconds = clock.take();
-        const body = JSON.stringify({ seconds: Math.round(Math.min(seconds, 3600) * 1000) / 1000 });
-        fetch(config.urls.time, {
-          method: "POST",
-          keepalive: true,
-          credentials: "same-origin",
-          headers: { "Content-Type": "application/json", "X-CSRFToken": csrfToken() },
-          body,
-        })
-          .then((r) => (r.ok ? (meta.timeSpent += seconds) : clock.giveBack(seconds)))
+        api("POST", config.urls.time, { seconds: Math.round(Math.min(seconds, 3600) * 1000) / 1000 }, { keepalive: true })
+          .then(() => (meta.timeSpent += seconds))
           .catch(() => clock.giveBack(seconds));
       }
     };
-    document.addEventListener("visibilitychange", () => document.visibilityState === "hidden" && flushOnHide());
+    document.addEventListener("visibilitychange", () => {
+      if (document.visibilityState === "hidden") flushOnHide();
+      // Back from another tab (perhaps signed in again there): try a failed save now.
+      else if (autosaver.retryAt !== null) autosaver.flush();
+    });
     window.addEventListener("pagehide", flushOnHide);
     window.addEventListener("beforeunload", (e) => {
       if (autosaver.dirty) {

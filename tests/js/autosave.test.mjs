@@ -1,7 +1,7 @@
 import assert from "node:assert/strict";
 import { test } from "node:test";
 
-import { ActiveClock, Autosaver } from "../../static/js/autosave.js";
+import { ActiveClock, Autosaver, retried, saveText } from "../../static/js/autosave.js";
 
 // A fake clock and timers: run(ms) advances time and fires due timers in order.
 function fakeTime() {
@@ -84,9 +84,11 @@ test("changes made during a save are saved right after it", async () => {
   await time.run(0);
   await time.run(0);
   assert.equal(calls.length, 2);
+  assert.equal(a.state, "saving", "the server does not have the last change yet");
   release();
   await time.run(0);
   assert.equal(a.dirty, false);
+  assert.equal(a.state, "saved");
 });
 
 test("a network failure is retried; a conflict stops until resume", async () => {
@@ -103,7 +105,7 @@ test("a network failure is retried; a conflict stops until resume", async () => 
   await time.run(3000);
   assert.equal(n, 2);
   fail = { status: 409 };
-  await time.run(3000);
+  await time.run(6000);
   assert.equal(a.state, "conflict");
   a.changed();
   await time.run(10000);
@@ -114,6 +116,99 @@ test("a network failure is retried; a conflict stops until resume", async () => 
   assert.equal(n, 4);
   assert.equal(a.state, "saved");
   assert.ok(states.includes("conflict"));
+});
+
+test("retries back off, doubling up to the limit, and start again from the first after a success", async () => {
+  const time = fakeTime();
+  let fail = { status: 0 };
+  const tries = [];
+  const { a } = saver(time, async () => {
+    tries.push(time.now());
+    if (fail) throw fail;
+  }, { retryDelay: 1000, maxRetryDelay: 5000 });
+  a.changed();
+  await time.run(500 + 1000 + 2000 + 4000 + 5000 + 5000);
+  assert.deepEqual(tries.map((t, i) => t - (tries[i - 1] ?? 0)), [500, 1000, 2000, 4000, 5000, 5000]);
+  fail = null;
+  await time.run(5000);
+  assert.equal(a.state, "saved");
+  fail = { status: 503 };
+  a.changed();
+  await time.run(500);
+  assert.equal(a.retryAt, time.now() + 1000, "the first delay again");
+});
+
+test("changes made while a retry is due go with that retry, and the last one decides 'saved'", async () => {
+  const time = fakeTime();
+  let online = false;
+  const sent = [];
+  let a;
+  ({ a } = saver(time, async () => {
+    sent.push(a.revision);
+    if (!online) throw { status: 0 };
+  }));
+  const states = [];
+  a.onState = (s) => states.push(s);
+  a.changed();
+  await time.run(500);
+  assert.equal(a.state, "error");
+  for (let i = 0; i < 10; i++) {
+    a.changed();
+    await time.run(100);
+  }
+  assert.deepEqual(sent, [1], "no extra tries between retries");
+  assert.equal(a.state, "error", "still says it is not saved");
+  online = true;
+  await time.run(2000); // the retry, 3 s after the failure
+  assert.deepEqual(sent, [1, 11]);
+  assert.equal(a.dirty, false);
+  assert.deepEqual(states, ["pending", "saving", "error", "saving", "saved"]);
+});
+
+test("a refused save is not retried; the next change or a flush tries again", async () => {
+  const time = fakeTime();
+  let fail = { status: 413, message: "the request body is too large" };
+  let n = 0;
+  const { a } = saver(time, async () => {
+    n++;
+    if (fail) throw fail;
+  });
+  a.changed();
+  await time.run(500);
+  assert.equal(a.state, "error");
+  assert.equal(a.retryAt, null);
+  await time.run(60000);
+  assert.equal(n, 1);
+  assert.equal(saveText(a), "Not saved: the request body is too large");
+  a.changed();
+  await time.run(500);
+  assert.equal(n, 2);
+  fail = null;
+  await a.flush();
+  assert.equal(n, 3);
+  assert.equal(a.state, "saved");
+});
+
+test("which failures are retried", () => {
+  for (const status of [undefined, 0, 401, 408, 429, 500, 502, 503]) assert.ok(retried(status), `${status}`);
+  for (const status of [400, 403, 404, 409, 413, 415, 422]) assert.ok(!retried(status), `${status}`);
+});
+
+test("the indicator says why a save failed, in words", () => {
+  const at = (state, error = null, retryAt = null) => saveText({ state, error, retryAt }, 10_000);
+  assert.equal(at("saved"), "All changes saved");
+  assert.equal(at("pending"), "Unsaved changes…");
+  assert.equal(at("saving"), "Saving…");
+  assert.equal(at("conflict"), "Not saved: this frame was saved elsewhere");
+  const network = { status: 0, message: "the server could not be reached" };
+  assert.equal(at("error", network, 14_200), "Not saved: the server could not be reached; retrying in 5s");
+  assert.equal(at("error", network, 10_000), "Not saved: the server could not be reached; retrying in 1s");
+  assert.equal(at("error", { status: 500, message: "The server encountered an internal error and was unable…" }, 12_000), "Not saved: the server failed (HTTP 500); retrying in 2s");
+  assert.equal(at("error", { status: 401, message: "sign in first" }, 40_000), "Not saved: you are signed out — sign in again in another tab");
+  assert.equal(at("error", { status: 403, message: "the participant role cannot use this" }), "Not saved: the participant role cannot use this");
+  assert.equal(at("error", { status: 400, message: "instances.0.mask: the size is 10x10, the frame 320x240" }), "Not saved: instances.0.mask: the size is 10x10, the frame 320x240");
+  assert.equal(at("error", { status: 400, message: "The CSRF tokens do not match.", body: { error: "csrf" } }), "Not saved: the page's security token was refused; reload the page");
+  assert.equal(at("error", new Error("mask is 10x10, the frame 320x240"), 11_000), "Not saved: mask is 10x10, the frame 320x240; retrying in 1s");
 });
 
 test("flush saves at once and waits for it; reset forgets", async () => {
