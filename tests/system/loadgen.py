@@ -8,7 +8,13 @@ and accounts, starts gunicorn (``app:create_app()``) and runs the users for
   GrabCut box around the frame's action-object (its demo ground truth, 5 %
   loose each side) and three strokes (foreground on the object, background
   in the box beside it), and save masks (with version checks);
-* participants answer study trials.
+* participants answer study trials;
+* optionally (``abuser=True``) one more annotator sends the largest GrabCut
+  calls the server allows, back to back with no think time: a box over all
+  but the border of a frame of the largest allowed size, then strokes with
+  the most points and the widest radius allowed, zig-zagging over it. Their
+  latencies are kept under ``ABUSE_BOX`` / ``ABUSE_STROKE``, apart from the
+  other users'.
 
 Users arrive one after another over the first ``ramp`` seconds (like
 locust's spawn rate; a thundering herd of users starting in the same
@@ -29,6 +35,7 @@ from contextlib import closing
 from dataclasses import dataclass, field
 from pathlib import Path
 
+import cv2
 import httpx
 import numpy as np
 from flask_migrate import upgrade
@@ -38,6 +45,8 @@ from app.models import Activity, Annotation, Frame
 from app.services import studies
 from app.services.demo import create_demo
 from app.services.ground_truth import ground_truths, mask_of
+from app.services.importing import import_path
+from app.services.labelling import stroke_pixels
 from app.services.users import create_user
 from tests.system.harness import (
     Server, drop_schema, make_app, participant_client, private_schema_url, rle, staff_client,
@@ -45,6 +54,7 @@ from tests.system.harness import (
 
 PASSWORD = "load-test-password"
 BOX, STROKE = "POST /api/label/grabcut/box", "POST /api/label/grabcut/stroke"
+ABUSE_BOX, ABUSE_STROKE = "abuser: largest box", "abuser: largest stroke"
 
 
 @dataclass
@@ -172,6 +182,72 @@ async def participant(base, cookies, headers, stats, deadline, seed, delay):
             await stats.call(client, "POST /s/api/trials/<id>", "POST", trial["submit_url"], json=answer)
 
 
+@dataclass(frozen=True)
+class Limits:
+    """The largest GrabCut call the server accepts (from the app's config)."""
+
+    frame_side: int
+    stroke_points: int
+    radius: float
+    stroke_pixels: int  # what one object's strokes may sweep in all (labelling.stroke_pixels)
+
+    @classmethod
+    def of(cls, config) -> "Limits":
+        return cls(int(config["MAX_FRAME_SIDE"]), int(config["GRABCUT_MAX_STROKE_POINTS"]),
+                   float(config["GRABCUT_MAX_RADIUS"]), int(config["GRABCUT_MAX_STROKE_PIXELS"]))
+
+
+def largest_stroke(limits: Limits) -> list[list[float]]:
+    """A zig-zag over the whole frame with the widest brush: as many points
+    as the stroke limits allow (the points cap, and the pixels one object's
+    strokes may sweep), every point somewhere new."""
+    side = limits.frame_side
+    shape = (side, side)
+
+    def zigzag(n: int) -> np.ndarray:
+        t = np.linspace(0.0, 1.0, n)
+        return np.stack([1 + (side - 3) * np.abs(((t * 40) % 2) - 1), 1 + (side - 3) * t], axis=1)
+
+    low, high = 1, limits.stroke_points
+    while low < high:  # the longest zig-zag within the sweep limit
+        mid = (low + high + 1) // 2
+        if stroke_pixels(shape, zigzag(mid), limits.radius) <= limits.stroke_pixels:
+            low = mid
+        else:
+            high = mid - 1
+    return zigzag(low).tolist()
+
+
+def add_abuse_frame(instance: Path, side: int) -> int:
+    """Import one ``side`` x ``side`` frame of smooth colour blobs with noise
+    (no clear object: the graph cut's worst case); return its id."""
+    rng = np.random.default_rng(5)
+    small = rng.integers(0, 256, (12, 12, 3), dtype=np.uint8)
+    image = cv2.resize(small, (side, side), interpolation=cv2.INTER_CUBIC)
+    image = np.clip(image.astype(np.int16) + rng.integers(-20, 21, image.shape), 0, 255).astype(np.uint8)
+    folder = instance / "abuse-frames"
+    folder.mkdir()
+    cv2.imwrite(str(folder / "00000.png"), image)
+    import_path(folder, activity="abuse")
+    return db.session.execute(db.select(Frame.id).where(Frame.width == side)).scalars().first()
+
+
+async def abuser(base, cookies, headers, frame_id: int, limits: Limits, stats, deadline):
+    """One annotator sending the largest allowed GrabCut calls in a loop, no
+    think time: a box over all of the largest frame but a 16 px border (the
+    least background GrabCut accepts), then the largest stroke (which uses up
+    the object's sweep budget, so the next call is a box again)."""
+    side = limits.frame_side
+    target = {"frame_id": frame_id, "instance": "abuse"}
+    box = {**target, "box": [16, 16, side - 16, side - 16]}
+    stroke = {**target, "points": largest_stroke(limits), "label": "bg", "radius": limits.radius}
+    async with httpx.AsyncClient(base_url=base, cookies=cookies, headers=headers, timeout=120) as client:
+        while time.monotonic() < deadline:
+            await stats.call(client, ABUSE_BOX, "POST", "/api/label/grabcut/box", json=box)
+            if time.monotonic() < deadline:
+                await stats.call(client, ABUSE_STROKE, "POST", "/api/label/grabcut/stroke", json=stroke)
+
+
 def count_lost(saves: list[tuple[int, int, np.ndarray]]) -> int:
     """How many frames' last acknowledged save is not what the database holds."""
     last: dict[int, tuple[int, np.ndarray]] = {}
@@ -201,8 +277,11 @@ def run_load(
     workers: int = 4,
     threads: int = 4,
     size: tuple[int, int] = (1280, 960),
+    abuse: bool = False,
 ) -> LoadResult:
-    """Run ``users`` simulated users (``participants`` of them in a study) for ``duration`` seconds."""
+    """Run ``users`` simulated users (``participants`` of them in a study) for
+    ``duration`` seconds; with ``abuse``, one more annotator sends the largest
+    allowed GrabCut calls in a loop."""
     n_annotators = users - participants
     if n_annotators < 1 or participants < 0:
         raise ValueError(f"need at least one annotator: {users} users, {participants} participants")
@@ -221,9 +300,16 @@ def run_load(
             truths = ground_truths(db.session.execute(db.select(Frame.id)).scalars())
             pick = np.random.default_rng(0)
             frames = [target_of(fid, mask_of(a), pick) for fid, a in sorted(truths.items())]
+            limits = Limits.of(app.config)
+            if abuse:
+                create_user("abuser", "annotator", PASSWORD)
+                abuse_frame = add_abuse_frame(instance, limits.frame_side)
             db.session.remove()
         description = (f"gunicorn {workers} workers x {threads} threads on PostgreSQL; {len(frames)} frames of "
                        f"{width}x{height}; {n_annotators} annotators + {participants} participants arriving over {ramp:g} s")
+        if abuse:
+            description += (f"; plus one abuser: boxes on a {limits.frame_side}x{limits.frame_side} frame and strokes of "
+                            f"{len(largest_stroke(limits))} points with radius {limits.radius:g}")
         server = Server(url, instance, workers=workers, threads=threads)
         try:
             sessions = []
@@ -249,6 +335,11 @@ def run_load(
                     jobs.append(annotator(server.url, cookies, headers, mine, activities, stats, saves, deadline, i, delay))
                 else:
                     jobs.append(participant(server.url, cookies, headers, stats, deadline, i, delay))
+
+            if abuse:
+                with closing(staff_client(server.url, "abuser", PASSWORD)) as c:
+                    headers = {k: v for k, v in c.headers.items() if k.lower() in ("x-csrftoken", "accept")}
+                    jobs.append(abuser(server.url, dict(c.cookies), headers, abuse_frame, limits, stats, deadline))
 
             async def run_all():
                 await asyncio.wait_for(asyncio.gather(*jobs), timeout=duration + 120)

@@ -11,7 +11,7 @@ import os
 
 import pytest
 
-from tests.system.loadgen import BOX, STROKE, run_load
+from tests.system.loadgen import ABUSE_BOX, ABUSE_STROKE, BOX, STROKE, run_load
 
 POSTGRES_URL = os.environ.get("EGONET_TEST_POSTGRES_URL")
 pytestmark = [
@@ -31,3 +31,16 @@ def test_twenty_users_no_errors_nothing_lost(tmp_path):
     assert result.saves >= annotators
     assert len(stats.times[STROKE]) == 3 * len(stats.times[BOX]) >= 3 * annotators
     assert len(stats.times["POST /s/api/trials/<id>"]) >= 6
+
+
+def test_an_abusive_annotator_costs_the_others_no_request(tmp_path):
+    """One annotator sending the largest GrabCut calls allowed, back to back:
+    those calls are accepted (the limits and the simulation agree), and
+    nobody else's request fails or save goes missing."""
+    result = run_load(POSTGRES_URL, tmp_path, users=10, participants=3, duration=20, ramp=3,
+                      workers=2, threads=4, size=(320, 240), abuse=True)
+    stats = result.stats
+    assert sum(stats.errors.values()) == 0, stats.error_samples[:10]
+    assert result.lost == 0
+    assert stats.times[ABUSE_BOX] and stats.times[ABUSE_STROKE]
+    assert result.saves >= 7 and len(stats.times["POST /s/api/trials/<id>"]) >= 3
