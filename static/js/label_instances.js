@@ -1,0 +1,111 @@
+// The labelling page's list of action-objects: adding, selecting and
+// deleting them, their kind and name, the "no action-object" flag, and
+// commit(), which records an edit in the undo history and lets autosave
+// send it.
+
+import { updateControls } from "./label_panel.js";
+import { autosaver } from "./label_save.js";
+import { $, N, doc, editable, instance, makeInstance, record, ui } from "./label_state.js";
+import { renderOverlay } from "./label_view.js";
+import { countSet } from "./raster.js";
+
+// Redraw everything that shows the document.
+export function refresh() {
+  renderOverlay();
+  renderInstances();
+  updateControls();
+}
+
+// The document changed (restored from the history, say): show it and save it.
+export function edited() {
+  refresh();
+  autosaver.changed();
+}
+
+// Record the edit just made (undoable) and let autosave send it.
+export function commit(op = null) {
+  record(op);
+  edited();
+}
+
+export function addInstance() {
+  const inst = makeInstance();
+  doc.instances.push(inst);
+  ui.selectedKey = inst.key;
+  doc.noActionObject = false;
+  commit();
+}
+
+export function deleteInstance(key) {
+  const i = doc.instances.findIndex((x) => x.key === key);
+  if (i < 0) return;
+  doc.instances.splice(i, 1);
+  if (ui.selectedKey === key) ui.selectedKey = doc.instances[Math.min(i, doc.instances.length - 1)]?.key ?? null;
+  commit();
+}
+
+export function select(key) {
+  if (!instance(key)) return;
+  ui.selectedKey = key;
+  renderOverlay();
+  renderInstances();
+}
+
+// The checkbox: marking the frame empty deletes what is drawn, once confirmed.
+function setNoActionObject(event) {
+  const drawn = doc.instances.filter((i) => i.mask.some((v) => v)).length;
+  if (event.target.checked && drawn && !window.confirm(`Delete the ${drawn} drawn object(s) and mark the frame "no action-object"?`)) {
+    event.target.checked = false;
+    return;
+  }
+  doc.noActionObject = event.target.checked;
+  if (doc.noActionObject) {
+    doc.instances = [];
+    ui.selectedKey = null;
+  }
+  commit();
+}
+
+export function wireInstances() {
+  if (editable) $("#no-ao").addEventListener("change", setNoActionObject);
+}
+
+export function renderInstances() {
+  const list = $("#instances");
+  list.replaceChildren();
+  doc.instances.forEach((inst, k) => {
+    const li = document.createElement("li");
+    li.className = "instance" + (inst.key === ui.selectedKey ? " selected" : "");
+    li.dataset.key = inst.key;
+    const area = countSet(inst.mask);
+    const [r, g, b] = inst.colour;
+    li.innerHTML = `
+      <button type="button" class="pick" title="Select (${k + 1})">
+        <span class="swatch"></span>
+        <span class="name">Object ${k + 1}</span>
+        <span class="area">${area ? `${((100 * area) / N).toFixed(1)}%` : "empty"}</span>
+      </button>
+      <div class="instance-fields">
+        <select class="kind" aria-label="kind" ${editable ? "" : "disabled"}>
+          <option value="">kind…</option><option value="tactile">tactile</option><option value="visual">visual</option>
+        </select>
+        <input class="label" placeholder="name (optional)" maxlength="120" aria-label="name" ${editable ? "" : "disabled"}>
+        ${editable ? '<button type="button" class="delete" title="Delete object (Del)" aria-label="delete">✕</button>' : ""}
+      </div>`;
+    li.querySelector(".swatch").style.background = `rgb(${r}, ${g}, ${b})`; // a style attribute would break the CSP
+    li.querySelector(".kind").value = inst.kind || "";
+    li.querySelector(".label").value = inst.label || "";
+    li.querySelector(".pick").addEventListener("click", () => select(inst.key));
+    li.querySelector(".kind").addEventListener("change", (e) => {
+      inst.kind = e.target.value || null;
+      commit();
+    });
+    li.querySelector(".label").addEventListener("change", (e) => {
+      inst.label = e.target.value.trim() || null;
+      commit();
+    });
+    li.querySelector(".delete")?.addEventListener("click", () => deleteInstance(inst.key));
+    list.append(li);
+  });
+  $("#instances-empty").hidden = doc.instances.length > 0;
+}

@@ -1,0 +1,70 @@
+// What the labelling page tells the person outside the canvas: the status
+// badge, the undo/redo buttons, the reviewer's note, the time spent, the
+// busy spinner and the passing messages. Also the queue that runs GrabCut
+// calls, undo and redo one at a time, so the server sees them in page order.
+
+import { ApiError } from "./api.js";
+import { $, clock, doc, editable, history, meta } from "./label_state.js";
+
+let busy = 0;
+let messageTimer = null;
+let queue = Promise.resolve();
+
+export function enqueue(task) {
+  queue = queue.then(task).catch((err) => showMessage(errorText(err), "error"));
+  return queue;
+}
+
+export function setBusy(delta) {
+  busy += delta;
+  $("#busy").hidden = busy <= 0;
+}
+
+export function showMessage(text, kind = "info") {
+  const el = $("#message");
+  el.textContent = text;
+  el.className = `message ${kind}`;
+  el.hidden = false;
+  clearTimeout(messageTimer);
+  messageTimer = setTimeout(() => (el.hidden = true), kind === "error" ? 7000 : 4000);
+}
+
+// The server's whole reason, with the fields it names when the message does not.
+export function errorText(err) {
+  if (err instanceof ApiError) {
+    const fields = Object.entries(err.body?.fields || {}).map(([k, v]) => `${k}: ${v}`);
+    return fields.length && !err.message.includes(fields[0].split(":")[0]) ? `${err.message} (${fields.join("; ")})` : err.message;
+  }
+  return err?.message || String(err);
+}
+
+export function updateControls() {
+  const badge = $("#status-badge");
+  badge.className = `status status-${meta.status}`;
+  badge.textContent = meta.status.replace("_", " ");
+  $("#no-ao").checked = doc.noActionObject;
+  const finished = meta.status === "done" || meta.status === "reviewed";
+  if (editable) {
+    $("#undo").disabled = !history.canUndo;
+    $("#redo").disabled = !history.canRedo;
+    $("#mark-done").hidden = finished;
+    $("#done-next").hidden = finished;
+    $("#reopen").hidden = !finished;
+  }
+  const banner = $("#review-note");
+  if (meta.reviewComment) {
+    banner.hidden = false;
+    banner.classList.toggle("rejected", meta.status === "rejected");
+    const who = meta.reviewer ? ` by ${meta.reviewer}` : "";
+    $("#review-note-title").textContent = meta.status === "rejected" ? `Returned${who} — please fix:` : `Reviewer's note${who}:`;
+    $("#review-note-text").textContent = meta.reviewComment;
+  } else {
+    banner.hidden = true;
+  }
+  updateTime();
+}
+
+export function updateTime() {
+  const total = Math.round(meta.timeSpent + (editable ? clock.pending : 0));
+  $("#time-spent").textContent = `${Math.floor(total / 60)}:${String(total % 60).padStart(2, "0")}`;
+}

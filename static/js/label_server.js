@@ -1,0 +1,51 @@
+// The labelling page's calls to the server, all through api.js: the
+// annotation (read, save, time, review), its masks and the GrabCut steps,
+// whose answers are masks sent as PNG.
+
+import { api, request } from "./api.js";
+import { H, N, W, config } from "./label_state.js";
+import { maskFromRGBA } from "./mask_codec.js";
+
+async function decodeMaskPng(blob) {
+  const bitmap = await createImageBitmap(blob, { colorSpaceConversion: "none", premultiplyAlpha: "none" });
+  if (bitmap.width !== W || bitmap.height !== H) throw new Error(`mask is ${bitmap.width}x${bitmap.height}, the frame ${W}x${H}`);
+  const c = document.createElement("canvas");
+  c.width = W;
+  c.height = H;
+  const g = c.getContext("2d", { willReadFrequently: true });
+  g.drawImage(bitmap, 0, 0);
+  bitmap.close();
+  return maskFromRGBA(g.getImageData(0, 0, W, H).data, N);
+}
+
+export async function fetchMask(url) {
+  const response = await request("GET", url, undefined, { cache: "no-cache", headers: { Accept: "image/png" } });
+  return decodeMaskPng(await response.blob());
+}
+
+// GrabCut's current mask for an object (its server session's last answer).
+export function fetchEngineMask(key) {
+  return fetchMask(`${config.urls.grabcut.mask}?frame_id=${config.frame.id}&instance=${encodeURIComponent(key)}`);
+}
+
+// kind: "box", "stroke" or "undo"; the answer is the object's new mask.
+export async function grabcut(kind, body) {
+  const response = await request("POST", config.urls.grabcut[kind], { frame_id: config.frame.id, ...body }, { headers: { Accept: "image/png" } });
+  return decodeMaskPng(await response.blob());
+}
+
+export function getAnnotation() {
+  return api("GET", config.urls.annotation);
+}
+
+export function putAnnotation(body, { keepalive = false } = {}) {
+  return api("PUT", config.urls.annotation, body, { keepalive });
+}
+
+export function postTime(seconds) {
+  return api("POST", config.urls.time, { seconds }, { keepalive: true });
+}
+
+export function postReview(body) {
+  return api("POST", config.urls.review, body);
+}
