@@ -41,8 +41,6 @@ import csv
 import hashlib
 import io as _io
 import json
-import os
-import tempfile
 from collections import defaultdict
 from collections.abc import Callable, Iterable, Iterator, Sequence
 from dataclasses import dataclass, field
@@ -558,16 +556,8 @@ def _read_cache(path: Path, thresholds: int) -> tuple[dict[str, Stats], list[str
 
 
 def _write_cache(path: Path, stats: dict[str, Stats], notes: list[str]) -> None:
-    path.parent.mkdir(parents=True, exist_ok=True)
     data = json.dumps({"stats": {name: _dump(s) for name, s in stats.items()}, "notes": notes})
-    fd, tmp = tempfile.mkstemp(dir=path.parent, prefix=".tmp-", suffix=".json")
-    try:
-        with os.fdopen(fd, "w") as fh:
-            fh.write(data)
-        os.replace(tmp, path)
-    except BaseException:
-        Path(tmp).unlink(missing_ok=True)
-        raise
+    media.write_atomic(path, data.encode())
 
 
 def _accumulate(

@@ -864,7 +864,7 @@ def participant_soft_masks(participant: Participant) -> Iterator[tuple[Frame, np
 
 def mask_png(mask: np.ndarray) -> bytes:
     """A soft mask as a 16-bit grayscale PNG (value * 65535), precise enough for 1/100 thresholds."""
-    return io.encode_png(np.round(np.clip(mask, 0.0, 1.0) * 65535).astype(np.uint16))
+    return io.encode_probability_png(mask)
 
 
 def overlay_png(
