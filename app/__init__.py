@@ -93,6 +93,7 @@ def create_app(test_config: dict | None = None, *, instance_path: str | None = N
         SQLALCHEMY_ENGINE_OPTIONS={"pool_pre_ping": True},
         MEDIA_ROOT=str(instance / "media"),
         CACHE_ROOT=str(instance / "cache"),
+        QUEUE_URL=os.environ.get("EGONET_QUEUE_URL") or f"sqlite:///{instance / 'queue.sqlite3'}",
         MAX_CONTENT_LENGTH=64 * 1024 * 1024,
         SESSION_COOKIE_HTTPONLY=True,
         SESSION_COOKIE_SAMESITE="Lax",
@@ -138,12 +139,13 @@ def create_app(test_config: dict | None = None, *, instance_path: str | None = N
     login_manager.init_app(app)
     login_manager.login_view = "auth.login"
 
-    from app import errors, security, throttle
+    from app import errors, queue, security, throttle
     from app.blueprints import api, auth, frames, label, navigation, scores, studies, study, training, users
     from app.cli import bp as cli_bp
 
     security.require_production_safety(app)
     throttle.init_app(app)
+    queue.init_app(app)
     errors.register(app)
     security.register(app)
     app.register_blueprint(auth.bp)

@@ -11,7 +11,7 @@ password included.
 
 Storage: in memory (per server process) by default; Redis when
 ``RATELIMIT_STORAGE_URI`` is a ``redis://`` URL, or, when it is unset and
-``EGONET_QUEUE_URL`` is one, that Redis (so several gunicorn processes and
+the queue's URL (``QUEUE_URL``, from ``EGONET_QUEUE_URL``) is one, that Redis (so several gunicorn processes and
 machines share the counts).
 
 The limiter is one object for the process (views are decorated with it at
@@ -22,7 +22,6 @@ process that makes several apps (the tests).
 """
 
 import math
-import os
 import time
 
 from flask import Flask, Response, current_app, request
@@ -36,7 +35,7 @@ def storage_uri(app: Flask) -> str:
     configured = app.config.get("RATELIMIT_STORAGE_URI")
     if configured:
         return configured
-    queue = os.environ.get("EGONET_QUEUE_URL", "")
+    queue = app.config.get("QUEUE_URL") or ""
     return queue if queue.startswith(("redis://", "rediss://")) else "memory://"
 
 

@@ -5,7 +5,6 @@ given (the README's test command and ``.ci/run`` give it).
 """
 
 import os
-import tempfile
 
 import pytest
 from hypothesis import settings
@@ -15,10 +14,11 @@ from hypothesis import settings
 settings.register_profile("egonet", deadline=None)
 settings.load_profile("egonet")
 
-# The task queue is chosen when app.tasks is imported: give the test session
-# its own SQLite queue so it never touches instance/ (tests that need Redis
-# make their own Huey).
-os.environ.setdefault("EGONET_QUEUE_URL", f"sqlite:///{tempfile.mkdtemp(prefix='egonet-queue-')}/queue.sqlite3")
+# Each test app's queue is the QUEUE_URL default, SQLite in its own instance
+# folder: a queue set for this machine must not reach the tests (those that
+# need Redis say so).
+for name in ("EGONET_QUEUE_URL", "FLASK_QUEUE_URL"):
+    os.environ.pop(name, None)
 
 
 def pytest_addoption(parser):

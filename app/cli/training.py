@@ -3,9 +3,9 @@
 import re
 
 import click
-from flask import current_app
 
 from app.cli import bp, one_line_errors, progress_bar
+from app.queue import current_huey, enqueue, run_worker
 
 
 def _size(ctx, param, value: str) -> tuple[int, int]:
@@ -150,9 +150,7 @@ def predict_command(checkpoint_id, activities, frames, device, queue):
     with one_line_errors():
         chosen = frames_for_prediction(activity_names=activities, frame_ids=frame_ids)
         if queue:
-            from app.tasks import predict_frames
-
-            predict_frames(checkpoint.id, [f.id for f in chosen], device)
+            enqueue("predict_frames", checkpoint.id, [f.id for f in chosen], device)
             click.echo(f"{len(chosen)} frames queued for checkpoint {checkpoint.id}: start `flask egonet worker`")
             return
         with progress_bar("Predicting") as (on_start, on_progress):
@@ -166,7 +164,5 @@ def predict_command(checkpoint_id, activities, frames, device, queue):
 @click.option("--workers", type=click.IntRange(min=1, max=16), default=1, show_default=True)
 def worker_command(workers):
     """Run the task-queue worker (training, batch prediction) until Ctrl-C."""
-    from app.tasks import huey, run_worker
-
-    click.echo(f"worker: {type(huey.storage).__name__} queue, {workers} worker(s); Ctrl-C to stop")
-    run_worker(current_app._get_current_object(), workers=workers)
+    click.echo(f"worker: {type(current_huey().storage).__name__} queue, {workers} worker(s); Ctrl-C to stop")
+    run_worker(workers=workers)

@@ -19,8 +19,6 @@ For the scorer: ``completed_runs()`` and ``held_out_predictions(run)``.
 """
 
 import logging
-import os
-import tempfile
 import time
 from collections.abc import Callable, Iterable, Iterator
 from dataclasses import dataclass
@@ -42,6 +40,7 @@ from app.models.training import (
     RunStatus,
     TrainingRun,
 )
+from app.queue import enqueue
 from app.services import ground_truth, media
 from egonet import io
 
@@ -93,10 +92,8 @@ class RunRequest:
 
 def start_run(request: RunRequest, *, created_by: User | None = None) -> TrainingRun:
     """Create a run and queue it for the worker; returns at once."""
-    from app.tasks import train_run
-
     run = create_run(request, created_by=created_by)
-    train_run(run.id)
+    enqueue("train_run", run.id)
     return run
 
 
@@ -287,8 +284,6 @@ def resume_run(run: TrainingRun) -> TrainingRun:
     Raises:
         ApiError: 409 if the run is queued, running or done.
     """
-    from app.tasks import train_run
-
     changed = db.session.execute(
         update(TrainingRun)
         .where(TrainingRun.id == run.id, TrainingRun.status.in_([RunStatus.FAILED, RunStatus.CANCELLED]))
@@ -298,7 +293,7 @@ def resume_run(run: TrainingRun) -> TrainingRun:
     db.session.refresh(run)
     if not changed:
         raise ApiError(409, f"run {run.id} is {run.status.value}: only failed or cancelled runs can be resumed")
-    train_run(run.id)
+    enqueue("train_run", run.id)
     return run
 
 
@@ -361,7 +356,7 @@ class _Recorder:
             raise Cancelled
 
     def map(self, fold: str, sample, probability: np.ndarray) -> None:
-        png = io.encode_png(np.round(probability * 65535.0).astype(np.uint16))
+        png = io.encode_probability_png(probability)
         self.maps.append((int(sample.key), media.store(png, ".png")))
 
     def fold_end(self, result) -> None:
@@ -386,7 +381,7 @@ class _Recorder:
 def execute_run(run_id: int, *, on_progress: Callable | None = None) -> TrainingRun:
     """The job: train a queued run and record its checkpoints and held-out predictions.
 
-    Runs in the worker (``app.tasks.train_run``) or in the foreground
+    Runs in the worker (job ``train_run`` of ``app.tasks``) or in the foreground
     (``flask egonet train``). A run that is no longer queued (cancelled
     meanwhile) is left alone. Under ``torchrun`` every process calls this;
     only rank 0 writes to the database.
@@ -584,12 +579,11 @@ def held_out_predictions(run: TrainingRun) -> Iterator[tuple[Frame, np.ndarray]]
 
 def read_probability(path: str, *, shape: tuple[int, int] | None = None) -> np.ndarray:
     """A stored prediction as float32 (H, W) in [0, 1]."""
-    raw = cv2.imdecode(np.frombuffer(media.read(path), np.uint8), cv2.IMREAD_UNCHANGED)
-    if raw is None or raw.dtype != np.uint16 or raw.ndim != 2:
-        raise io.MediaError(path, "prediction must be a single-channel 16-bit PNG")
-    if shape is not None and raw.shape != tuple(shape):
-        raise io.MediaError(path, f"prediction is {raw.shape[1]}x{raw.shape[0]}, the frame {shape[1]}x{shape[0]}")
-    return raw.astype(np.float32) / 65535.0
+    probability = io.decode_probability_png(media.read(path), path=path)
+    if shape is not None and probability.shape != tuple(shape):
+        raise io.MediaError(path, f"prediction is {probability.shape[1]}x{probability.shape[0]}, "
+                                  f"the frame {shape[1]}x{shape[0]}")
+    return probability
 
 
 def latest_prediction(frame_id: int) -> Prediction | None:
@@ -623,11 +617,7 @@ def prediction_overlay(prediction: Prediction) -> Path:
         probability = read_probability(prediction.path)
         bgr = cv2.applyColorMap(np.round(probability * 255).astype(np.uint8), cv2.COLORMAP_TURBO)
         alpha = np.round(np.clip(probability * 1.4, 0, 1) * 220).astype(np.uint8)  # faint where unlikely
-        root.mkdir(parents=True, exist_ok=True)
-        fd, tmp = tempfile.mkstemp(dir=root, prefix=".tmp-", suffix=".png")
-        with os.fdopen(fd, "wb") as fh:
-            fh.write(cv2.imencode(".png", np.dstack([bgr, alpha]))[1].tobytes())
-        os.replace(tmp, path)
+        media.write_atomic(path, cv2.imencode(".png", np.dstack([bgr, alpha]))[1].tobytes())
     return path
 
 
@@ -712,7 +702,7 @@ def predict(
         rgb = io.read_image(media.absolute_path(frame.rgb_path))
         dhg = io.read_dhg(media.absolute_path(frame.dhg_path)) if frame.dhg_path and model.uses_dhg else None
         probability = predict_frame(model, rgb, dhg, size=size)
-        path = media.store(io.encode_png(np.round(probability * 65535.0).astype(np.uint16)), ".png")
+        path = media.store(io.encode_probability_png(probability), ".png")
         prediction = existing.get(frame.id) or Prediction(run_id=checkpoint.run_id, checkpoint_id=checkpoint.id, frame_id=frame.id)
         prediction.path, prediction.held_out, prediction.created_at = path, frame.id in held_out, utcnow()
         db.session.add(prediction)

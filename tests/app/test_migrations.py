@@ -34,7 +34,8 @@ def test_downgrade_to_base_and_back(ctx):
 def test_create_app_never_creates_tables(tmp_path):
     from app import create_app
 
-    app = create_app({"SQLALCHEMY_DATABASE_URI": f"sqlite:///{tmp_path / 'empty.sqlite3'}", "TESTING": True})
+    app = create_app({"SQLALCHEMY_DATABASE_URI": f"sqlite:///{tmp_path / 'empty.sqlite3'}", "TESTING": True},
+                     instance_path=str(tmp_path / "instance"))
     with app.app_context():
         app.test_client().get("/api/activities")
         assert inspect(db.engine).get_table_names() == []

@@ -8,7 +8,8 @@ from pathlib import Path
 
 import pytest
 
-from app.tasks import huey, make_huey, ping
+from app.queue import current_huey, enqueue, make_huey
+from app.tasks import ping
 
 ROOT = Path(__file__).resolve().parents[2]
 
@@ -41,10 +42,12 @@ def wait_result(result, timeout=30.0):
 
 
 @pytest.mark.slow
-def test_sqlite_queue_round_trip_through_the_worker(database_url, tmp_path):
-    worker = start_worker(database_url, tmp_path, os.environ["EGONET_QUEUE_URL"])
+def test_sqlite_queue_round_trip_through_the_worker(app, database_url, tmp_path):
+    worker = start_worker(database_url, tmp_path, app.config["QUEUE_URL"])
     try:
-        assert wait_result(ping(41)) == 42
+        with app.app_context():
+            result = enqueue("ping", 41)
+        assert wait_result(result) == 42
     finally:
         worker.terminate()
         out = worker.communicate(timeout=10)[0]
@@ -68,7 +71,8 @@ def test_redis_queue_round_trip_through_the_worker(database_url, tmp_path):
     assert "RedisStorage queue" in out
 
 
-def test_queue_url_is_checked():
+def test_queue_url_is_checked(ctx):
+    huey = current_huey()
     with pytest.raises(RuntimeError, match="EGONET_QUEUE_URL"):
         make_huey("mysql://nope")
     assert type(huey.storage).__name__ == "SqliteStorage"

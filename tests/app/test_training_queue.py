@@ -13,7 +13,6 @@ from app.models import Activity
 from app.models.training import RunStatus, TrainingRun
 from app.services import training
 from app.services.demo import create_demo
-from app.tasks import huey
 
 ROOT = Path(__file__).resolve().parents[2]
 
@@ -24,14 +23,13 @@ def test_a_run_started_from_the_page_completes_through_the_worker(app, database_
     with app.app_context():
         create_demo(frames_per_activity=2, width=64, height=48)
         ids = list(db.session.execute(db.select(Activity.id).where(Activity.name.in_(["cooking", "dining"]))).scalars())
-    huey.flush()  # jobs other tests left in the session's queue must not reach this worker
     form = {"model": "egonet-lite", "folds": "loao", "epochs": "1", "device": "cpu", "width": "32", "height": "24",
             "batch_size": "2", "seed": "0", "name": "queued from the page", "activities": [str(i) for i in ids]}
     assert admin_client.post("/training/runs", data=form).status_code == 302
 
     env = dict(
         os.environ,
-        EGONET_QUEUE_URL=os.environ["EGONET_QUEUE_URL"],
+        EGONET_QUEUE_URL=app.config["QUEUE_URL"],
         FLASK_SQLALCHEMY_DATABASE_URI=database_url,
         FLASK_MEDIA_ROOT=str(tmp_path / "media"),
         FLASK_CACHE_ROOT=str(tmp_path / "cache"),

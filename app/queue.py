@@ -1,0 +1,120 @@
+"""The task queue: long work (training, batch prediction) runs in a worker.
+
+Huey, with SQLite storage in the instance folder by default (no server), or
+Redis with ``QUEUE_URL=redis://host:6379/0`` (the setting defaults to the
+``EGONET_QUEUE_URL`` environment variable). ``init_app`` gives each app its
+queue from that setting, so the web app and ``flask egonet worker`` agree on
+it; the Huey is made on first use, so an app that never queues a job creates
+no file.
+
+This module is a leaf: it knows the queue, not the jobs. The jobs are the
+functions of ``app.tasks`` marked ``@job``; services queue one by name with
+``enqueue("train_run", run_id)`` and return at once, and the worker runs it
+inside an application context.
+"""
+
+from collections.abc import Callable
+from functools import cached_property, update_wrapper, wraps
+from importlib import import_module
+from pathlib import Path
+from urllib.parse import urlsplit
+
+from flask import Flask, current_app
+from huey import Huey, RedisHuey, SqliteHuey
+from huey.api import Result, TaskWrapper
+
+EXTENSION = "egonet.queue"
+JOBS = "app.tasks"
+"""The module whose ``@job`` functions the worker runs."""
+
+_jobs: dict[str, "Job"] = {}
+
+
+class Job:
+    """A function the worker runs, made by ``@job``.
+
+    Calling the job queues it on the current app's queue and returns Huey's
+    ``Result`` at once; ``func`` is the function itself.
+    """
+
+    def __init__(self, func: Callable):
+        update_wrapper(self, func)
+        self.func = func
+        self.name = func.__name__
+
+    def __call__(self, *args) -> Result | None:
+        return current_app.extensions[EXTENSION].task(self.name)(*args)
+
+
+def job(func: Callable) -> Job:
+    """Declare ``func`` a job of the queue (used in ``app.tasks``)."""
+    _jobs[func.__name__] = Job(func)
+    return _jobs[func.__name__]
+
+
+def enqueue(name: str, *args) -> Result | None:
+    """Queue job ``name`` of ``app.tasks`` with ``args`` for the worker; returns at once.
+
+    The job is looked up on the module when called, so replacing it there
+    (a test's ``monkeypatch``) replaces it for every caller.
+    """
+    return getattr(import_module(JOBS), name)(*args)
+
+
+def make_huey(url: str) -> Huey:
+    """A Huey instance for ``redis://...`` or ``sqlite:///path``."""
+    if url.startswith(("redis://", "rediss://")):
+        return RedisHuey("egonet", url=url)
+    if not url.startswith("sqlite:///"):
+        raise RuntimeError(f"QUEUE_URL (EGONET_QUEUE_URL) must start with redis:// or sqlite:///, got {url!r}")
+    path = Path(urlsplit(url).path)
+    path.parent.mkdir(parents=True, exist_ok=True)
+    return SqliteHuey("egonet", filename=str(path))
+
+
+def _in_app_context(app: Flask, func: Callable) -> Callable:
+    @wraps(func)  # keeps the job's module and name, which identify it in messages
+    def run(*args):
+        with app.app_context():
+            return func(*args)
+
+    return run
+
+
+class AppQueue:
+    """One app's queue (``app.extensions["egonet.queue"]``), made on first use."""
+
+    def __init__(self, app: Flask, url: str):
+        self.app = app
+        self.url = url
+
+    @cached_property
+    def _registered(self) -> tuple[Huey, dict[str, TaskWrapper]]:
+        huey = make_huey(self.url)
+        import_module(JOBS)  # its @job decorators fill _jobs
+        tasks = {name: huey.task(name=name)(_in_app_context(self.app, job.func)) for name, job in _jobs.items()}
+        return huey, tasks
+
+    @property
+    def huey(self) -> Huey:
+        return self._registered[0]
+
+    def task(self, name: str) -> TaskWrapper:
+        """Job ``name``, registered on this queue to run in this app's context."""
+        return self._registered[1][name]
+
+
+def init_app(app: Flask) -> None:
+    app.extensions[EXTENSION] = AppQueue(app, app.config["QUEUE_URL"])
+
+
+def current_huey() -> Huey:
+    """The current app's Huey."""
+    return current_app.extensions[EXTENSION].huey
+
+
+def run_worker(*, workers: int = 1) -> None:
+    """Consume the current app's jobs until interrupted (``flask egonet worker``)."""
+    # Threads share the process; the training jobs themselves use torch's threads.
+    consumer = current_huey().create_consumer(workers=workers, worker_type="thread", periodic=False)
+    consumer.run()
