@@ -31,18 +31,39 @@ Example:
 from __future__ import annotations
 
 from collections.abc import Sequence
+from dataclasses import dataclass
 
 import cv2
 import numpy as np
 
 from egonet.io import check_rgb
 
-__all__ = ["DEFAULT_SIGMA", "click_gaussian", "project_to_regions", "soft_mask", "superpixels"]
+__all__ = ["DEFAULT_SIGMA", "SUPERPIXEL_DEFAULTS", "SuperpixelDefaults", "click_gaussian", "project_to_regions",
+           "soft_mask", "superpixels"]
 
 DEFAULT_SIGMA = 60.0
 """The paper's click width: standard deviation in native-resolution pixels."""
 
 SUPERPIXEL_METHODS = ("slic", "felzenszwalb")
+
+
+@dataclass(frozen=True)
+class SuperpixelDefaults:
+    """The one place the superpixel defaults live (``superpixels``, the
+    study builder and its form all read them): SLIC with about 400 regions
+    of compactness 10, as a stand-in for the paper's MCG regions; for
+    Felzenszwalb, scale 100 and regions of at least 50 pixels; both on a
+    copy at most 640 px on its long side."""
+
+    method: str = "slic"
+    n_segments: int = 400
+    compactness: float = 10.0
+    scale: float = 100.0
+    min_size: int = 50
+    max_side: int = 640
+
+
+SUPERPIXEL_DEFAULTS = SuperpixelDefaults()
 
 
 def _relabel(labels: np.ndarray) -> np.ndarray:
@@ -66,12 +87,12 @@ def _upscale_nearest(labels: np.ndarray, shape: tuple[int, int]) -> np.ndarray:
 def superpixels(
     image: np.ndarray,
     *,
-    method: str = "slic",
+    method: str = SUPERPIXEL_DEFAULTS.method,
     n_segments: int | None = None,
     compactness: float | None = None,
     scale: float | None = None,
     min_size: int | None = None,
-    max_side: int | None = 640,
+    max_side: int | None = SUPERPIXEL_DEFAULTS.max_side,
 ) -> np.ndarray:
     """Partition a frame into superpixel regions.
 
@@ -133,16 +154,16 @@ def superpixels(
         work = cv2.resize(image, size, interpolation=cv2.INTER_AREA)
 
     if method == "slic":
-        n = 400 if n_segments is None else n_segments
-        c = 10.0 if compactness is None else compactness
+        n = SUPERPIXEL_DEFAULTS.n_segments if n_segments is None else n_segments
+        c = SUPERPIXEL_DEFAULTS.compactness if compactness is None else compactness
         if isinstance(n, bool) or not isinstance(n, (int, np.integer)) or n < 1:
             raise ValueError(f"n_segments must be a positive int, got {n!r}")
         if not np.isfinite(c) or c <= 0:
             raise ValueError(f"compactness must be a positive number, got {c!r}")
         labels = slic(work, n_segments=int(n), compactness=float(c), start_label=0, channel_axis=-1)
     else:
-        s = 100.0 if scale is None else scale
-        m = 50 if min_size is None else min_size
+        s = SUPERPIXEL_DEFAULTS.scale if scale is None else scale
+        m = SUPERPIXEL_DEFAULTS.min_size if min_size is None else min_size
         if not np.isfinite(s) or s <= 0:
             raise ValueError(f"scale must be a positive number, got {s!r}")
         if isinstance(m, bool) or not isinstance(m, (int, np.integer)) or m < 1:

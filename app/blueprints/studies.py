@@ -30,6 +30,7 @@ from app.models.studies import ANSWERED, EntryKind, Participant, Study, StudyFra
 from app.security import roles
 from app.services import ground_truth
 from app.services import studies
+from egonet.clicks import SUPERPIXEL_DEFAULTS
 
 bp = Blueprint("studies", __name__, url_prefix="/studies")
 
@@ -53,12 +54,14 @@ class StudyForm(Form):
     trial_limit_s = IntegerField("Per-trial limit (seconds, empty for none)", validators=[Optional(), NumberRange(1, 24 * 3600)])
     multiple_clicks = BooleanField("Several clicks per frame (then Next; otherwise one click answers)", default=True)
     sigma_px = FloatField("Click width sigma (native pixels)", default=60.0, validators=[InputRequired(), NumberRange(0.5, 10_000)])
-    superpixel_method = SelectField("Superpixels", choices=[SelectChoice("slic", "SLIC"), SelectChoice("felzenszwalb", "Felzenszwalb")], default="slic")
-    n_segments = IntegerField("SLIC regions", default=400, validators=[Optional()])
-    compactness = FloatField("SLIC compactness", default=10.0, validators=[Optional()])
-    scale = FloatField("Felzenszwalb scale", default=100.0, validators=[Optional()])
-    min_size = IntegerField("Felzenszwalb minimum region size", default=50, validators=[Optional()])
-    max_side = IntegerField("Working resolution: longest side (px, empty for native)", default=640, validators=[Optional()])
+    superpixel_method = SelectField("Superpixels", choices=[SelectChoice("slic", "SLIC"), SelectChoice("felzenszwalb", "Felzenszwalb")],
+                                    default=SUPERPIXEL_DEFAULTS.method)
+    n_segments = IntegerField("SLIC regions", default=SUPERPIXEL_DEFAULTS.n_segments, validators=[Optional()])
+    compactness = FloatField("SLIC compactness", default=SUPERPIXEL_DEFAULTS.compactness, validators=[Optional()])
+    scale = FloatField("Felzenszwalb scale", default=SUPERPIXEL_DEFAULTS.scale, validators=[Optional()])
+    min_size = IntegerField("Felzenszwalb minimum region size", default=SUPERPIXEL_DEFAULTS.min_size, validators=[Optional()])
+    max_side = IntegerField("Working resolution: longest side (px, empty for native)", default=SUPERPIXEL_DEFAULTS.max_side,
+                            validators=[Optional()])
     instructions = TextAreaField("Instructions", default=studies.DEFAULT_INSTRUCTIONS, validators=[Length(max=20_000)])
     consent = TextAreaField("Consent", default=studies.DEFAULT_CONSENT, validators=[Length(max=20_000)])
 

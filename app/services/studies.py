@@ -68,18 +68,23 @@ from app.models.studies import (
 from app.services import ground_truth, media
 from egonet import clicks as egonet_clicks
 from egonet import io
+from egonet.clicks import SUPERPIXEL_DEFAULTS
 
 LATE_GRACE_S = 2.0
 """Seconds after a deadline during which an answer is still accepted (network latency)."""
 
-DEFAULT_SUPERPIXELS = {"method": "slic", "n_segments": 400, "compactness": 10.0, "max_side": 640}
 SUPERPIXEL_OPTIONS = {"slic": ("n_segments", "compactness"), "felzenszwalb": ("scale", "min_size")}
-# Each option's default (egonet.clicks.superpixels's), type and accepted range.
+DEFAULT_SUPERPIXELS = {
+    "method": SUPERPIXEL_DEFAULTS.method,
+    **{name: getattr(SUPERPIXEL_DEFAULTS, name) for name in SUPERPIXEL_OPTIONS[SUPERPIXEL_DEFAULTS.method]},
+    "max_side": SUPERPIXEL_DEFAULTS.max_side,
+}
+# Each option's default (egonet.clicks.SUPERPIXEL_DEFAULTS), type and accepted range.
 OPTION_RULES = {
-    "n_segments": (400, int, 1, 10_000),
-    "compactness": (10.0, float, 1e-3, 1e3),
-    "scale": (100.0, float, 1e-3, 1e5),
-    "min_size": (50, int, 1, 100_000),
+    "n_segments": (SUPERPIXEL_DEFAULTS.n_segments, int, 1, 10_000),
+    "compactness": (SUPERPIXEL_DEFAULTS.compactness, float, 1e-3, 1e3),
+    "scale": (SUPERPIXEL_DEFAULTS.scale, float, 1e-3, 1e5),
+    "min_size": (SUPERPIXEL_DEFAULTS.min_size, int, 1, 100_000),
 }
 
 DEFAULT_INSTRUCTIONS = (
