@@ -1,4 +1,7 @@
-"""One error shape: JSON for API calls, an HTML page for browsers.
+"""One error type, one shape: JSON for API calls, an HTML page for browsers.
+
+Services raise ``Problem`` (egonet raises ``EgonetError``, mapped onto it);
+the handlers below answer it, and ``app.cli`` prints it as one line.
 
 API errors are ``{"error": <short name>, "message": <sentence>, "fields":
 {<field>: <reason>}}``. A request is an API call when its path starts with
@@ -10,28 +13,50 @@ from flask_wtf.csrf import CSRFError
 from werkzeug.exceptions import HTTPException, InternalServerError
 
 from app.extensions import db
+from egonet.errors import EgonetError
 
 
-class Problem(ValueError):
-    """A request a service cannot carry out; ``field`` names the bad input when there is one.
+class Problem(Exception):
+    """The app's one error: something a user asked for that cannot be done, said in words.
 
-    The CLI prints it as a one-line error; views turn it into a 400 naming the field.
+    Services and views raise it (or an area's subclass, such as
+    ``StudyProblem``); one handler each turns it into the API's JSON shape,
+    the browser's error page and the CLI's one-line failure. egonet's
+    ``EgonetError`` is mapped the same way (see ``from_egonet``).
+
+    Args:
+        message: The sentence shown to the user.
+        field: The input at fault: a form or JSON field, a CLI option or a file.
+        status: The HTTP status a view answers with: 400 bad input (default),
+            403 not allowed, 404 no such thing, 409 conflict, 410 gone, 413 too large.
+        fields: ``{field: reason}`` for the JSON's ``fields``; defaults to
+            ``{field: message}`` when ``field`` is given.
+        **extra: More keys of the JSON body (for example ``reason="time_up"``).
     """
 
-    def __init__(self, message: str, *, field: str | None = None):
+    def __init__(self, message: str, *, field: str | None = None, status: int = 400,
+                 fields: dict[str, str] | None = None, **extra):
         super().__init__(message)
-        self.field = field
+        self.message = message
+        self.field = field if field is not None else next(iter(fields or {}), None)
+        self.status = status
+        self.fields = dict(fields) if fields is not None else ({field: message} if field else {})
+        self.extra = extra
+
+    @classmethod
+    def from_egonet(cls, exc: EgonetError) -> "Problem":
+        """egonet's error as the app's: a 400 naming its field (an argument or a file)."""
+        return cls(exc.message, field=exc.field, fields={exc.field: exc.reason} if exc.field else {})
 
 
-class ApiError(Exception):
-    """Raised by views and services to answer a 4xx with a message and fields."""
+class ApiError(Problem):
+    """Transitional spelling of ``Problem(message, status=...)``; being removed."""
 
     def __init__(self, status: int, message: str, *, fields: dict[str, str] | None = None, **extra):
-        super().__init__(message)
-        self.status = status
-        self.message = message
-        self.fields = fields or {}
-        self.extra = extra
+        super().__init__(message, status=status, fields=fields or {}, **extra)
+
+
+ERROR_NAMES = {400: "bad_request", 404: "not_found", 409: "conflict", 413: "too_large"}
 
 
 def wants_json() -> bool:
@@ -49,10 +74,13 @@ def error_response(status: int, name: str, message: str, fields: dict[str, str] 
 
 
 def register(app: Flask) -> None:
-    @app.errorhandler(ApiError)
-    def handle_api_error(exc: ApiError):
-        name = {400: "bad_request", 404: "not_found", 409: "conflict", 413: "too_large"}.get(exc.status, "error")
-        return error_response(exc.status, name, exc.message, exc.fields, **exc.extra)
+    @app.errorhandler(Problem)
+    def handle_problem(exc: Problem):
+        return error_response(exc.status, ERROR_NAMES.get(exc.status, "error"), exc.message, exc.fields, **exc.extra)
+
+    @app.errorhandler(EgonetError)
+    def handle_egonet_error(exc: EgonetError):
+        return handle_problem(Problem.from_egonet(exc))
 
     @app.errorhandler(CSRFError)
     def handle_csrf(exc: CSRFError):

@@ -23,6 +23,8 @@ import cv2
 import numpy as np
 from PIL import Image, UnidentifiedImageError
 
+from egonet.errors import EgonetError
+
 IMAGE_SUFFIXES = (".jpg", ".jpeg", ".png")
 VIDEO_SUFFIXES = (".mp4", ".avi", ".mov")
 DEPTH_SUFFIXES = (".png", ".npy", ".npz")
@@ -32,13 +34,12 @@ DEPTH_SUFFIXES = (".png", ".npy", ".npz")
 MAX_PIXELS = 64_000_000
 
 
-class MediaError(ValueError):
-    """A media file that cannot be used, with the file named in the message."""
+class MediaError(EgonetError):
+    """A media file that cannot be used; the file is the field, named in the message."""
 
     def __init__(self, path: str | Path, reason: str):
+        super().__init__(f"{path}: {reason}", field=str(path), reason=reason)
         self.path = str(path)
-        self.reason = reason
-        super().__init__(f"{path}: {reason}")
 
 
 def check_rgb(image: object, name: str, *, min_side: int = 1) -> tuple[int, int]:

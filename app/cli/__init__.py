@@ -1,25 +1,33 @@
 """The ``flask egonet`` command group: thin wrappers over the services.
 
 Each area adds its commands in its own module (data.py, training.py, ...),
-all on the one group below. Every failure exits non-zero with a one-line
-reason (click's "Error: ...").
+all on the one group below. A ``Problem`` or ``EgonetError`` raised by a
+command exits non-zero with a one-line reason (click's "Error: ...").
 """
 
 import contextlib
 
 import click
 from flask import Blueprint
+from flask.cli import AppGroup
+
+from app.errors import Problem
+from egonet.errors import EgonetError
+
+
+
+class EgonetGroup(AppGroup):
+    """The command group; its one handler prints a ``Problem`` or ``EgonetError`` as one line."""
+
+    def invoke(self, ctx: click.Context):
+        try:
+            return super().invoke(ctx)
+        except (Problem, EgonetError) as exc:
+            raise click.ClickException(str(exc)) from None
+
 
 bp = Blueprint("egonet_cli", __name__, cli_group="egonet")
-
-
-@contextlib.contextmanager
-def one_line_errors():
-    """Turn the services' validation errors into click's one-line failure."""
-    try:
-        yield
-    except ValueError as exc:  # MediaError, ImportProblem, UserProblem are ValueErrors
-        raise click.ClickException(str(exc)) from None
+bp.cli = EgonetGroup()
 
 
 @contextlib.contextmanager

@@ -4,7 +4,7 @@ from pathlib import Path
 
 import click
 
-from app.cli import bp, one_line_errors, progress_bar
+from app.cli import bp, progress_bar
 from app.models import Role, Status
 
 
@@ -34,7 +34,7 @@ def import_command(path, activity, sequence, stride, depth_dir, dhg_dir, masks_d
     """
     from app.services.importing import import_path
 
-    with one_line_errors(), progress_bar("Importing") as (on_start, on_progress):
+    with progress_bar("Importing") as (on_start, on_progress):
         report = import_path(
             path,
             activity=activity,
@@ -65,7 +65,7 @@ def demo_command(frames_per_activity, seed, width, height):
     from app.services.demo import create_demo
     from egonet.synth import ACTIVITIES
 
-    with one_line_errors(), progress_bar("Rendering demo") as (on_start, on_progress):
+    with progress_bar("Rendering demo") as (on_start, on_progress):
         on_start(frames_per_activity * len(ACTIVITIES))
         reports = create_demo(
             frames_per_activity=frames_per_activity, seed=seed, width=width, height=height, on_progress=on_progress
@@ -99,16 +99,14 @@ def create_user_command(name, role, password, if_missing, reset_password):
     if existing is not None and reset_password:
         if role is not None and role != existing.role.value:
             raise click.ClickException(f"{existing.username!r} is {existing.role.value}, not {role}; change roles with set-role")
-        with one_line_errors():
-            generated = set_password(existing, password or ask_password(existing.role))
+        generated = set_password(existing, password or ask_password(existing.role))
         click.echo(f"new password for {existing.role.value} {existing.username!r}; their sessions have ended")
         if generated:
             click.echo(f"password: {generated}")
         return
     if role is None:
         raise click.UsageError("Missing option '--role' (NAME is a new user).")
-    with one_line_errors():
-        user, generated = create_user(name, role, password or ask_password(Role(role)))
+    user, generated = create_user(name, role, password or ask_password(Role(role)))
     click.echo(f"created {user.role.value} {user.username!r}")
     if generated:
         click.echo(f"password: {generated}")

@@ -4,7 +4,7 @@ from pathlib import Path
 
 import click
 
-from app.cli import bp, one_line_errors, progress_bar
+from app.cli import bp, progress_bar
 from app.models import Status
 
 STATUS_CHOICES = click.Choice([s.value for s in Status])
@@ -27,7 +27,7 @@ def export_command(out, fmt, activities, statuses):
     one RLE mask per instance)."""
     from app.services.exchange import DEFAULT_STATUSES, export_folder
 
-    with one_line_errors(), progress_bar("Exporting") as (on_start, on_progress):
+    with progress_bar("Exporting") as (on_start, on_progress):
         report = export_folder(
             out,
             fmt=fmt,
@@ -51,7 +51,7 @@ def import_annotations_command(path, author, status, replace, skip_missing):
     as <activity>/<sequence>/<frame>.png. The frames must be imported first."""
     from app.services.exchange import import_annotations
 
-    with one_line_errors(), progress_bar("Importing") as (on_start, on_progress):
+    with progress_bar("Importing") as (on_start, on_progress):
         report = import_annotations(
             path,
             author=author,

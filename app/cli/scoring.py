@@ -4,7 +4,7 @@ import sys
 
 import click
 
-from app.cli import bp, one_line_errors, progress_bar
+from app.cli import bp, progress_bar
 
 FORMATS = {"table": "to_table", "csv": "to_csv", "latex": "to_latex", "json": "to_json"}
 
@@ -37,7 +37,7 @@ def score_command(runs, studies, fmt, baselines, thresholds, per_image, no_cache
     """
     from app.services.scoring import build_report
 
-    with one_line_errors(), progress_bar("Scoring frames", file=sys.stderr) as (on_start, on_progress):
+    with progress_bar("Scoring frames", file=sys.stderr) as (on_start, on_progress):
         report = build_report(
             run_ids=runs,
             study_ids=studies,

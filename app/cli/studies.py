@@ -4,7 +4,7 @@ from pathlib import Path
 
 import click
 
-from app.cli import bp, one_line_errors, progress_bar
+from app.cli import bp, progress_bar
 
 
 def _study(study_id: int):
@@ -28,7 +28,7 @@ def study_superpixels_command(study_id):
     from app.services.studies import precompute_superpixels
 
     study = _study(study_id)
-    with one_line_errors(), progress_bar("Superpixels") as (on_start, on_progress):
+    with progress_bar("Superpixels") as (on_start, on_progress):
         on_start(len(study.frames))
         computed = precompute_superpixels(study, on_progress=on_progress)
     click.echo(f"study {study.id}: {computed} frames computed, {len(study.frames) - computed} already cached")
@@ -47,7 +47,7 @@ def study_export_command(study_id, out):
     from app.services.studies import export_to_folder
 
     study = _study(study_id)
-    with one_line_errors(), progress_bar("Exporting") as (on_start, on_progress):
+    with progress_bar("Exporting") as (on_start, on_progress):
         try:
             written = export_to_folder(study, out, on_start=on_start, on_progress=on_progress)
         except OSError as exc:

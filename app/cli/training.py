@@ -4,7 +4,7 @@ import re
 
 import click
 
-from app.cli import bp, one_line_errors, progress_bar
+from app.cli import bp, progress_bar
 from app.queue import current_huey, enqueue, run_worker
 
 
@@ -97,16 +97,15 @@ def train_command(model, folds, epochs, device, size, lr, batch_size, seed, pret
         batch_size=batch_size, seed=seed, pretrained=pretrained, activity_ids=activity_ids, name=name,
         resume_from=checkpoint,
     )
-    with one_line_errors():
-        if queue:
-            run = start_run(request)
-            click.echo(f"run {run.id} queued: start `flask egonet worker` to train it")
-            return
-        bar = TrainingBar()
-        try:
-            run = train_in_foreground(request, on_progress=bar)
-        finally:
-            bar.close()
+    if queue:
+        run = start_run(request)
+        click.echo(f"run {run.id} queued: start `flask egonet worker` to train it")
+        return
+    bar = TrainingBar()
+    try:
+        run = train_in_foreground(request, on_progress=bar)
+    finally:
+        bar.close()
     if run is None:
         return
     click.echo(f"run {run.id} ({run.name}): {run.status.value}")
@@ -147,15 +146,14 @@ def predict_command(checkpoint_id, activities, frames, device, queue):
         frame_ids = [int(x) for x in frames.split(",") if x.strip()] if frames else []
     except ValueError:
         raise click.BadParameter("give frame ids separated by commas, e.g. 3,4,10", param_hint="--frames") from None
-    with one_line_errors():
-        chosen = frames_for_prediction(activity_names=activities, frame_ids=frame_ids)
-        if queue:
-            enqueue("predict_frames", checkpoint.id, [f.id for f in chosen], device)
-            click.echo(f"{len(chosen)} frames queued for checkpoint {checkpoint.id}: start `flask egonet worker`")
-            return
-        with progress_bar("Predicting") as (on_start, on_progress):
-            on_start(len(chosen))
-            made = predict(checkpoint, chosen, device=device, on_progress=on_progress)
+    chosen = frames_for_prediction(activity_names=activities, frame_ids=frame_ids)
+    if queue:
+        enqueue("predict_frames", checkpoint.id, [f.id for f in chosen], device)
+        click.echo(f"{len(chosen)} frames queued for checkpoint {checkpoint.id}: start `flask egonet worker`")
+        return
+    with progress_bar("Predicting") as (on_start, on_progress):
+        on_start(len(chosen))
+        made = predict(checkpoint, chosen, device=device, on_progress=on_progress)
     held_out = sum(p.held_out for p in made)
     click.echo(f"checkpoint {checkpoint.id} ({checkpoint.fold}): {len(made)} predictions stored, {held_out} of held-out frames")
 

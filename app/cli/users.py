@@ -9,7 +9,7 @@ import sys
 
 import click
 
-from app.cli import bp, one_line_errors
+from app.cli import bp
 from app.models import Role, User
 from app.services import users
 
@@ -55,8 +55,7 @@ def users_command():
 def set_role_command(name, role):
     """Give user NAME another staff ROLE (their sessions end)."""
     user = _user(name)
-    with one_line_errors():
-        users.set_role(user, role)
+    users.set_role(user, role)
     click.echo(f"{user.username!r} is now {user.role.value}")
 
 
@@ -65,8 +64,7 @@ def set_role_command(name, role):
 def deactivate_command(name):
     """Deactivate user NAME: they are signed out at once and cannot sign in; their work stays theirs."""
     user = _user(name)
-    with one_line_errors():
-        users.set_active(user, False)
+    users.set_active(user, False)
     click.echo(f"{user.username!r} is deactivated")
 
 
@@ -86,8 +84,7 @@ def activate_command(name):
 def set_password_command(name, password):
     """Give staff user NAME a new password (their sessions end); a generated one is printed once."""
     user = _user(name)
-    with one_line_errors():
-        generated = users.set_password(user, password or ask_password(user.role))
+    generated = users.set_password(user, password or ask_password(user.role))
     click.echo(f"new password for {user.username!r}; their sessions have ended")
     if generated:
         click.echo(f"password: {generated}")

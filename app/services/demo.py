@@ -2,10 +2,11 @@
 
 from collections.abc import Callable, Iterator
 
-from app.models import Status
-from app.services.importing import FrameItem, ImportReport, add_frames
 import cv2
 
+from app.errors import Problem
+from app.models import Status
+from app.services.importing import FrameItem, ImportReport, add_frames
 from egonet import synth
 from egonet.dhg import encode_dhg
 
@@ -30,7 +31,7 @@ def create_demo(
     running this twice with the same arguments adds nothing.
     """
     if frames_per_activity < 1:
-        raise ValueError(f"--frames-per-activity must be >= 1, got {frames_per_activity}")
+        raise Problem(f"--frames-per-activity must be >= 1, got {frames_per_activity}", field="frames_per_activity")
 
     def items(activity: str) -> Iterator[FrameItem]:
         for f in synth.render_activity(activity, frames_per_activity, seed=seed, width=width, height=height):

@@ -35,7 +35,7 @@ import numpy as np
 import pycocotools.mask as coco_mask
 from sqlalchemy import case, func
 
-from app.errors import ApiError
+from app.errors import ApiError, Problem
 from app.extensions import db
 from app.models import Activity, Annotation, Frame, Instance, InstanceKind, Role, Sequence, Status, User
 from app.services import media
@@ -53,7 +53,7 @@ CATEGORY = {"id": 1, "name": "action-object", "supercategory": "object"}
 _RANK = {Status.REVIEWED: 0, Status.DONE: 1, Status.IN_PROGRESS: 2, Status.REJECTED: 3, Status.TODO: 4}
 
 
-class ExchangeProblem(ValueError):
+class ExchangeProblem(Problem):
     """An export or import that cannot go ahead; the message names the file or option."""
 
 

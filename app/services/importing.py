@@ -24,6 +24,7 @@ import numpy as np
 from flask import current_app
 from sqlalchemy.exc import IntegrityError
 
+from app.errors import Problem
 from app.extensions import db
 from app.models import Activity, Annotation, Frame, Instance, Role, Sequence, Status, User
 from app.services import media
@@ -41,7 +42,7 @@ DHG_DIRS = ("dhg",)
 MASK_DIRS = ("masks", "mask")
 
 
-class ImportProblem(ValueError):
+class ImportProblem(Problem):
     """An import that cannot go ahead; the message names the file or option."""
 
 
