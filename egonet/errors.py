@@ -21,11 +21,15 @@ class EgonetError(ValueError):
         message: The whole sentence for the user (it names the field itself).
         field: The argument, request field or file the message is about.
         reason: The message without the field's name, for forms and JSON's
-            ``fields``; defaults to ``message``.
+            ``fields``; defaults to what follows ``"<field>: "`` in the
+            message, else the whole message.
     """
 
     def __init__(self, message: str, *, field: str | None = None, reason: str | None = None):
         super().__init__(message)
         self.message = message
         self.field = field
-        self.reason = reason or message
+        if reason is None:
+            prefix = f"{field}: "
+            reason = message[len(prefix):] if field and message.startswith(prefix) else message
+        self.reason = reason

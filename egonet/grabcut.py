@@ -53,6 +53,8 @@ from collections.abc import Mapping, Sequence
 import cv2
 import numpy as np
 
+from egonet.errors import EgonetError
+
 __all__ = ["GrabCutSession", "stroke_footprint", "LABELS", "STATE_FORMAT"]
 
 #: Stroke labels accepted by ``GrabCutSession.stroke``.
@@ -129,24 +131,24 @@ def _check_points(points: object, name: str = "points") -> np.ndarray:
     try:
         arr = np.asarray(points, dtype=np.float64)
     except (TypeError, ValueError) as exc:
-        raise ValueError(f"{name}: expected a list of (x, y) pairs, got {points!r:.80}") from exc
+        raise EgonetError(f"{name}: expected a list of (x, y) pairs, got {points!r:.80}", field=name) from exc
     if arr.ndim == 1 and arr.size == 2:
         arr = arr[None, :]
     if arr.ndim != 2 or arr.shape[1] != 2:
-        raise ValueError(f"{name}: expected a list of (x, y) pairs, got shape {arr.shape}")
+        raise EgonetError(f"{name}: expected a list of (x, y) pairs, got shape {arr.shape}", field=name)
     if len(arr) == 0:
-        raise ValueError(f"{name}: a stroke needs at least one (x, y) point")
+        raise EgonetError(f"{name}: a stroke needs at least one (x, y) point", field=name)
     if not np.isfinite(arr).all():
-        raise ValueError(f"{name}: coordinates must be finite numbers")
+        raise EgonetError(f"{name}: coordinates must be finite numbers", field=name)
     return arr
 
 
 def _check_radius(radius: object) -> float:
     if isinstance(radius, bool) or not isinstance(radius, (int, float, np.integer, np.floating)):
-        raise ValueError(f"radius: expected a number of pixels, got {radius!r}")
+        raise EgonetError(f"radius: expected a number of pixels, got {radius!r}", field="radius")
     r = float(radius)
     if not math.isfinite(r) or r <= 0:
-        raise ValueError(f"radius: must be a positive number of pixels, got {radius!r}")
+        raise EgonetError(f"radius: must be a positive number of pixels, got {radius!r}", field="radius")
     return r
 
 
@@ -172,7 +174,7 @@ def stroke_footprint(shape: tuple[int, int], points: Sequence[Sequence[float]] |
         [[0, 0, 1, 0, 0], [0, 1, 1, 1, 0], [0, 0, 1, 0, 0]]
     """
     if len(shape) != 2 or min(int(shape[0]), int(shape[1])) <= 0:
-        raise ValueError(f"shape: expected (H, W) with H, W > 0, got {shape!r}")
+        raise EgonetError(f"shape: expected (H, W) with H, W > 0, got {shape!r}", field="shape")
     pts = _check_points(points)
     r = _check_radius(radius)
     out = np.zeros((int(shape[0]), int(shape[1])), bool)
@@ -486,19 +488,19 @@ class _Snapshot:
 
 def _check_image(image: object) -> np.ndarray:
     if not isinstance(image, np.ndarray):
-        raise ValueError(f"image: expected a numpy array, got {type(image).__name__}")
+        raise EgonetError(f"image: expected a numpy array, got {type(image).__name__}", field="image")
     if image.dtype != np.uint8 or image.ndim != 3 or image.shape[2] != 3:
-        raise ValueError(f"image: expected RGB uint8 of shape (H, W, 3), got {image.dtype} {image.shape}")
+        raise EgonetError(f"image: expected RGB uint8 of shape (H, W, 3), got {image.dtype} {image.shape}", field="image")
     if image.shape[0] < 2 or image.shape[1] < 2:
-        raise ValueError(f"image: needs at least 2x2 pixels, got {image.shape[1]}x{image.shape[0]}")
+        raise EgonetError(f"image: needs at least 2x2 pixels, got {image.shape[1]}x{image.shape[0]}", field="image")
     return np.ascontiguousarray(image).copy()
 
 
 def _as_int(value: object, name: str) -> int:
     if isinstance(value, bool) or not isinstance(value, (int, float, np.integer, np.floating)):
-        raise ValueError(f"{name}: expected a number, got {value!r}")
+        raise EgonetError(f"{name}: expected a number, got {value!r}", field=name)
     if not math.isfinite(float(value)):
-        raise ValueError(f"{name}: must be finite, got {value!r}")
+        raise EgonetError(f"{name}: must be finite, got {value!r}", field=name)
     return int(round(float(value)))
 
 
@@ -574,9 +576,9 @@ class GrabCutSession:
     def __init__(self, image: np.ndarray, *, work_size: int = 272, max_undo: int = 20) -> None:
         self._image = _check_image(image)
         if isinstance(work_size, bool) or not isinstance(work_size, (int, np.integer)) or work_size < 32:
-            raise ValueError(f"work_size: expected an integer >= 32, got {work_size!r}")
+            raise EgonetError(f"work_size: expected an integer >= 32, got {work_size!r}", field="work_size")
         if isinstance(max_undo, bool) or not isinstance(max_undo, (int, np.integer)) or max_undo < 0:
-            raise ValueError(f"max_undo: expected an integer >= 0, got {max_undo!r}")
+            raise EgonetError(f"max_undo: expected an integer >= 0, got {max_undo!r}", field="max_undo")
         self._work_size = int(work_size)
         self._max_undo = int(max_undo)
         self._history: list[_Snapshot] = []
@@ -652,16 +654,17 @@ class GrabCutSession:
         bx0, by0 = _as_int(x0, "x0"), _as_int(y0, "y0")
         bx1, by1 = _as_int(x1, "x1"), _as_int(y1, "y1")
         if not (0 <= bx0 < bx1 <= w and 0 <= by0 < by1 <= h):
-            raise ValueError(
+            raise EgonetError(
                 f"box: ({bx0}, {by0}, {bx1}, {by1}) must satisfy 0 <= x0 < x1 <= {w} and "
-                f"0 <= y0 < y1 <= {h} (clip it to the {w}x{h} frame and keep it non-empty)")
+                f"0 <= y0 < y1 <= {h} (clip it to the {w}x{h} frame and keep it non-empty)", field="box"
+            )
         box = (bx0, by0, bx1, by1)
         guide = self._guide_for(box)
         rows, cols = guide.geom.box_low()
         gc = np.full((guide.geom.low_h, guide.geom.low_w), cv2.GC_BGD, np.uint8)
         gc[rows, cols] = cv2.GC_PR_FGD
         if not (gc == cv2.GC_BGD).any():
-            raise ValueError("box: leaves no background in the frame around it; draw a tighter box")
+            raise EgonetError("box: leaves no background in the frame around it; draw a tighter box", field="box")
         # Initial colour models from k-means on a fixed-seed sample of each side
         # (plain grabCut runs k-means on every pixel, which is most of its cost).
         initial = _first_models(guide.image, gc, np.random.default_rng(0))
@@ -702,14 +705,14 @@ class GrabCutSession:
         """
         prev = self._now
         if prev.box is None:
-            raise ValueError("box: stroke() needs an object first; call box(x0, y0, x1, y1)")
+            raise EgonetError("box: stroke() needs an object first; call box(x0, y0, x1, y1)", field="box")
         pts = _check_points(points)
         if label not in LABELS:
-            raise ValueError(f"label: expected one of {LABELS}, got {label!r}")
+            raise EgonetError(f"label: expected one of {LABELS}, got {label!r}", field="label")
         r = _check_radius(radius)
         footprint = _polyline_distance_mask(self.shape, pts, r)
         if footprint is None:
-            raise ValueError(f"points: the stroke covers no pixel of the {self.shape[1]}x{self.shape[0]} frame")
+            raise EgonetError(f"points: the stroke covers no pixel of the {self.shape[1]}x{self.shape[0]} frame", field="points")
         new = _Stroke(pts, label == "fg", r)
         self._footprints[new] = footprint
         strokes = prev.strokes + (new,)
@@ -842,13 +845,13 @@ class GrabCutSession:
         """
         _check_image(image)
         if not isinstance(state, Mapping):
-            raise ValueError(f"state: expected the dict from GrabCutSession.state(), got {type(state).__name__}")
+            raise EgonetError(f"state: expected the dict from GrabCutSession.state(), got {type(state).__name__}", field="state")
         try:
             return cls._from_state(image, state)
         except (KeyError, IndexError, TypeError, ValueError) as exc:
             if str(exc).startswith("state:"):
                 raise
-            raise ValueError(f"state: malformed GrabCut session state ({type(exc).__name__}: {exc})") from exc
+            raise EgonetError(f"state: malformed GrabCut session state ({type(exc).__name__}: {exc})", field="state") from exc
 
     @classmethod
     def _from_state(cls, image: np.ndarray, state: Mapping[str, object]) -> GrabCutSession:
@@ -856,18 +859,18 @@ class GrabCutSession:
             return np.asarray(state[key]).item()
 
         if scalar("format") != STATE_FORMAT:
-            raise ValueError(f"state: format {scalar('format')!r} is not {STATE_FORMAT!r}")
+            raise EgonetError(f"state: format {scalar('format')!r} is not {STATE_FORMAT!r}", field="state")
         session = cls(image, work_size=int(scalar("work_size")), max_undo=int(scalar("max_undo")))
         h, w = session.shape
         if (int(scalar("height")), int(scalar("width"))) != (h, w):
-            raise ValueError(f"state: made on a {scalar('width')}x{scalar('height')} frame, the image is {w}x{h}")
+            raise EgonetError(f"state: made on a {scalar('width')}x{scalar('height')} frame, the image is {w}x{h}", field="state")
         a = {k: np.asarray(state[k]) for k in (
             "box", "models", "low_shape", "low_bits", "low_offsets", "mask_rle", "mask_offsets",
             "stroke_points", "stroke_point_offsets", "stroke_fg", "stroke_radius",
             "level_strokes", "level_stroke_offsets")}
         n = len(a["box"])
         if n < 1 or a["models"].shape != (n, 2, _MODEL_SIZE) or a["low_shape"].shape != (n, 2):
-            raise ValueError("state: its arrays disagree on the number of undo levels")
+            raise EgonetError("state: its arrays disagree on the number of undo levels", field="state")
         points, p_off = a["stroke_points"].astype(np.float64), a["stroke_point_offsets"]
         strokes = [_Stroke(points[p_off[i] : p_off[i + 1]].copy(), bool(a["stroke_fg"][i]),
                            float(a["stroke_radius"][i])) for i in range(len(p_off) - 1)]
@@ -880,7 +883,7 @@ class GrabCutSession:
                 continue
             box = tuple(int(v) for v in a["box"][i])
             if not (0 <= box[0] < box[2] <= w and 0 <= box[1] < box[3] <= h):
-                raise ValueError(f"state: box {box} lies outside the {w}x{h} frame")
+                raise EgonetError(f"state: box {box} lies outside the {w}x{h} frame", field="state")
             lh, lw = (int(v) for v in a["low_shape"][i])
             bits = a["low_bits"][a["low_offsets"][i] : a["low_offsets"][i + 1]].astype(np.uint8)
             low = np.unpackbits(bits, count=lh * lw).astype(bool).reshape(lh, lw)
@@ -1040,5 +1043,5 @@ def _rle_decode(runs: np.ndarray, shape: tuple[int, int]) -> np.ndarray:
     values = np.arange(len(runs)) % 2 == 1
     flat = np.repeat(values, runs.astype(np.int64))
     if flat.size != shape[0] * shape[1]:
-        raise ValueError(f"state: mask run lengths sum to {flat.size}, expected {shape[0] * shape[1]}")
+        raise EgonetError(f"state: mask run lengths sum to {flat.size}, expected {shape[0] * shape[1]}", field="state")
     return flat.reshape(shape)
