@@ -6,8 +6,9 @@ baseline and a trained EgoNet alike. Baselines that do not look at depth
 accept ``dhg=None``.
 
 * ``"aop"``: :class:`ActionObjectPrior`, the paper's Action-Object Prior, the
-  mean of the training masks. Under leave-one-activity-out the caller fits
-  it inside each fold on the six training activities only.
+  mean of the training masks. Under leave-one-activity-out it is fitted
+  inside each fold on the six training activities only
+  (:func:`aop_fold_priors` fits every fold at once).
 * ``"center"``: :class:`CenterPrior`, an isotropic Gaussian at the image
   centre (first-person cameras tend to centre what the wearer attends to).
 * ``"saliency"``: :class:`SpectralResidualSaliency`, bottom-up saliency of
@@ -25,7 +26,7 @@ Example:
 
 from __future__ import annotations
 
-from collections.abc import Callable, Iterable
+from collections.abc import Callable, Iterable, Iterator, Mapping
 from typing import Protocol, runtime_checkable
 
 import cv2
@@ -39,6 +40,7 @@ __all__ = [
     "CenterPrior",
     "Predictor",
     "SpectralResidualSaliency",
+    "aop_fold_priors",
     "build_baseline",
 ]
 
@@ -267,6 +269,63 @@ class SpectralResidualSaliency:
         sal = (sal - lo) / (hi - lo)
         out = cv2.resize(sal, (w, h), interpolation=cv2.INTER_LINEAR)
         return np.clip(out, 0.0, 1.0, out=out).astype(np.float32, copy=False)
+
+
+def aop_fold_priors(
+    masks_by_activity: Mapping[str, Iterable[np.ndarray]], *, size: tuple[int, int] = (60, 80)
+) -> dict[str, ActionObjectPrior | None]:
+    """The AOP of each leave-one-activity-out fold: the mean mask of the *other* activities.
+
+    Each activity's masks are averaged once (:meth:`ActionObjectPrior.fit`,
+    on its fixed grid); the prior of the fold that tests activity A is the
+    frame-weighted mean of the other activities' means, which is the mean of
+    their masks, without reading every mask once per fold.
+
+    Args:
+        masks_by_activity: Each activity's ground-truth masks, bool (H, W)
+            each, consumed once.
+        size: The prior's grid as (height, width), as in :meth:`ActionObjectPrior.fit`.
+
+    Returns:
+        The prior by activity; None for an activity when no other activity
+        has masks.
+
+    Raises:
+        ValueError: As :meth:`ActionObjectPrior.fit` (an activity without
+            masks, a mask that is not bool (H, W), a bad ``size``).
+
+    Example:
+        >>> empty, full = np.zeros((2, 2), bool), np.ones((2, 2), bool)
+        >>> priors = aop_fold_priors({"a": [empty], "b": [full, full, empty]}, size=(2, 2))
+        >>> priors["a"].prior
+        array([[0.6666667, 0.6666667],
+               [0.6666667, 0.6666667]], dtype=float32)
+        >>> float(priors["b"].prior.max())
+        0.0
+    """
+    fitted = {}
+    for activity, masks in masks_by_activity.items():
+        counted = _Counted(masks)
+        fitted[activity] = (ActionObjectPrior.fit(counted, size=size).prior.astype(np.float64), counted.n)
+    priors: dict[str, ActionObjectPrior | None] = {}
+    for activity in fitted:
+        others = [(p, n) for a, (p, n) in fitted.items() if a != activity]
+        total = sum(n for _, n in others)
+        priors[activity] = ActionObjectPrior(sum(p * n for p, n in others) / total) if total else None
+    return priors
+
+
+class _Counted:
+    """An iterable that counts what it yields (how many masks a fit averaged)."""
+
+    def __init__(self, items: Iterable[np.ndarray]):
+        self.items = items
+        self.n = 0
+
+    def __iter__(self) -> Iterator[np.ndarray]:
+        for item in self.items:
+            self.n += 1
+            yield item
 
 
 BASELINES: dict[str, Callable[..., Predictor]] = {

@@ -46,12 +46,14 @@ Example:
 
 from __future__ import annotations
 
-from collections.abc import Iterable
+from collections.abc import Iterable, Mapping
 from dataclasses import dataclass, field
 from functools import lru_cache
 from typing import NamedTuple
 
 import numpy as np
+
+from egonet.errors import EgonetError
 
 __all__ = [
     "Counts",
@@ -64,6 +66,7 @@ __all__ = [
 ]
 
 DEFAULT_THRESHOLDS = 99
+_STATE_KEYS = ("tp", "fp", "fn", "precision_sum", "recall_sum", "n_maps")
 
 
 class Counts(NamedTuple):
@@ -440,6 +443,65 @@ class ScoreAccumulator:
         self.precision_sum += other.precision_sum
         self.recall_sum += other.recall_sum
         self.n_maps += other.n_maps
+
+    def state(self) -> dict[str, np.ndarray | int]:
+        """The sufficient statistics as plain arrays, to store and restore later.
+
+        Returns:
+            ``{"tp", "fp", "fn"}``: int64 (T,) counts, ``{"precision_sum",
+            "recall_sum"}``: float64 (T,) per-map curve sums (copies), and
+            ``"n_maps"``: an int. :meth:`from_state` turns it back into an
+            accumulator.
+
+        Example:
+            >>> acc = ScoreAccumulator(thresholds=3)
+            >>> _ = acc.add(np.array([[0.8, 0.1]]), np.array([[True, False]]))
+            >>> acc.state()["tp"], acc.state()["n_maps"]
+            (array([1, 1, 1]), 1)
+        """
+        return {
+            "tp": self.counts.tp.copy(),
+            "fp": self.counts.fp.copy(),
+            "fn": self.counts.fn.copy(),
+            "precision_sum": self.precision_sum.copy(),
+            "recall_sum": self.recall_sum.copy(),
+            "n_maps": self.n_maps,
+        }
+
+    @classmethod
+    def from_state(cls, state: Mapping[str, object], *, thresholds: int = DEFAULT_THRESHOLDS) -> ScoreAccumulator:
+        """An accumulator holding the statistics :meth:`state` returned.
+
+        Args:
+            state: ``tp``, ``fp``, ``fn``, ``precision_sum``, ``recall_sum``
+                (array-likes of length T; lists read back from JSON do) and
+                ``n_maps``.
+            thresholds: The number T of thresholds the statistics must have.
+
+        Returns:
+            The accumulator, ready to add, merge or score.
+
+        Raises:
+            EgonetError: If a key is missing or an array does not have T
+                entries (statistics saved with another number of thresholds).
+
+        Example:
+            >>> acc = ScoreAccumulator(thresholds=3)
+            >>> _ = acc.add(np.array([[0.8, 0.1]]), np.array([[True, False]]))
+            >>> ScoreAccumulator.from_state(acc.state(), thresholds=3).score().max_f
+            1.0
+        """
+        missing = [key for key in _STATE_KEYS if key not in state]
+        if missing:
+            raise EgonetError(f"state: has no {missing[0]!r}; pass what ScoreAccumulator.state() returned", field="state")
+        acc = cls(thresholds=thresholds)
+        acc.counts = Counts(*(np.array(state[key], dtype=np.int64) for key in ("tp", "fp", "fn")))
+        acc.precision_sum = np.array(state["precision_sum"], dtype=np.float64)
+        acc.recall_sum = np.array(state["recall_sum"], dtype=np.float64)
+        acc.n_maps = int(state["n_maps"])
+        if any(a.shape != (acc.thresholds,) for a in (*acc.counts, acc.precision_sum, acc.recall_sum)):
+            raise EgonetError(f"state: the statistics do not have {acc.thresholds} thresholds", field="state")
+        return acc
 
     def score(self, *, beta2: float = 1.0, per_image: bool = False) -> Score:
         """Reduce the statistics to a :class:`Score`.

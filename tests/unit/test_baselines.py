@@ -10,6 +10,7 @@ from egonet.baselines import (
     CenterPrior,
     Predictor,
     SpectralResidualSaliency,
+    aop_fold_priors,
     build_baseline,
 )
 
@@ -101,6 +102,31 @@ def test_aop_validation():
 
 # --------------------------------------------------------------------------
 # Centre prior.
+
+
+def test_aop_needs_another_activity():
+    priors = aop_fold_priors({"only": iter([np.ones((4, 4), bool)])})
+    assert priors == {"only": None}
+    one, two = np.zeros((4, 4), bool), np.ones((4, 4), bool)
+    priors = aop_fold_priors({"a": iter([one]), "b": iter([two, two, one])})
+    assert np.allclose(priors["a"].prior, 2 / 3) and np.allclose(priors["b"].prior, 0.0)
+
+
+def test_aop_fold_prior_is_the_mean_of_the_other_activities_masks():
+    # Three activities on a 1x2 grid; the fold of "a" averages b's and c's three masks:
+    # [[1, 0], [1, 1], [0, 0]] -> [2/3, 1/3].
+    left, both, none = (np.array([v], bool) for v in ([True, False], [True, True], [False, False]))
+    masks = {"a": [left, left], "b": [left, both], "c": [none]}
+    priors = aop_fold_priors({k: iter(v) for k, v in masks.items()}, size=(1, 2))
+    np.testing.assert_allclose(priors["a"].prior, [[2 / 3, 1 / 3]], atol=1e-7)
+    np.testing.assert_allclose(priors["c"].prior, [[1.0, 0.25]], atol=1e-7)
+    # The same as fitting each fold on the other activities' masks directly.
+    rng = np.random.default_rng(5)
+    masks = {k: [rng.random((9, 12)) > 0.6 for _ in range(n)] for k, n in (("a", 2), ("b", 3), ("c", 1))}
+    priors = aop_fold_priors(masks, size=(3, 4))
+    for activity in masks:
+        others = [m for a, ms in masks.items() if a != activity for m in ms]
+        np.testing.assert_allclose(priors[activity].prior, ActionObjectPrior.fit(others, size=(3, 4)).prior, atol=1e-6)
 
 
 def test_center_prior_peaks_at_centre():

@@ -5,6 +5,7 @@ import dataclasses
 import numpy as np
 import pytest
 
+from egonet.errors import EgonetError
 from egonet.metrics import (
     Counts,
     Score,
@@ -283,6 +284,43 @@ def test_accumulator_merge_equals_one_pass():
         np.testing.assert_allclose(merged.f, whole.f, rtol=0, atol=1e-15)
         assert merged.ap == pytest.approx(whole.ap, abs=1e-15)
         assert merged.n_maps == 6
+
+
+def test_accumulator_state_of_eight_pixels():
+    # Two copies of the eight pixels: the counts double, each curve sum is twice the map's curve.
+    acc = ScoreAccumulator(thresholds=3)
+    acc.add(EIGHT_PROB, EIGHT_MASK)
+    acc.add(EIGHT_PROB, EIGHT_MASK)
+    state = acc.state()
+    np.testing.assert_array_equal(state["tp"], [8, 6, 4])
+    np.testing.assert_array_equal(state["fp"], [4, 2, 0])
+    np.testing.assert_array_equal(state["fn"], [0, 2, 4])
+    np.testing.assert_allclose(state["precision_sum"], [4 / 3, 3 / 2, 2.0], rtol=0, atol=1e-15)
+    np.testing.assert_allclose(state["recall_sum"], [2.0, 3 / 2, 1.0], rtol=0, atol=1e-15)
+    assert state["n_maps"] == 2
+    state["tp"][0] = 0  # a copy: the accumulator keeps its counts
+    assert acc.counts.tp[0] == 8
+
+
+def test_accumulator_state_round_trip():
+    rng = np.random.default_rng(4)
+    probs, masks = random_maps(rng, np.float32, 9, n=3)
+    acc = ScoreAccumulator(thresholds=9)
+    for p, m in zip(probs, masks):
+        acc.add(p, m)
+    # As a JSON cache stores it: plain lists.
+    stored = {k: v.tolist() if isinstance(v, np.ndarray) else v for k, v in acc.state().items()}
+    back = ScoreAccumulator.from_state(stored, thresholds=9)
+    for key, value in acc.state().items():
+        np.testing.assert_array_equal(back.state()[key], value)
+    assert back.counts.tp.dtype == np.int64 and back.precision_sum.dtype == np.float64
+    for per_image in (False, True):
+        assert back.score(per_image=per_image).ap == acc.score(per_image=per_image).ap
+    with pytest.raises(EgonetError, match="do not have 99 thresholds") as info:
+        ScoreAccumulator.from_state(stored)
+    assert info.value.field == "state"
+    with pytest.raises(EgonetError, match="has no 'n_maps'"):
+        ScoreAccumulator.from_state({k: v for k, v in stored.items() if k != "n_maps"}, thresholds=9)
 
 
 def test_counts_pool_with_add():
