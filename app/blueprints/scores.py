@@ -8,7 +8,6 @@ the baselines.
 
 from flask import Blueprint, Response, render_template, request
 
-from app.errors import ApiError
 from app.services import scoring
 
 bp = Blueprint("scores", __name__, url_prefix="/scores")
@@ -25,7 +24,7 @@ def _ids(name: str) -> list[int]:
     try:
         return [int(v) for v in values]
     except ValueError:
-        raise ApiError(400, f"{name} must be whole numbers (ids)", fields={name: "must be whole numbers"}) from None
+        raise scoring.ScoringProblem(f"{name} must be whole numbers (ids)", fields={name: "must be whole numbers"}) from None
 
 
 def _choice() -> dict:
@@ -33,13 +32,6 @@ def _choice() -> dict:
     if "chosen" not in request.args:
         return {"run_ids": None, "study_ids": None, "baselines": True}
     return {"run_ids": _ids("runs"), "study_ids": _ids("studies"), "baselines": "baselines" in request.args}
-
-
-def _report(choice: dict) -> scoring.Report:
-    try:
-        return scoring.build_report(**choice)
-    except scoring.ScoringProblem as exc:
-        raise ApiError(400, str(exc), fields={exc.field or "query": str(exc)}) from None
 
 
 def _query(choice: dict, runs: list, studies: list) -> dict:
@@ -57,7 +49,7 @@ def _query(choice: dict, runs: list, studies: list) -> dict:
 @bp.get("/")
 def index():
     choice = _choice()
-    report = _report(choice)
+    report = scoring.build_report(**choice)
     plots = [scoring.pr_plot(report, key) for key in ([scoring.ALL, *report.activities] if report.rows else [])]
     runs, studies = scoring.available_runs(), scoring.available_studies()
     query = _query(choice, runs, studies)
@@ -79,7 +71,7 @@ def index():
 @bp.get("/table.<any(csv, tex, json):table_format>")
 def download(table_format: str):
     """The table as CSV, LaTeX (booktabs) or JSON (with the curves), for the same choice as the page."""
-    report = _report(_choice())
+    report = scoring.build_report(**_choice())
     mimetype, render = DOWNLOADS[table_format]
     headers = {"Content-Disposition": f'attachment; filename="scores.{table_format}"'}
     return Response(render(report), mimetype=mimetype, headers=headers)

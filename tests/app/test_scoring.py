@@ -16,6 +16,7 @@ from app.models.training import Checkpoint, FoldsMode, Prediction, RunStatus, Tr
 from app.services import ground_truth, media, scoring, studies, training
 from app.services.demo import create_demo
 from app.services.importing import FrameItem, add_frames
+from app.services.scoring import sources as scoring_sources
 from egonet import clicks as egonet_clicks
 from egonet import io as egonet_io
 from egonet.baselines import ActionObjectPrior, CenterPrior, SpectralResidualSaliency
@@ -177,14 +178,6 @@ def test_baselines_match_a_direct_computation_and_aop_follows_the_fold_rule(ctx)
         mean_mf, mean_ap = got.mean()
         assert mean_mf == pytest.approx(np.mean([got.cells[a].max_f for a in frames]))
         assert mean_ap == pytest.approx(np.mean([got.cells[a].ap for a in frames]))
-
-
-def test_aop_needs_another_activity():
-    priors = scoring.aop_fold_priors({"only": iter([np.ones((4, 4), bool)])})
-    assert priors == {"only": None}
-    one, two = np.zeros((4, 4), bool), np.ones((4, 4), bool)
-    priors = scoring.aop_fold_priors({"a": iter([one]), "b": iter([two, two, one])})
-    assert np.allclose(priors["a"].prior, 2 / 3) and np.allclose(priors["b"].prior, 0.0)
 
 
 def test_with_one_activity_there_is_no_aop(ctx):
@@ -353,9 +346,9 @@ def test_statistics_are_cached_and_recomputed_when_their_inputs_change(ctx, monk
     run = make_run("lite", held_out=["cooking", "hotel"])
     first = scoring.build_report(study_ids=[])
     scored = []
-    run_stats, baseline_stats = scoring._run_stats, scoring._baseline_stats
-    monkeypatch.setattr(scoring, "_run_stats", lambda *a: scored.append("run") or run_stats(*a))
-    monkeypatch.setattr(scoring, "_baseline_stats", lambda *a: scored.append("baselines") or baseline_stats(*a))
+    run_stats, baseline_stats = scoring_sources.run_stats, scoring_sources.baseline_stats
+    monkeypatch.setattr(scoring_sources, "run_stats", lambda *a: scored.append("run") or run_stats(*a))
+    monkeypatch.setattr(scoring_sources, "baseline_stats", lambda *a: scored.append("baselines") or baseline_stats(*a))
 
     again = scoring.build_report(study_ids=[])
     assert scored == []  # read back

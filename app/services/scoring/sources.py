@@ -1,0 +1,153 @@
+"""Where the scored maps come from: ground truth, and each source's statistics per activity.
+
+Ground truth is each frame's finished annotation (``app.services.ground_truth``),
+loaded once per report as a :class:`Truth`. The three sources stream their
+maps through one ``ScoreAccumulator`` per activity:
+
+* a completed training run: its held-out predictions (``app.services.training``);
+* the baselines (``egonet.baselines``) on every labelled frame: AOP fitted
+  inside each leave-one-activity-out fold, the centre prior and saliency;
+* a participant: the click soft masks of the frames they answered
+  (``app.services.studies``).
+
+Each returns ``({statistics name: Stats}, notes)``, what ``cache`` stores.
+"""
+
+from __future__ import annotations
+
+import hashlib
+from collections import defaultdict
+from collections.abc import Callable, Iterable, Iterator
+from dataclasses import dataclass
+
+import numpy as np
+
+from app.extensions import db
+from app.models import Activity, Annotation, Frame
+from app.models import Sequence as FrameSequence
+from app.models.studies import Participant
+from app.models.training import TrainingRun
+from app.services import ground_truth, media, training
+from app.services import studies as studies_service
+from app.services.scoring.cache import Stats
+from egonet import io
+from egonet.baselines import CenterPrior, SpectralResidualSaliency, aop_fold_priors
+from egonet.metrics import ScoreAccumulator
+
+# Baseline keys, names and the predictors' settings (part of the cache key).
+BASELINE_NAMES = {"aop": "AOP", "center": "centre prior", "saliency": "saliency"}
+AOP_SIZE = (60, 80)
+CENTER_SIGMA = 0.25
+SALIENCY = {"width": 64, "blur_sigma": 2.5}
+
+Scored = tuple[dict[str, Stats], list[str]]
+"""A source's statistics by name ("" for a single row, else the baseline's key) and its notes."""
+
+
+# --------------------------------------------------------------------------
+# Ground truth, loaded once per report
+
+
+@dataclass
+class Truth:
+    """The labelled frames, their ground-truth annotations and activities, and a fingerprint of them all."""
+
+    frames: list[Frame]
+    annotations: dict[int, Annotation]
+    activity: dict[int, str]  # frame id -> activity name
+    fingerprint: str
+
+    def mask(self, frame_id: int) -> np.ndarray | None:
+        annotation = self.annotations.get(frame_id)
+        return ground_truth.mask_of(annotation) if annotation is not None else None
+
+
+def load_truth() -> Truth:
+    """Every labelled frame's ground truth; the fingerprint changes whenever an annotation does."""
+    frames = ground_truth.labelled_frames()
+    ids = [f.id for f in frames]
+    annotations: dict[int, Annotation] = {}
+    for start in range(0, len(ids), 5000):  # keep IN lists well under SQLite's variable limit
+        annotations.update(ground_truth.ground_truths(ids[start : start + 5000]))
+    names = dict(
+        db.session.execute(
+            db.select(Frame.id, Activity.name)
+            .select_from(Frame)
+            .join(FrameSequence, Frame.sequence)
+            .join(Activity, FrameSequence.activity)
+            .where(Frame.id.in_(db.select(Annotation.frame_id)))
+        ).all()
+    )
+    digest = hashlib.sha256()
+    for fid in sorted(annotations):
+        a = annotations[fid]
+        digest.update(f"{fid}:{a.id}:{a.version}:{a.mask_path}:{a.updated_at.isoformat()};".encode())
+    return Truth(frames, annotations, {f.id: names[f.id] for f in frames}, digest.hexdigest())
+
+
+# --------------------------------------------------------------------------
+# The three sources
+
+
+def _accumulate(
+    pairs: Iterable[tuple[Frame, np.ndarray]], truth: Truth, thresholds: int, on_progress: Callable[[int], None]
+) -> tuple[Stats, int]:
+    """Score (frame, map) pairs per activity; return the stats and how many frames had no ground truth."""
+    stats: Stats = {}
+    missing = 0
+    for frame, prob in pairs:
+        mask = truth.mask(frame.id)
+        if mask is None:
+            missing += 1
+            continue
+        activity = truth.activity[frame.id]
+        acc = stats.setdefault(activity, ScoreAccumulator(thresholds=thresholds))
+        acc.add(prob, mask, name=f"prob of frame {frame.id}")
+        on_progress(1)
+    return stats, missing
+
+
+def run_stats(run: TrainingRun, truth: Truth, thresholds: int, on_progress: Callable[[int], None]) -> Scored:
+    """Score a run's held-out predictions (frames without a ground truth any more become a note)."""
+    stats, missing = _accumulate(training.held_out_predictions(run), truth, thresholds, on_progress)
+    notes = [f"run {run.id}: {missing} held-out frames no longer have a ground truth and were left out."] if missing else []
+    return {"": stats}, notes
+
+
+def participant_stats(participant: Participant, truth: Truth, thresholds: int, on_progress: Callable[[int], None]) -> Scored:
+    """Score a participant's soft masks of the frames they answered."""
+    stats, missing = _accumulate(studies_service.participant_soft_masks(participant), truth, thresholds, on_progress)
+    label = f"{participant.label} of study {participant.study_id}"
+    notes = [f"{label}: {missing} answered frames no longer have a ground truth and were left out."] if missing else []
+    return {"": stats}, notes
+
+
+def baseline_stats(truth: Truth, thresholds: int, on_progress: Callable[[int], None]) -> Scored:
+    """Score the three baselines on every labelled frame, activity by activity (one pass per frame)."""
+    by_activity: dict[str, list[Frame]] = defaultdict(list)
+    for frame in truth.frames:
+        by_activity[truth.activity[frame.id]].append(frame)
+
+    def masks_of(frames: list[Frame]) -> Iterator[np.ndarray]:
+        for frame in frames:
+            yield truth.mask(frame.id)
+            on_progress(1)
+
+    folds = aop_fold_priors({a: masks_of(frames) for a, frames in by_activity.items()}, size=AOP_SIZE)
+    centre = CenterPrior(sigma=CENTER_SIGMA)
+    saliency = SpectralResidualSaliency(**SALIENCY)
+    stats: dict[str, Stats] = {key: {} for key in BASELINE_NAMES}
+    notes = []
+    for activity, frames in by_activity.items():
+        predictors = {"aop": folds[activity], "center": centre, "saliency": saliency}
+        if folds[activity] is None:
+            del predictors["aop"]
+            notes.append(f"AOP: no other activity has labelled frames to fit the prior for {activity}.")
+        for frame in frames:
+            mask = truth.mask(frame.id)
+            rgb = io.read_image(media.absolute_path(frame.rgb_path))
+            for key, predictor in predictors.items():
+                acc = stats[key].setdefault(activity, ScoreAccumulator(thresholds=thresholds))
+                acc.add(predictor.predict(rgb, None), mask, name=f"prob of frame {frame.id}")
+            on_progress(1)
+    return stats, notes
