@@ -61,6 +61,7 @@ __all__ = [
     "ScoreAccumulator",
     "count_stats",
     "curve_from_counts",
+    "iso_f_curve",
     "score_maps",
     "threshold_values",
 ]
@@ -248,6 +249,40 @@ def curve_from_counts(counts: Counts) -> tuple[np.ndarray, np.ndarray]:
     precision = np.divide(tp, predicted, out=np.ones_like(tp), where=predicted > 0)
     recall = np.divide(tp, positives, out=np.zeros_like(tp), where=positives > 0)
     return precision, recall
+
+
+def iso_f_curve(f: float, *, beta2: float = 1.0, points: int = 40) -> tuple[np.ndarray, np.ndarray]:
+    """The precision-recall points where the F-score equals ``f`` (to draw under PR curves).
+
+    Solving ``F = (1 + beta2) P R / (beta2 P + R)`` for P gives
+    ``P = F R / ((1 + beta2) R - beta2 F)``, which lies in [0, 1] from
+    ``R = beta2 F / (1 + beta2 - F)`` (where P = 1) up to R = 1 (where P is
+    smallest).
+
+    Args:
+        f: The F-score, in (0, 1).
+        beta2: Weight of recall in F (beta squared), > 0.
+        points: How many points, evenly spaced in recall, >= 2.
+
+    Returns:
+        ``(recall, precision)``, float64 arrays (points,), recall increasing.
+
+    Raises:
+        EgonetError: If ``f`` is not in (0, 1) or ``points`` is below 2.
+
+    Example:
+        >>> recall, precision = iso_f_curve(0.5, points=3)
+        >>> recall.round(3).tolist(), precision.round(3).tolist()
+        ([0.333, 0.667, 1.0], [1.0, 0.4, 0.333])
+    """
+    beta2 = _check_beta2(beta2)
+    if isinstance(f, bool) or not isinstance(f, (int, float, np.integer, np.floating)) or not 0 < f < 1:
+        raise EgonetError(f"f: must be an F-score between 0 and 1 (exclusive), got {f!r}", field="f")
+    if isinstance(points, bool) or not isinstance(points, (int, np.integer)) or points < 2:
+        raise EgonetError(f"points: must be an int of at least 2, got {points!r}", field="points")
+    recall = np.linspace(beta2 * f / (1 + beta2 - f), 1.0, int(points))
+    precision = f * recall / ((1 + beta2) * recall - beta2 * f)
+    return recall, precision
 
 
 def _readonly(a: np.ndarray) -> np.ndarray:

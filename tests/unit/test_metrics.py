@@ -12,6 +12,7 @@ from egonet.metrics import (
     ScoreAccumulator,
     count_stats,
     curve_from_counts,
+    iso_f_curve,
     score_maps,
     threshold_values,
 )
@@ -321,6 +322,24 @@ def test_accumulator_state_round_trip():
     assert info.value.field == "state"
     with pytest.raises(EgonetError, match="has no 'n_maps'"):
         ScoreAccumulator.from_state({k: v for k, v in stored.items() if k != "n_maps"}, thresholds=9)
+
+
+def test_iso_f_curve():
+    # F = 0.5: P = 0.5 R / (2 R - 0.5), from R = 1/3 (P = 1) to R = 1 (P = 1/3).
+    recall, precision = iso_f_curve(0.5, points=3)
+    np.testing.assert_allclose(recall, [1 / 3, 2 / 3, 1.0], rtol=0, atol=1e-15)
+    np.testing.assert_allclose(precision, [1.0, 0.4, 1 / 3], rtol=0, atol=1e-15)
+    for beta2 in (0.3, 1.0, 2.0):
+        recall, precision = iso_f_curve(0.6, beta2=beta2)
+        assert recall.shape == precision.shape == (40,)
+        f = Score.from_curves(precision, recall, beta2=beta2).f
+        np.testing.assert_allclose(f, 0.6, rtol=0, atol=1e-12)
+    for bad in (0, 1, 1.5, True):
+        with pytest.raises(EgonetError, match="f: must be an F-score") as info:
+            iso_f_curve(bad)
+        assert info.value.field == "f"
+    with pytest.raises(EgonetError, match="points: must be an int of at least 2"):
+        iso_f_curve(0.5, points=1)
 
 
 def test_counts_pool_with_add():

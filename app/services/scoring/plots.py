@@ -9,10 +9,8 @@ from __future__ import annotations
 
 from dataclasses import dataclass
 
-import numpy as np
-
 from app.services.scoring.table import ALL, HUMAN, Report
-from egonet.metrics import threshold_values
+from egonet.metrics import iso_f_curve, threshold_values
 
 @dataclass(frozen=True)
 class PlotLine:
@@ -79,8 +77,7 @@ def pr_plot(report: Report, key: str, *, width: int = 300, height: int = 270) ->
         )
     iso = []
     for f in (0.2, 0.4, 0.6, 0.8):
-        recalls = np.linspace(f / (2 - f), 1.0, 40)  # P = fR / (2R - f) is in [0, 1] from R = f / (2 - f)
-        pts = [xy(r, f * r / (2 * r - f)) for r in recalls]
+        pts = [xy(r, p) for r, p in zip(*iso_f_curve(f, points=40), strict=True)]
         iso.append((" ".join(f"{x},{y}" for x, y in pts), f"F={f:.1f}"))
     title = "All activities (pooled)" if key == ALL else key
     ticks = [(t, f"{t:g}") for t in (0.0, 0.25, 0.5, 0.75, 1.0)]
