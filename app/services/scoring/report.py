@@ -141,8 +141,15 @@ def build_report(
     if baselines and truth.frames:
         jobs.append(_baseline_job(truth, thresholds))
     jobs += _participant_jobs(chosen_studies, truth, thresholds, notes)
-    rows = _rows(jobs, thresholds=thresholds, per_image=per_image, use_cache=use_cache,
-                 on_start=on_start, on_progress=on_progress, notes=notes)
+    rows = _rows(
+        jobs,
+        thresholds=thresholds,
+        per_image=per_image,
+        use_cache=use_cache,
+        on_start=on_start,
+        on_progress=on_progress,
+        notes=notes,
+    )
     activities = sorted({a for r in rows for a in r.cells})
     return Report(activities=activities, rows=rows, thresholds=thresholds, per_image=per_image, notes=notes)
 
