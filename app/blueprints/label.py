@@ -13,10 +13,10 @@ reads them as PNG from their own URLs, and GrabCut answers with a PNG.
 
 import time
 
-from flask import Blueprint, Response, abort, current_app, flash, redirect, render_template, request, send_file, url_for
+from flask import Blueprint, Response, current_app, flash, redirect, render_template, request, send_file, url_for
 from flask_login import current_user
 
-from app.errors import ApiError
+from app.errors import Problem
 from app.extensions import db
 from app.models import Annotation, Frame, InstanceKind, Role, Status
 from app.security import roles
@@ -176,16 +176,13 @@ def export():
     """Download the masks as a zip: PNG per frame and/or COCO JSON (see exchange)."""
     fmt = request.args.get("format", "both")
     if fmt not in exchange.FORMATS:
-        abort(400, f"format must be one of {', '.join(exchange.FORMATS)}")
+        raise Problem(f"format must be one of {', '.join(exchange.FORMATS)}")
     try:
         statuses = [Status(s) for s in request.args.getlist("status")] or list(exchange.DEFAULT_STATUSES)
     except ValueError:
-        abort(400, f"status must be among {', '.join(s.value for s in Status)}")
+        raise Problem(f"status must be among {', '.join(s.value for s in Status)}") from None
     activities = [a for a in request.args.getlist("activity") if a]
-    try:
-        archive, count = exchange.export_zip(fmt=fmt, activities=activities, statuses=statuses)
-    except exchange.ExchangeProblem as exc:
-        abort(400, str(exc))
+    archive, count = exchange.export_zip(fmt=fmt, activities=activities, statuses=statuses)
     response = send_file(archive, mimetype="application/zip", as_attachment=True, download_name="egonet-masks.zip")
     response.headers["X-Exported-Frames"] = str(count)
     return response
@@ -268,7 +265,7 @@ def add_time(frame_id: int):
     data = json_body({"seconds": Float(min=0, max=labelling.MAX_TIME_DELTA_S)})
     fr = labelling.get_frame(frame_id)
     if not labelling.add_time(fr, me(), data["seconds"]):
-        raise ApiError(404, "you have no annotation of this frame yet", fields={"frame_id": "no annotation"})
+        raise Problem("you have no annotation of this frame yet", status=404, fields={"frame_id": "no annotation"})
     return "", 204
 
 
@@ -303,9 +300,10 @@ def upload_instance_mask(annotation_id: int, position: int):
     """Replace an instance's mask with the PNG body (``?version=N`` required)."""
     version = query_int("version", min=0)
     if version is None:
-        raise ApiError(400, "version: give the annotation's version as ?version=N", fields={"version": "is required"})
+        raise Problem("version: give the annotation's version as ?version=N", fields={"version": "is required"})
     if request.mimetype != "image/png":
-        raise ApiError(415, "send the mask as a PNG body (Content-Type: image/png)", fields={"mask": "must be image/png"})
+        raise Problem("send the mask as a PNG body (Content-Type: image/png)", status=415,
+                      fields={"mask": "must be image/png"})
     ann = labelling.get_annotation(annotation_id)
     ann = labelling.upload_instance_mask(ann, me(), position=position, version=version, png=request.get_data())
     return annotation_json(ann, ann.frame)
@@ -387,7 +385,7 @@ def grabcut_mask():
     """``?frame_id=&instance=`` -> the session's current mask (PNG), 404 without a session."""
     frame_id = query_int("frame_id")
     if frame_id is None:
-        raise ApiError(400, "frame_id: give ?frame_id=N", fields={"frame_id": "is required"})
+        raise Problem("frame_id: give ?frame_id=N", fields={"frame_id": "is required"})
     fr = labelling.get_frame(frame_id, field="frame_id")
     key = labelling.check_key(request.args.get("instance", ""))
     result = labelling.grabcut_mask(fr, me(), key)

@@ -35,12 +35,12 @@ import numpy as np
 import pycocotools.mask as coco_mask
 from sqlalchemy import case, func
 
-from app.errors import ApiError, Problem
+from app.errors import Problem
 from app.extensions import db
 from app.models import Activity, Annotation, Frame, Instance, InstanceKind, Role, Sequence, Status, User
 from app.services import media
 from app.services.importing import unpacked
-from app.services.labelling import Rle, coco_decode, decode_rle
+from app.services.labelling.masks import Rle, coco_decode, decode_rle
 from app.validation import Invalid
 from egonet import io
 
@@ -470,7 +470,7 @@ def _decode_segmentation(segmentation: object, frame: Frame, where: str) -> np.n
         return decode_rle(Rle().check(segmentation), (h, w), field="segmentation")
     except Invalid as exc:
         raise ExchangeProblem(f"{where}: segmentation: {exc.reason}") from None
-    except ApiError as exc:
+    except Problem as exc:
         raise ExchangeProblem(f"{where}: {exc.message}") from None
 
 

@@ -15,10 +15,11 @@ import numpy as np
 import pytest
 
 from app import MAX_ID
-from app.errors import ApiError
+from app.errors import Problem
 from app.extensions import db
 from app.models.annotations import GrabCutState
 from app.services import labelling
+from app.services.labelling import grabcut as grabcut_service
 from egonet.grabcut import GrabCutSession
 from tests.app.access import ALL, all_url_values
 from tests.app.test_access_matrix import EXPECTED
@@ -56,7 +57,7 @@ def test_a_huge_counts_string_is_refused_by_its_length_before_decoding(app, anno
 
 
 def test_a_number_wider_than_any_count_is_refused():
-    with pytest.raises(ApiError) as error:
+    with pytest.raises(Problem) as error:
         labelling.decode_rle({"size": [H, W], "counts": "PPPPPPP0"}, (H, W), field="m")
     assert error.value.fields == {"m.counts": "a number of 8 characters; no count of this mask takes more than 4"}
 
@@ -155,7 +156,7 @@ def test_grabcut_on_a_frame_over_the_side_limit_is_refused_naming_it(app, annota
 
 
 def test_the_recent_cache_keeps_within_its_byte_budget_least_recent_out_first():
-    cache = labelling._Recent()
+    cache = grabcut_service._Recent()
     for key in "abc":
         cache.put(key, key.upper(), nbytes=10, budget=25)
     assert cache.keys() == ["b", "c"] and cache.nbytes == 20
@@ -181,28 +182,28 @@ def test_a_session_is_sized_by_its_arrays():
 
 
 def test_grabcut_sessions_are_kept_within_the_byte_budget(app, annotator, monkeypatch):
-    monkeypatch.setattr(labelling, "_sessions", labelling._Recent())
+    monkeypatch.setattr(grabcut_service, "_sessions", grabcut_service._Recent())
     frame_id, *_ = make_frames(app, n=1)
     call(annotator, "box", frame_id=frame_id, instance="o0", box=BOX)
-    one = labelling._sessions.nbytes
+    one = grabcut_service._sessions.nbytes
     assert one > H * W * 4
     budget = one * 5 // 2
     app.config["GRABCUT_CACHE_BYTES"] = budget
     for key in ("o1", "o2", "o3"):
         call(annotator, "box", frame_id=frame_id, instance=key, box=BOX)
-        assert labelling._sessions.nbytes <= budget
+        assert grabcut_service._sessions.nbytes <= budget
     with app.app_context():
         revisions = dict(db.session.execute(db.select(GrabCutState.instance_key, GrabCutState.revision)).all())
-    assert labelling._sessions.keys() == [revisions["o2"], revisions["o3"]]  # the least recent went first
+    assert grabcut_service._sessions.keys() == [revisions["o2"], revisions["o3"]]  # the least recent went first
     # A session that was let go is restored from its row.
     assert stroke(annotator, frame_id, [[60, 60]], 3, instance="o0")[0] == "1"
 
     app.config["GRABCUT_CACHE_BYTES"] = one // 2  # smaller than one session: none is kept, all still work
     app.config["GRABCUT_IMAGE_CACHE_BYTES"] = H * W * 3 - 1
-    monkeypatch.setattr(labelling, "_sessions", labelling._Recent())
-    monkeypatch.setattr(labelling, "_images", labelling._Recent())
+    monkeypatch.setattr(grabcut_service, "_sessions", grabcut_service._Recent())
+    monkeypatch.setattr(grabcut_service, "_images", grabcut_service._Recent())
     assert stroke(annotator, frame_id, [[60, 60]], 3, instance="o1")[0] == "1"
-    assert labelling._sessions.keys() == [] and labelling._images.keys() == []
+    assert grabcut_service._sessions.keys() == [] and grabcut_service._images.keys() == []
 
 
 # --------------------------------------------------------------------------

@@ -8,7 +8,7 @@ import pytest
 
 from app.extensions import db
 from app.models.annotations import GrabCutState
-from app.services import labelling
+from app.services.labelling import grabcut as grabcut_service
 from egonet import io
 from tests.app.test_labelling import H, W, body, make_frames, square, true_mask
 
@@ -23,8 +23,8 @@ def annotator(client, make_user):
 
 def forget_everything(app, monkeypatch):
     """Every request from now on as if served by a new worker process: nothing kept in memory."""
-    monkeypatch.setattr(labelling, "_sessions", labelling._Recent())
-    monkeypatch.setattr(labelling, "_images", labelling._Recent())
+    monkeypatch.setattr(grabcut_service, "_sessions", grabcut_service._Recent())
+    monkeypatch.setattr(grabcut_service, "_images", grabcut_service._Recent())
     monkeypatch.setitem(app.config, "GRABCUT_CACHE_BYTES", 0)
     monkeypatch.setitem(app.config, "GRABCUT_IMAGE_CACHE_BYTES", 0)
 

@@ -1,0 +1,75 @@
+"""Labelling: a person's annotation of a frame, its review, the queues, and
+the server-side GrabCut sessions that help draw it; import it from here.
+
+    * ``annotations``: loading and saving an annotation (version checks,
+      statuses) and its instances;
+    * ``grabcut``: the GrabCut sessions (their saved state, this worker's
+      caches, locks, box / stroke / undo and what each may cost);
+    * ``review``: accept / reject, the annotators' and reviewers' queues;
+    * ``masks``: masks as COCO RLE and PNG, checked before they are decoded.
+"""
+
+from app.services.labelling.annotations import (
+    AUTHOR_STATUSES,
+    MAX_INSTANCES,
+    MAX_TIME_DELTA_S,
+    add_time,
+    check_key,
+    empty_mask,
+    get_annotation,
+    get_frame,
+    instance_of,
+    save_annotation,
+    upload_instance_mask,
+    user_annotation,
+)
+from app.services.labelling.grabcut import (
+    check_box,
+    check_stroke,
+    grabcut_box,
+    grabcut_keys,
+    grabcut_mask,
+    grabcut_stroke,
+    grabcut_undo,
+    stroke_pixels,
+)
+from app.services.labelling.masks import Rle, coco_decode, decode_rle, max_rle_chars
+from app.services.labelling.review import (
+    annotator_queue,
+    next_to_review,
+    next_unlabelled,
+    review_annotation,
+    review_queue,
+)
+
+__all__ = [
+    "AUTHOR_STATUSES",
+    "MAX_INSTANCES",
+    "MAX_TIME_DELTA_S",
+    "Rle",
+    "add_time",
+    "annotator_queue",
+    "check_box",
+    "check_key",
+    "check_stroke",
+    "coco_decode",
+    "decode_rle",
+    "empty_mask",
+    "get_annotation",
+    "get_frame",
+    "grabcut_box",
+    "grabcut_keys",
+    "grabcut_mask",
+    "grabcut_stroke",
+    "grabcut_undo",
+    "instance_of",
+    "max_rle_chars",
+    "next_to_review",
+    "next_unlabelled",
+    "review_annotation",
+    "review_queue",
+    "save_annotation",
+    "stroke_pixels",
+    "upload_instance_mask",
+    "user_annotation",
+]

@@ -1,0 +1,318 @@
+"""A person's annotation of a frame: loading it, saving it with a version
+check, and its instances.
+
+Saving. Each annotation (one per frame and author) carries a ``version``.
+A save names the version it was made on; if the annotation has moved on
+since (another tab, a reviewer's decision), the save is refused with 409 and
+the current version, and nothing is written. A save replaces the instances
+(each with its own binary mask, stored content-addressed) and the union mask
+in one transaction, after the mask files are on disk, so an acknowledged save
+is never lost.
+
+Statuses. An annotation starts in progress; its author marks it done (at
+least one drawn instance, or "no action-object"); a reviewer accepts a done
+annotation (reviewed) or rejects it with a comment (rejected), which sends it
+back to its author with the comment (see ``review``). Editing a rejected
+annotation puts it back in progress; editing a done or reviewed one leaves it
+done, so a changed annotation is reviewed again. Marking it done lets go of
+the GrabCut sessions of instances it no longer has.
+"""
+
+import re
+from dataclasses import dataclass
+
+import numpy as np
+from sqlalchemy.exc import IntegrityError
+from sqlalchemy.orm.exc import StaleDataError
+
+from app.errors import Problem
+from app.extensions import db
+from app.models import Annotation, Frame, Instance, InstanceKind, Status, User, utcnow
+from app.services import media
+from app.services.labelling.grabcut import forget_sessions
+from app.services.labelling.masks import decode_mask_png, decode_rle
+from egonet import io as egonet_io
+
+# The statuses an annotator may ask for; review decisions set the others.
+AUTHOR_STATUSES = (Status.IN_PROGRESS, Status.DONE)
+MAX_INSTANCES = 50
+MAX_TIME_DELTA_S = 3600.0
+KEY_PATTERN = re.compile(r"[A-Za-z0-9_-]{1,40}")
+
+
+# --------------------------------------------------------------------------
+# Loading
+
+
+def get_frame(frame_id: int, *, field: str | None = None) -> Frame:
+    """The frame, or an error: 400 naming ``field`` when the id came in a
+    request body, 404 when it was part of the URL."""
+    frame = db.session.get(Frame, frame_id)
+    if frame is None:
+        if field is not None:
+            raise Problem(f"{field}: there is no frame {frame_id}", fields={field: "no such frame"})
+        raise Problem(f"there is no frame {frame_id}", status=404, fields={"frame_id": "no such frame"})
+    return frame
+
+
+def get_annotation(annotation_id: int) -> Annotation:
+    annotation = db.session.get(Annotation, annotation_id)
+    if annotation is None:
+        raise Problem(f"there is no annotation {annotation_id}", status=404,
+                      fields={"annotation_id": "no such annotation"})
+    return annotation
+
+
+def user_annotation(frame: Frame, user: User) -> Annotation | None:
+    """The user's own annotation of the frame, if they started one."""
+    return db.session.execute(db.select(Annotation).filter_by(frame_id=frame.id, author_id=user.id)).scalar_one_or_none()
+
+
+def instance_of(annotation: Annotation, position: int) -> Instance:
+    for instance in annotation.instances:
+        if instance.position == position:
+            return instance
+    raise Problem(f"annotation {annotation.id} has no instance {position}", status=404,
+                  fields={"position": "no such instance"})
+
+
+def empty_mask(frame: Frame) -> np.ndarray:
+    return np.zeros((frame.height, frame.width), bool)
+
+
+def check_key(key: str, *, field: str = "instance") -> str:
+    """An instance's key (which also names its GrabCut session): 1-40 letters, digits, - or _."""
+    if not KEY_PATTERN.fullmatch(key):
+        raise Problem(f"{field}: use 1-40 letters, digits, - or _", fields={field: "use 1-40 letters, digits, - or _"})
+    return key
+
+
+# --------------------------------------------------------------------------
+# Saving
+
+
+@dataclass
+class InstanceSpec:
+    """One instance of a save, with its mask already stored."""
+
+    key: str | None
+    kind: InstanceKind | None
+    label: str | None
+    mask_path: str
+    mask: np.ndarray
+
+
+def save_annotation(frame: Frame, user: User, data: dict) -> Annotation:
+    """Save the user's annotation of the frame from a checked request body.
+
+    ``data`` holds ``version`` (the version the page has; 0 when it has
+    none yet), ``instances`` (``key``, ``kind``, ``label``, ``mask`` as RLE),
+    ``no_action_object``, optionally ``status`` ("in_progress" or "done")
+    and ``time_spent_delta_s`` (seconds spent since the last save).
+
+    Raises:
+        Problem: 400 naming a bad field, 409 with ``current_version`` when
+            ``version`` is stale.
+    """
+    existing = user_annotation(frame, user)
+    if data["version"] != (existing.version if existing is not None else 0):
+        raise stale(existing.version if existing is not None else 0)  # before any mask is decoded or stored
+    shape = (frame.height, frame.width)
+    _check_keys([item["key"] for item in data["instances"]])
+    masks = [decode_rle(item["mask"], shape, field=f"instances[{i}].mask") for i, item in enumerate(data["instances"])]
+    # Mask files first: if the commit then fails, only unreferenced
+    # content-addressed files remain.
+    specs = [
+        InstanceSpec(
+            key=item["key"],
+            kind=InstanceKind(item["kind"]) if item["kind"] else None,
+            label=(item["label"] or "").strip() or None,
+            mask_path=media.store(egonet_io.encode_png(mask), ".png"),
+            mask=mask,
+        )
+        for item, mask in zip(data["instances"], masks)
+    ]
+    status = Status(data["status"]) if data["status"] else None
+    return _write(
+        frame,
+        user,
+        version=data["version"],
+        specs=specs,
+        no_action_object=data["no_action_object"],
+        status=status,
+        time_delta_s=data["time_spent_delta_s"],
+    )
+
+
+def _check_keys(keys: list[str]) -> None:
+    """Each instance's key well-formed and used once."""
+    seen: set[str] = set()
+    for i, key in enumerate(keys):
+        check_key(key, field=f"instances[{i}].key")
+        if key in seen:
+            raise Problem(f"instances[{i}].key: {key!r} is used twice", fields={f"instances[{i}].key": "duplicate key"})
+        seen.add(key)
+
+
+def upload_instance_mask(annotation: Annotation, user: User, *, position: int, version: int, png: bytes) -> Annotation:
+    """Replace one instance's mask with a PNG (``position`` = the number of
+    instances adds one); only the annotation's author may.
+
+    Raises:
+        Problem: 403 for someone else's annotation, 409 for a stale
+            ``version``, 404 for an unknown position, 400 for a PNG that is
+            not binary or not the frame's size (in that order: the PNG is
+            decoded last).
+    """
+    frame = annotation.frame
+    if annotation.author_id != user.id:
+        raise Problem("only its author can change an annotation", status=403)
+    if version != annotation.version:
+        raise stale(annotation.version)
+    current = annotation.instances
+    if not 0 <= position <= len(current):
+        raise Problem(f"there is no instance {position} (the annotation has {len(current)})", status=404,
+                      fields={"position": f"must be 0-{len(current)}"})
+    mask = decode_mask_png(png, (frame.height, frame.width))
+    specs = [_spec_of(instance) for instance in current]
+    path = media.store(egonet_io.encode_png(mask), ".png")
+    if position == len(specs):
+        specs.append(InstanceSpec(key=None, kind=None, label=None, mask_path=path, mask=mask))
+    else:
+        specs[position].mask_path, specs[position].mask = path, mask
+    return _write(frame, user, version=version, specs=specs, no_action_object=annotation.no_action_object,
+                  status=None, time_delta_s=0.0)
+
+
+def _spec_of(instance: Instance) -> InstanceSpec:
+    return InstanceSpec(
+        key=instance.key,
+        kind=instance.kind,
+        label=instance.label,
+        mask_path=instance.mask_path,
+        mask=egonet_io.read_mask(media.absolute_path(instance.mask_path)),
+    )
+
+
+def _write(
+    frame: Frame,
+    user: User,
+    *,
+    version: int,
+    specs: list[InstanceSpec],
+    no_action_object: bool,
+    status: Status | None,
+    time_delta_s: float,
+) -> Annotation:
+    annotation = user_annotation(frame, user)
+    current = annotation.version if annotation is not None else 0
+    if version != current:
+        raise stale(current)
+    drawn = [s for s in specs if s.mask.any()]
+    if no_action_object and drawn:
+        raise Problem(
+            "no_action_object: the frame has drawn action-objects; delete them first",
+            fields={"no_action_object": "delete the drawn instances first"},
+        )
+    if status is Status.DONE:
+        _check_complete(specs, no_action_object)
+    union = np.zeros((frame.height, frame.width), bool)
+    for spec in specs:
+        union |= spec.mask
+    union_path = media.store(egonet_io.encode_png(union), ".png") if union.any() else None
+
+    if annotation is None:
+        annotation = Annotation(frame=frame, author=user, status=Status.IN_PROGRESS)
+        db.session.add(annotation)
+        changed = True
+    else:
+        old = [(i.key, i.kind, i.label, i.mask_path) for i in annotation.instances]
+        new = [(s.key, s.kind, s.label, s.mask_path) for s in specs]
+        changed = old != new or annotation.no_action_object != no_action_object
+    annotation.no_action_object = no_action_object
+    annotation.mask_path = union_path
+    annotation.status = _next_status(annotation.status, requested=status, changed=changed)
+    annotation.time_spent_s = (annotation.time_spent_s or 0.0) + time_delta_s
+    annotation.updated_at = utcnow()  # always an UPDATE, so the version moves on
+    _commit(annotation, frame, user, specs, changed=changed)
+    return annotation
+
+
+def _commit(annotation: Annotation, frame: Frame, user: User, specs: list[InstanceSpec], *, changed: bool) -> None:
+    """Write the annotation's row, then its instances when they changed, in one transaction.
+
+    Raises:
+        Problem: 409 with ``current_version`` when another save won the race.
+    """
+    try:
+        # The annotation's row goes first: its UPDATE carries the version
+        # check (and locks the row), so a concurrent save fails here, before
+        # any instance row is touched.
+        db.session.flush()
+        if changed:
+            annotation.instances.clear()
+            db.session.flush()  # free the positions before the new rows take them
+            for position, spec in enumerate(specs):
+                annotation.instances.append(
+                    Instance(position=position, key=spec.key, kind=spec.kind, label=spec.label, mask_path=spec.mask_path)
+                )
+        if annotation.status is Status.DONE:
+            forget_sessions(frame, user, keep={s.key for s in specs})
+        db.session.commit()
+    except (StaleDataError, IntegrityError):
+        # Another save of the same annotation won the race.
+        db.session.rollback()
+        latest = user_annotation(frame, user)
+        raise stale(latest.version if latest is not None else 0) from None
+
+
+def add_time(frame: Frame, user: User, seconds: float) -> bool:
+    """Add time spent on the user's annotation of the frame, without a new version.
+
+    Time alone is no edit: it must not make other pages' versions stale
+    (the page sends it when it is hidden or closed). Returns False when the
+    user has no annotation of the frame.
+    """
+    result = db.session.execute(
+        db.update(Annotation)
+        .where(Annotation.frame_id == frame.id, Annotation.author_id == user.id)
+        .values(time_spent_s=Annotation.time_spent_s + seconds, updated_at=Annotation.updated_at)
+        .execution_options(synchronize_session=False)
+    )
+    db.session.commit()
+    return result.rowcount > 0
+
+
+def _check_complete(specs: list[InstanceSpec], no_action_object: bool) -> None:
+    for i, spec in enumerate(specs):
+        if not spec.mask.any():
+            raise Problem(f"instances[{i}].mask: empty; draw the object or delete the instance",
+                          fields={f"instances[{i}].mask": "empty"})
+    if not specs and not no_action_object:
+        raise Problem(
+            'status: draw at least one action-object or mark the frame "no action-object" before marking it done',
+            fields={"status": "nothing drawn and not marked no action-object"},
+        )
+
+
+def _next_status(current: Status, *, requested: Status | None, changed: bool) -> Status:
+    if requested is Status.DONE:
+        # Confirming "done" on an accepted annotation that did not change keeps the acceptance.
+        return Status.REVIEWED if current is Status.REVIEWED and not changed else Status.DONE
+    if requested is Status.IN_PROGRESS:
+        return Status.IN_PROGRESS
+    if not changed:
+        return current
+    if current in (Status.DONE, Status.REVIEWED):
+        return Status.DONE  # an edited finished annotation goes back to review
+    return Status.IN_PROGRESS
+
+
+def stale(current: int) -> Problem:
+    """The 409 of a save or review made on an older version than ``current``."""
+    return Problem(
+        f"this annotation was changed elsewhere: it is at version {current}",
+        status=409,
+        fields={"version": f"is {current} now"},
+        current_version=current,
+    )

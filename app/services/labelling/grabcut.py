@@ -1,0 +1,348 @@
+"""Server-side GrabCut sessions that help draw an annotation's instances.
+
+One ``egonet.grabcut.GrabCutSession`` per user, frame and instance key.
+After every operation its state goes into the ``grabcut_state`` row, so the
+session survives a restart and any worker process can continue it. Two
+strokes never interleave: an operation holds a lock file for its session
+(threads and processes of one machine wait for each other), on PostgreSQL
+it also locks the row, and the row's revision token catches any writer the
+locks cannot see (the operation is then redone on the winner's state). A
+worker keeps recent sessions in memory under their revision, within a budget
+of bytes, which spares decoding the frame and the state when the same worker
+sees the next operation. What one operation may cost is bounded: frames up to
+MAX_FRAME_SIDE pixels a side, strokes of up to GRABCUT_MAX_STROKE_POINTS
+points and GRABCUT_MAX_RADIUS, and the pixels all of an object's strokes
+sweep (a restored session paints them again) up to GRABCUT_MAX_STROKE_PIXELS.
+"""
+
+import contextlib
+import fcntl
+import io
+import threading
+import zlib
+from collections import OrderedDict
+from collections.abc import Callable
+from dataclasses import dataclass
+from pathlib import Path
+
+import numpy as np
+from flask import current_app
+from sqlalchemy.exc import IntegrityError
+from sqlalchemy.orm.exc import StaleDataError
+
+from app.errors import Problem
+from app.extensions import db
+from app.models import Frame, User
+from app.models.annotations import GrabCutState
+from app.services import media
+from egonet import io as egonet_io
+from egonet.errors import EgonetError
+from egonet.grabcut import GrabCutSession
+
+
+@dataclass
+class GrabCutResult:
+    mask: np.ndarray
+    can_undo: bool
+
+
+# --------------------------------------------------------------------------
+# What this worker keeps in memory
+
+
+class _Recent:
+    """Recently used objects of this worker, by key, within a budget of bytes:
+    the least recently used go first, and one larger than the budget is not kept."""
+
+    def __init__(self):
+        self._items: OrderedDict = OrderedDict()  # key -> (value, bytes), least recent first
+        self._lock = threading.Lock()
+        self.nbytes = 0
+
+    def keys(self) -> list:
+        with self._lock:
+            return list(self._items)
+
+    def get(self, key):
+        with self._lock:
+            if key not in self._items:
+                return None
+            self._items.move_to_end(key)
+            return self._items[key][0]
+
+    def take(self, key):
+        with self._lock:
+            value, size = self._items.pop(key, (None, 0))
+            self.nbytes -= size
+            return value
+
+    def put(self, key, value, *, nbytes: int, budget: int) -> None:
+        with self._lock:
+            self.nbytes -= self._items.pop(key, (None, 0))[1]
+            if nbytes > budget:
+                return
+            self._items[key] = (value, nbytes)
+            self.nbytes += nbytes
+            while self.nbytes > budget:
+                _, (_, size) = self._items.popitem(last=False)
+                self.nbytes -= size
+
+
+# Sessions under their row's revision. A session is taken out while an
+# operation runs on it (so two threads never share one) and put back under
+# the new revision afterwards; since a revision is random and changes with
+# every write, a cached session is used only while the database still holds
+# exactly its state. A client's keep-alive connection stays with one worker,
+# so an annotator's strokes usually find their session here. They are kept
+# within GRABCUT_CACHE_BYTES, counted by their arrays (8-10 MB each at
+# 1280x960: the frame's copy, the mask, the ROI's guide, the footprints).
+_sessions = _Recent()
+# Decoded frames by their (content-addressed, so never stale) media path,
+# within GRABCUT_IMAGE_CACHE_BYTES: a session restored in another worker then
+# only needs its state decoded.
+_images = _Recent()
+
+
+def _dump_state(session: GrabCutSession) -> bytes:
+    buffer = io.BytesIO()
+    np.savez(buffer, **session.state())
+    # np.savez_compressed is several times slower than zlib's fastest level
+    # for about the same size on these mostly-bit-packed arrays.
+    return zlib.compress(buffer.getvalue(), 1)
+
+
+def _frame_image(frame: Frame) -> np.ndarray:
+    image = _images.get(frame.rgb_path)
+    if image is None:
+        image = egonet_io.read_image(media.absolute_path(frame.rgb_path))
+        _images.put(frame.rgb_path, image, nbytes=image.nbytes, budget=current_app.config["GRABCUT_IMAGE_CACHE_BYTES"])
+    return image
+
+
+def _keep(revision: str, session: GrabCutSession) -> None:
+    _sessions.put(revision, session, nbytes=session.nbytes, budget=current_app.config["GRABCUT_CACHE_BYTES"])
+
+
+def _load_session(frame: Frame, blob: bytes) -> GrabCutSession:
+    with np.load(io.BytesIO(zlib.decompress(blob)), allow_pickle=False) as arrays:
+        return GrabCutSession.from_state(_frame_image(frame), dict(arrays))
+
+
+def _new_session(frame: Frame) -> GrabCutSession:
+    return GrabCutSession(_frame_image(frame))
+
+
+# --------------------------------------------------------------------------
+# What one operation may cost
+
+
+def check_box(frame: Frame, box: list[float]) -> tuple[int, int, int, int]:
+    """A box ``[x0, y0, x1, y1]`` (pixels, x1 and y1 exclusive) inside the frame, not empty."""
+    x0, y0, x1, y1 = (int(round(v)) for v in box)
+    w, h = frame.width, frame.height
+    if not (0 <= x0 < x1 <= w and 0 <= y0 < y1 <= h):
+        raise Problem(
+            f"box: [{x0}, {y0}, {x1}, {y1}] is empty or outside the {w}x{h} frame",
+            fields={"box": f"must satisfy 0 <= x0 < x1 <= {w} and 0 <= y0 < y1 <= {h}"},
+        )
+    if (x0, y0, x1, y1) == (0, 0, w, h):
+        raise Problem("box: covers the whole frame; leave some background around the object",
+                      fields={"box": "covers the whole frame"})
+    return x0, y0, x1, y1
+
+
+def check_stroke(frame: Frame, points: list[list[float]], radius: float) -> None:
+    """A stroke with at least one point, a radius in (0, GRABCUT_MAX_RADIUS],
+    points no further than a frame's size outside it, touching the frame.
+    (The request's schema holds the number of points to
+    GRABCUT_MAX_STROKE_POINTS; ``grabcut_stroke`` checks what the object's
+    strokes cost in all.)"""
+    w, h = frame.width, frame.height
+    if not points:
+        raise Problem("points: a stroke needs at least one point", fields={"points": "must not be empty"})
+    limit = current_app.config["GRABCUT_MAX_RADIUS"]
+    if not 0 < radius <= limit:
+        raise Problem(f"radius: must be a positive number of pixels up to {limit:g}",
+                      fields={"radius": f"must be > 0 and <= {limit:g}"})
+    for i, (x, y) in enumerate(points):
+        if not (-w <= x <= 2 * w and -h <= y <= 2 * h):
+            raise Problem(f"points[{i}]: ({x}, {y}) is far outside the {w}x{h} frame",
+                          fields={f"points[{i}]": "far outside the frame"})
+    xs = [p[0] for p in points]
+    ys = [p[1] for p in points]
+    if max(xs) < -radius or min(xs) > w - 1 + radius or max(ys) < -radius or min(ys) > h - 1 + radius:
+        raise Problem("points: the stroke lies outside the frame", fields={"points": "outside the frame"})
+
+
+def stroke_pixels(shape: tuple[int, int], points: list | np.ndarray, radius: float) -> int:
+    """The pixels that painting a stroke visits: ``egonet.grabcut`` measures
+    the distance to each segment over the segment's box widened by the
+    radius, into a crop of the whole stroke's box (all clipped to the frame).
+    Its time and memory, and those of replaying the stroke when a worker
+    restores the session, follow this number."""
+    h, w = shape
+    p = np.asarray(points, np.float64).reshape(-1, 2)
+    starts, ends = (p, p) if len(p) == 1 else (p[:-1], p[1:])
+    lows = np.vstack([np.minimum(starts, ends), p.min(axis=0)])
+    highs = np.vstack([np.maximum(starts, ends), p.max(axis=0)])
+    x0 = np.clip(np.floor(lows[:, 0] - radius), 0, w)
+    y0 = np.clip(np.floor(lows[:, 1] - radius), 0, h)
+    x1 = np.clip(np.ceil(highs[:, 0] + radius) + 1, 0, w)
+    y1 = np.clip(np.ceil(highs[:, 1] + radius) + 1, 0, h)
+    return int((np.maximum(x1 - x0, 0) * np.maximum(y1 - y0, 0)).sum())
+
+
+def _check_frame_size(frame: Frame) -> None:
+    side = current_app.config["MAX_FRAME_SIDE"]
+    if max(frame.width, frame.height) > side:
+        raise Problem(f"frame_id: frame {frame.id} is {frame.width}x{frame.height}, larger than GrabCut's "
+                      f"limit of {side} pixels a side; label it by hand or import it smaller",
+                      fields={"frame_id": f"larger than {side} pixels a side"})
+
+
+def _check_sweep(session: GrabCutSession, points: list, radius: float) -> None:
+    """Refuse a stroke that would take the object's strokes past GRABCUT_MAX_STROKE_PIXELS (see ``stroke_pixels``)."""
+    limit = current_app.config["GRABCUT_MAX_STROKE_PIXELS"]
+    new = stroke_pixels(session.shape, points, radius)
+    earlier = sum(stroke_pixels(session.shape, p, r) for p, _, r in session.strokes)
+    if new > limit:
+        reason = (f"the stroke sweeps {new / 1e6:.1f} Mpx (its segments' boxes widened by the radius), more than "
+                  f"the limit of {limit / 1e6:.1f} Mpx; draw shorter strokes or use a smaller brush")
+        raise Problem(f"points: {reason}", fields={"points": reason})
+    if earlier + new > limit:
+        reason = (f"the object's strokes would sweep {(earlier + new) / 1e6:.1f} Mpx, more than the limit of "
+                  f"{limit / 1e6:.1f} Mpx; undo some of them or start the object again with a box")
+        raise Problem(f"points: {reason}", fields={"points": reason})
+
+
+# --------------------------------------------------------------------------
+# Operations
+
+
+def grabcut_box(frame: Frame, user: User, key: str, box: tuple[int, int, int, int]) -> GrabCutResult:
+    """Start (or restart) the object ``key`` from a box; see ``check_box``."""
+    return _operate(frame, user, key, lambda s: s.box(*box), create=True)
+
+
+def grabcut_stroke(frame: Frame, user: User, key: str, *, points: list, label: str, radius: float) -> GrabCutResult:
+    """Add a corrective fg/bg stroke to the object ``key``; see ``check_stroke``.
+    The object's strokes in all may sweep at most GRABCUT_MAX_STROKE_PIXELS."""
+
+    def apply(session: GrabCutSession) -> np.ndarray:
+        _check_sweep(session, points, radius)
+        return session.stroke(points, label, radius)
+
+    return _operate(frame, user, key, apply, create=False)
+
+
+def grabcut_undo(frame: Frame, user: User, key: str) -> GrabCutResult:
+    """Step the object's GrabCut session back by one operation (409 when there is none)."""
+
+    def apply(session: GrabCutSession) -> np.ndarray:
+        if not session.can_undo:
+            raise Problem("undo: nothing to undo", status=409, fields={"undo": "nothing to undo"})
+        return session.undo()
+
+    return _operate(frame, user, key, apply, create=False)
+
+
+def grabcut_mask(frame: Frame, user: User, key: str) -> GrabCutResult:
+    """The session's current mask, without changing it."""
+    _check_frame_size(frame)
+    row = _state_row(frame, user, key, lock=False)
+    if row is None:
+        raise Problem(f"no GrabCut session for object {key!r} on this frame", status=404,
+                      fields={"instance": "no session"})
+    session = _sessions.take(row.revision) or _load_session(frame, row.state)
+    _keep(row.revision, session)
+    return GrabCutResult(session.mask, session.can_undo)
+
+
+def _operate(frame: Frame, user: User, key: str, apply: Callable[[GrabCutSession], np.ndarray], *, create: bool) -> GrabCutResult:
+    _check_frame_size(frame)
+    # The lock file serialises the workers of one machine; the revision check
+    # below still catches a writer that it cannot see (another machine).
+    with _session_lock(frame, user, key):
+        return _operate_locked(frame, user, key, apply, create=create)
+
+
+def _operate_locked(frame: Frame, user: User, key: str, apply: Callable[[GrabCutSession], np.ndarray], *, create: bool) -> GrabCutResult:
+    for _ in range(3):
+        row = _state_row(frame, user, key, lock=True)
+        if row is None:
+            if not create:
+                db.session.rollback()
+                raise Problem("box: draw a box around the object first", fields={"box": "no box yet for this object"})
+            session = _new_session(frame)
+        else:
+            session = _sessions.take(row.revision) or _load_session(frame, row.state)
+        try:
+            mask = apply(session)
+        except Problem:
+            db.session.rollback()  # let go of the row's lock before answering
+            raise
+        except EgonetError as exc:
+            db.session.rollback()
+            raise Problem.from_egonet(exc) from None
+        if row is None:
+            row = GrabCutState(user_id=user.id, frame_id=frame.id, instance_key=key, state=_dump_state(session))
+            db.session.add(row)
+        else:
+            row.state = _dump_state(session)
+        try:
+            db.session.commit()
+        except (StaleDataError, IntegrityError):
+            # Another operation on this session committed first: redo ours on its state.
+            db.session.rollback()
+            continue
+        _keep(row.revision, session)
+        return GrabCutResult(mask, session.can_undo)
+    raise Problem("another GrabCut operation on this object is still running; try again", status=409,
+                  fields={"instance": "busy"})
+
+
+# --------------------------------------------------------------------------
+# Saved sessions: their rows and locks
+
+
+def grabcut_keys(frame: Frame, user: User) -> list[str]:
+    """The instance keys for which the user has a saved GrabCut session on the frame."""
+    return list(
+        db.session.execute(
+            db.select(GrabCutState.instance_key)
+            .filter_by(frame_id=frame.id, user_id=user.id)
+            .order_by(GrabCutState.instance_key)
+        ).scalars()
+    )
+
+
+def forget_sessions(frame: Frame, user: User, *, keep: set[str | None]) -> None:
+    """Delete the user's GrabCut sessions on the frame except those of ``keep``
+    (in the caller's transaction)."""
+    query = db.delete(GrabCutState).where(GrabCutState.frame_id == frame.id, GrabCutState.user_id == user.id)
+    kept = [k for k in keep if k]
+    if kept:
+        query = query.where(GrabCutState.instance_key.not_in(kept))
+    db.session.execute(query)
+
+
+def _state_row(frame: Frame, user: User, key: str, *, lock: bool) -> GrabCutState | None:
+    query = db.select(GrabCutState).filter_by(user_id=user.id, frame_id=frame.id, instance_key=key)
+    if lock:
+        query = query.with_for_update()
+    return db.session.execute(query).scalar_one_or_none()
+
+
+@contextlib.contextmanager
+def _session_lock(frame: Frame, user: User, key: str):
+    """Hold an exclusive lock for one GrabCut session, across threads and
+    processes on this machine (one of 64 lock files under CACHE_ROOT)."""
+    folder = Path(current_app.config["CACHE_ROOT"]) / "grabcut-locks"
+    folder.mkdir(parents=True, exist_ok=True)
+    stripe = zlib.crc32(f"{user.id}/{frame.id}/{key}".encode()) % 64
+    with open(folder / f"{stripe:02d}.lock", "a+b") as handle:
+        fcntl.flock(handle, fcntl.LOCK_EX)
+        try:
+            yield
+        finally:
+            fcntl.flock(handle, fcntl.LOCK_UN)

@@ -1,0 +1,163 @@
+"""Review and the queues: a reviewer's decision on a done annotation, and
+which frames and annotations wait for whom.
+
+A reviewer accepts a done annotation (reviewed; its GrabCut sessions go) or
+rejects it with a comment (rejected, back to its author). An annotator's
+queue runs in dataset order (activity, sequence, index) over the frames
+nobody else has taken; a reviewer's runs oldest first.
+"""
+
+from dataclasses import dataclass
+
+from sqlalchemy import and_, exists, func, or_, tuple_
+from sqlalchemy.orm.exc import StaleDataError
+
+from app.errors import Problem
+from app.extensions import db
+from app.models import FINISHED, Activity, Annotation, Frame, Sequence, Status, User, utcnow
+from app.services.labelling.annotations import get_annotation, stale
+from app.services.labelling.grabcut import forget_sessions
+
+# --------------------------------------------------------------------------
+# Review
+
+
+def review_annotation(annotation: Annotation, reviewer: User, *, version: int, decision: str, comment: str | None) -> Annotation:
+    """Accept (reviewed) or reject (rejected, back to its author) a done annotation.
+
+    Raises:
+        Problem: 403 for the reviewer's own annotation, 400 for a rejection
+            without a comment, 409 when the annotation is not done or
+            ``version`` is stale.
+    """
+    if annotation.author_id == reviewer.id:
+        raise Problem("you cannot review your own annotation", status=403, fields={"annotation_id": "is your own"})
+    comment = (comment or "").strip() or None
+    if decision == "reject" and comment is None:
+        raise Problem("comment: say what to fix when rejecting", fields={"comment": "required when rejecting"})
+    if annotation.version != version:
+        raise stale(annotation.version)
+    if annotation.status is not Status.DONE:
+        raise Problem(
+            f"only done annotations can be reviewed; this one is {annotation.status.value.replace('_', ' ')}",
+            status=409,
+            fields={"status": f"is {annotation.status.value}"},
+        )
+    annotation.status = Status.REVIEWED if decision == "accept" else Status.REJECTED
+    annotation.review_comment = comment
+    annotation.reviewer = reviewer
+    annotation.reviewed_at = utcnow()
+    if annotation.status is Status.REVIEWED:
+        forget_sessions(annotation.frame, annotation.author, keep=set())
+    try:
+        db.session.commit()
+    except StaleDataError:
+        db.session.rollback()
+        raise stale(get_annotation(annotation.id).version) from None
+    return annotation
+
+
+# --------------------------------------------------------------------------
+# Queues
+
+
+def _frame_order():
+    return (Activity.name, Sequence.name, Frame.index, Frame.id)
+
+
+def _unlabelled_for(user: User):
+    """SQL condition: the frame still needs labelling, as far as ``user`` goes.
+
+    A frame is taken when any annotation of it is finished, or another
+    person's is in progress or rejected (it is theirs to finish).
+    """
+    taken = exists().where(
+        Annotation.frame_id == Frame.id,
+        or_(
+            Annotation.status.in_(FINISHED),
+            and_(Annotation.author_id != user.id, Annotation.status.in_((Status.IN_PROGRESS, Status.REJECTED))),
+        ),
+    )
+    return ~taken
+
+
+def next_unlabelled(user: User, *, after: Frame | None = None, activity_id: int | None = None) -> int | None:
+    """The id of the next frame the user should label, in dataset order
+    (activity, sequence, index), after ``after`` and wrapping around (so
+    the last one left is ``after`` itself)."""
+    query = (
+        db.select(Frame.id)
+        .join(Sequence, Frame.sequence_id == Sequence.id)
+        .join(Activity, Sequence.activity_id == Activity.id)
+        .where(_unlabelled_for(user))
+        .order_by(*_frame_order())
+        .limit(1)
+    )
+    if activity_id is not None:
+        query = query.where(Activity.id == activity_id)
+    if after is not None:
+        key = (after.sequence.activity.name, after.sequence.name, after.index, after.id)
+        later = db.session.execute(query.where(tuple_(*_frame_order()) > tuple_(*key))).scalar_one_or_none()
+        if later is not None:
+            return later
+    return db.session.execute(query).scalar_one_or_none()
+
+
+@dataclass
+class ActivityProgress:
+    activity: Activity
+    frames: int
+    unlabelled: int
+
+
+def annotator_queue(user: User) -> dict:
+    """What the labelling overview shows an annotator: per-activity progress,
+    frames returned with a comment, frames in progress, recent work."""
+    counts = dict(
+        db.session.execute(
+            db.select(Sequence.activity_id, func.count(Frame.id)).join(Frame).group_by(Sequence.activity_id)
+        ).all()
+    )
+    open_counts = dict(
+        db.session.execute(
+            db.select(Sequence.activity_id, func.count(Frame.id))
+            .join(Frame)
+            .where(_unlabelled_for(user))
+            .group_by(Sequence.activity_id)
+        ).all()
+    )
+    activities = db.session.execute(db.select(Activity).order_by(Activity.name)).scalars().all()
+    mine = db.select(Annotation).filter_by(author_id=user.id)
+    return {
+        "progress": [ActivityProgress(a, counts.get(a.id, 0), open_counts.get(a.id, 0)) for a in activities],
+        "rejected": db.session.execute(
+            mine.filter_by(status=Status.REJECTED).order_by(Annotation.reviewed_at.desc())
+        ).scalars().all(),
+        "in_progress": db.session.execute(
+            mine.filter_by(status=Status.IN_PROGRESS).order_by(Annotation.updated_at.desc()).limit(50)
+        ).scalars().all(),
+        "recent": db.session.execute(
+            mine.where(Annotation.status.in_(FINISHED)).order_by(Annotation.updated_at.desc()).limit(12)
+        ).scalars().all(),
+    }
+
+
+def review_queue(*, limit: int = 200) -> tuple[list[Annotation], int]:
+    """Done annotations waiting for a decision, oldest first, and how many there are."""
+    waiting = db.select(Annotation).filter_by(status=Status.DONE)
+    total = db.session.execute(db.select(func.count()).select_from(waiting.subquery())).scalar_one()
+    rows = db.session.execute(waiting.order_by(Annotation.updated_at, Annotation.id).limit(limit)).scalars().all()
+    return rows, total
+
+
+def next_to_review(reviewer: User, *, after: Annotation | None = None) -> int | None:
+    """The id of the oldest done annotation other than ``after`` and the reviewer's own."""
+    query = (
+        db.select(Annotation.id)
+        .filter_by(status=Status.DONE)
+        .where(Annotation.author_id != reviewer.id)
+        .order_by(Annotation.updated_at, Annotation.id)
+    )
+    if after is not None:
+        query = query.where(Annotation.id != after.id)
+    return db.session.execute(query.limit(1)).scalar_one_or_none()
