@@ -36,6 +36,7 @@ def settings_key(settings: dict[str, Any]) -> str:
 
 
 def labels_path(frame: Frame, settings: dict[str, Any]) -> Path:
+    """Where the frame's labels for these settings are cached (named by content, so re-imports share it)."""
     root = Path(current_app.config["CACHE_ROOT"]) / "superpixels" / settings_key(settings)
     return root / frame.content_hash[:2] / f"{frame.content_hash}.npz"
 
