@@ -140,7 +140,7 @@ def create_app(test_config: dict | None = None, *, instance_path: str | None = N
     login_manager.login_view = "auth.login"
 
     from app import errors, queue, security, throttle
-    from app.blueprints import api, auth, frames, label, navigation, scores, studies, study, training, users
+    from app.blueprints import api, auth, frames, label, navigation, participate, scores, studies, training, users
     from app.cli import bp as cli_bp
 
     security.require_production_safety(app)
@@ -149,7 +149,7 @@ def create_app(test_config: dict | None = None, *, instance_path: str | None = N
     errors.register(app)
     security.register(app)
     app.register_blueprint(auth.bp)
-    for module in (frames, api, label, studies, study, training, scores, users):
+    for module in (frames, api, label, studies, participate, training, scores, users):
         app.register_blueprint(module.bp)
     app.context_processor(navigation)
     app.register_blueprint(cli_bp)

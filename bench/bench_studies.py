@@ -62,7 +62,7 @@ def main() -> None:
             start = time.perf_counter()
             labels = studies.superpixel_labels(frame, settings)
             first = (time.perf_counter() - start) * 1e3
-            size_kb = studies._labels_path(frame, settings).stat().st_size / 1024
+            size_kb = studies.masks.labels_path(frame, settings).stat().st_size / 1024
             read = median_ms(lambda: studies.superpixel_labels(frame, settings), 15)
             project = median_ms(lambda: egonet_clicks.soft_mask((H, W), CLICKS, sigma=60.0, labels=labels), 15)
 

@@ -36,10 +36,11 @@ from dataclasses import dataclass
 import cv2
 import numpy as np
 
+from egonet.errors import EgonetError
 from egonet.io import check_rgb
 
-__all__ = ["DEFAULT_SIGMA", "SUPERPIXEL_DEFAULTS", "SuperpixelDefaults", "click_gaussian", "project_to_regions",
-           "soft_mask", "superpixels"]
+__all__ = ["DEFAULT_SIGMA", "SUPERPIXEL_DEFAULTS", "MaskMean", "SuperpixelDefaults", "click_gaussian", "overlay",
+           "project_to_regions", "soft_mask", "superpixels"]
 
 DEFAULT_SIGMA = 60.0
 """The paper's click width: standard deviation in native-resolution pixels."""
@@ -347,3 +348,94 @@ def soft_mask(
         return gauss
     out = project_to_regions(gauss, labels)
     return np.clip(out, 0.0, 1.0, out=out)
+
+
+class MaskMean:
+    """The pixel-wise mean of soft masks given one at a time (the paper's Fig. 5 mean map).
+
+    Sums in float64, so the mean of many participants does not depend on
+    their order beyond rounding; ``mean()`` is float32 like the masks.
+
+    Example:
+        >>> acc = MaskMean()
+        >>> acc.add(np.ones((2, 2), np.float32))
+        >>> acc.add(np.zeros((2, 2), np.float32))
+        >>> acc.count, float(acc.mean()[0, 0])
+        (2, 0.5)
+    """
+
+    def __init__(self) -> None:
+        self.total: np.ndarray | None = None
+        self.count = 0
+
+    def add(self, mask: np.ndarray) -> None:
+        """Add one soft mask, (H, W).
+
+        Raises:
+            EgonetError: If its shape differs from the first mask's.
+        """
+        mask = np.asarray(mask, dtype=np.float64)
+        if self.total is not None and mask.shape != self.total.shape:
+            raise EgonetError(f"mask: shape {mask.shape} differs from the first mask's {self.total.shape}", field="mask")
+        self.total = mask.copy() if self.total is None else self.total + mask
+        self.count += 1
+
+    def mean(self) -> np.ndarray | None:
+        """The mean so far, float32 (H, W); None before any mask was added."""
+        if self.total is None:
+            return None
+        return (self.total / self.count).astype(np.float32)
+
+
+def overlay(
+    rgb: np.ndarray,
+    mask: np.ndarray | None,
+    *,
+    points: Sequence[tuple[float, float]] = (),
+    outline: np.ndarray | None = None,
+    max_width: int = 640,
+) -> np.ndarray:
+    """A frame with a soft mask as a heat map, clicks as rings and an optional outline.
+
+    The heat map (turbo colour map) is drawn with an opacity of 0.75 times
+    the mask, so the frame shows through where the mask is low. The result
+    is downscaled to at most ``max_width`` pixels wide (never upscaled).
+
+    Args:
+        rgb: The frame, uint8 (H, W, 3).
+        mask: Soft mask in [0, 1], (H, W), or None for the frame alone.
+        points: Clicks (x, y) in the frame's pixels, drawn as white rings.
+        outline: A binary mask (H, W) whose outer contours are drawn in
+            green (for example the ground truth).
+        max_width: Widest output in pixels.
+
+    Returns:
+        The picture, uint8 (h, w, 3) RGB.
+
+    Example:
+        >>> out = overlay(np.zeros((10, 20, 3), np.uint8), np.ones((10, 20), np.float32), max_width=10)
+        >>> out.shape, out.dtype.name
+        ((5, 10, 3), 'uint8')
+    """
+    image = rgb.astype(np.float32)
+    h, w = image.shape[:2]
+    scale = min(1.0, max_width / w)
+    size = (max(1, round(w * scale)), max(1, round(h * scale)))
+    if scale < 1.0:
+        image = cv2.resize(image, size, interpolation=cv2.INTER_AREA)
+    out = image
+    if mask is not None:
+        m = cv2.resize(mask.astype(np.float32), size, interpolation=cv2.INTER_LINEAR) if scale < 1.0 else mask
+        heat = cv2.cvtColor(cv2.applyColorMap(np.round(m * 255).astype(np.uint8), cv2.COLORMAP_TURBO), cv2.COLOR_BGR2RGB)
+        alpha = (0.75 * np.clip(m, 0, 1))[..., None]
+        out = image * (1 - alpha) + heat.astype(np.float32) * alpha
+    out = np.clip(out, 0, 255).astype(np.uint8)
+    if outline is not None:
+        edge = cv2.resize(outline.astype(np.uint8), size, interpolation=cv2.INTER_NEAREST)
+        contours, _ = cv2.findContours(edge, cv2.RETR_EXTERNAL, cv2.CHAIN_APPROX_SIMPLE)
+        cv2.drawContours(out, contours, -1, (60, 255, 60), 2, lineType=cv2.LINE_AA)
+    for x, y in points:
+        centre = (round((x + 0.5) * scale - 0.5), round((y + 0.5) * scale - 0.5))
+        cv2.circle(out, centre, 7, (0, 0, 0), 3, lineType=cv2.LINE_AA)
+        cv2.circle(out, centre, 7, (255, 255, 255), 2, lineType=cv2.LINE_AA)
+    return out

@@ -23,7 +23,7 @@ from wtforms import (
 from wtforms.validators import DataRequired, InputRequired, Length, NumberRange, Optional
 from wtforms.widgets import CheckboxInput, ListWidget
 
-from app.errors import ApiError
+from app.errors import Problem
 from app.extensions import db
 from app.models import Role
 from app.models.studies import ANSWERED, EntryKind, Participant, Study, StudyFrame, Trial
@@ -79,21 +79,21 @@ def _study_trial(study_id: int, trial_id: int) -> Trial:
     """A trial of this study (404 for a trial of another study)."""
     trial = db.session.get(Trial, trial_id)
     if trial is None or trial.participant.study_id != study_id:
-        raise ApiError(404, "no such trial in this study")
+        raise Problem("no such trial in this study", status=404)
     return trial
 
 
 def _study_frame(study_id: int, study_frame_id: int) -> StudyFrame:
     study_frame = db.session.get(StudyFrame, study_frame_id)
     if study_frame is None or study_frame.study_id != study_id:
-        raise ApiError(404, "no such frame in this study")
+        raise Problem("no such frame in this study", status=404)
     return study_frame
 
 
 def _page() -> int:
     page = request.args.get("page", 1, type=int)
     if page < 1:
-        raise ApiError(400, "page must be a positive integer", fields={"page": "must be >= 1"})
+        raise Problem("page must be a positive integer", fields={"page": "must be >= 1"})
     return page
 
 
@@ -190,12 +190,12 @@ def participant(study_id: int, participant_id: int):
     study = _study(study_id)
     person = db.session.get(Participant, participant_id)
     if person is None or person.study_id != study.id:
-        raise ApiError(404, "no such participant in this study")
+        raise Problem("no such participant in this study", status=404)
     page = _page()
     total = len(person.trials)
     pages = max(1, -(-total // PER_PAGE))
     if page > pages:
-        raise ApiError(404, f"page {page} does not exist (there are {pages})")
+        raise Problem(f"page {page} does not exist (there are {pages})", status=404)
     trials = person.trials[(page - 1) * PER_PAGE : page * PER_PAGE]
     return render_template(
         "studies/participant.html",
@@ -216,7 +216,7 @@ def frames(study_id: int):
     page = _page()
     pages = max(1, -(-len(study.frames) // PER_PAGE))
     if page > pages:
-        raise ApiError(404, f"page {page} does not exist (there are {pages})")
+        raise Problem(f"page {page} does not exist (there are {pages})", status=404)
     shown = study.frames[(page - 1) * PER_PAGE : page * PER_PAGE]
     answered = studies.answered_counts(shown)
     return render_template("studies/frames.html", study=study, frames=shown, answered=answered, page=page, pages=pages)
@@ -262,7 +262,7 @@ def trial_mask(study_id: int, trial_id: int):
     """One participant's soft mask as a 16-bit PNG at the frame's native size."""
     trial = _study_trial(study_id, trial_id)
     if trial.outcome not in ANSWERED:
-        raise ApiError(404, "this trial has no answer, so no soft mask")
+        raise Problem("this trial has no answer, so no soft mask", status=404)
     return _png(studies.mask_png(studies.trial_soft_mask(trial)))
 
 
@@ -272,7 +272,7 @@ def export(study_id: int, export_name: str):
     """The study's results: trials, clicks and events as CSV, everything as JSON, soft masks as PNGs in a zip."""
     study = _study(study_id)
     if export_name not in studies.EXPORTS:
-        raise ApiError(404, f"unknown export {export_name!r}; choose one of {', '.join(studies.EXPORTS)}")
+        raise Problem(f"unknown export {export_name!r}; choose one of {', '.join(studies.EXPORTS)}", status=404)
     headers = {"Content-Disposition": f'attachment; filename="study{study.id}-{export_name}"'}
     if export_name.endswith(".csv"):
         table = export_name.removesuffix(".csv")

@@ -14,8 +14,8 @@ from flask import current_app
 
 from app.extensions import db
 from app.models import Activity, Frame, Sequence, Status
-from app.models.studies import EntryKind, Outcome, Participant, Study, Trial
-from app.services import studies
+from app.models.studies import EntryKind, EventKind, Outcome, Participant, Study, Trial
+from app.services import ground_truth, studies
 from egonet import clicks as egonet_clicks
 from tests.app.access.studies import build_study
 
@@ -64,7 +64,7 @@ def test_sampling_is_reproducible_from_the_seed_and_only_eligible(ctx, tmp_path)
 
     # The recorded seed reproduces the draw with the documented recipe.
     hotel = db.session.execute(db.select(Activity).filter_by(name="hotel")).scalar_one()
-    eligible_hotel = [f for f in studies.ground_truth.labelled_frames([hotel.id])]
+    eligible_hotel = [f for f in ground_truth.labelled_frames([hotel.id])]
     expected = [f.id for f in random.Random("5:hotel").sample(eligible_hotel, 4)]
     assert first[4:] == expected
 
@@ -142,7 +142,7 @@ def test_superpixels_are_computed_once_and_cached(ctx, tmp_path, monkeypatch):
     assert not studies.cached_superpixels(frame, study.superpixels)
     labels = studies.superpixel_labels(frame, study.superpixels)
     assert labels.shape == (frame.height, frame.width) and labels.dtype == np.uint16
-    path = studies._labels_path(frame, study.superpixels)
+    path = studies.masks.labels_path(frame, study.superpixels)
     assert path.exists() and studies.settings_key(study.superpixels) in str(path) and frame.content_hash in path.name
     assert not list(path.parent.glob(".tmp-*"))
 
@@ -233,7 +233,7 @@ def done_study(tmp_path):
         return studies.Answer(
             clicks=[(3.0, 4.0, 250.0)],
             rt_ms=600.0,
-            events=[studies.ClientEvent(kind=studies.EventKind.BLUR, client_ms=100.0), studies.ClientEvent(kind=studies.EventKind.RESIZE, client_ms=200.0, detail={"width": 800, "height": 600})],
+            events=[studies.ClientEvent(kind=EventKind.BLUR, client_ms=100.0), studies.ClientEvent(kind=EventKind.RESIZE, client_ms=200.0, detail={"width": 800, "height": 600})],
             window_width=1280,
             window_height=900,
             display_width=640.0,

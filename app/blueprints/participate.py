@@ -1,5 +1,8 @@
 """The participant side of a human study: consent, instructions, timed trials.
 
+(The admin side is ``app.blueprints.studies``. This blueprint keeps its
+registered name ``study`` and its URLs under ``/s``.)
+
 A participant enters with an access code (a public form) or a single-use
 link, which signs them in as their participant user. Opening the link shows
 a Start button; only pressing it (a POST) uses the link, so a link-preview
@@ -21,7 +24,7 @@ from werkzeug.wrappers import Response
 from wtforms import StringField
 from wtforms.validators import DataRequired, Length
 
-from app.errors import ApiError
+from app.errors import Problem
 from app.extensions import db
 from app.models import Role
 from app.models.studies import EventKind, Participant, Trial
@@ -90,7 +93,7 @@ def _participant() -> Participant:
     """The signed-in user's own enrolment, with time-up applied; 403 for anyone else."""
     participant = studies.participant_of(current_user) if current_user.is_authenticated else None
     if participant is None:
-        raise ApiError(403, "you are not enrolled in a study; use the link or code you were given")
+        raise Problem("you are not enrolled in a study; use the link or code you were given", status=403)
     return studies.refresh(participant)
 
 
@@ -99,7 +102,7 @@ def _owned_trial(trial_id: int) -> tuple[Participant, Trial]:
     participant = _participant()
     trial = db.session.get(Trial, trial_id)
     if trial is None or trial.participant_id != participant.id:
-        raise ApiError(404, "no such trial")
+        raise Problem("no such trial", status=404)
     return participant, trial
 
 
@@ -109,7 +112,7 @@ def _go_to_step(participant: Participant) -> Response:
 
 def _sign_in(participant: Participant) -> Response:
     if not login_user(participant.user):
-        raise ApiError(403, "this participant has been deactivated")
+        raise Problem("this participant has been deactivated", status=403)
     return _go_to_step(participant)
 
 
@@ -152,7 +155,7 @@ def consent():
     if request.method == "POST":
         decision = request.form.get("decision")
         if decision not in ("agree", "decline"):
-            raise ApiError(400, "answer agree or decline", fields={"decision": "must be agree or decline"})
+            raise Problem("answer agree or decline", fields={"decision": "must be agree or decline"})
         studies.answer_consent(participant, agree=decision == "agree")
         return _go_to_step(participant)
     if studies.step(participant) != "consent":

@@ -1,0 +1,164 @@
+"""Superpixels (cached per frame), soft masks and the pictures made of them.
+
+Soft masks: ``egonet.clicks.soft_mask`` on superpixels computed once per
+frame and cached under ``CACHE_ROOT/superpixels/<settings key>/`` as a
+compressed ``.npz`` named by the frame's content hash, written atomically.
+The mean map of a frame and the overlays are ``egonet.clicks.MaskMean`` and
+``egonet.clicks.overlay``; this module finds the trials and the files.
+
+For the scorer: ``study_participants(study_ids)`` and
+``participant_soft_masks(participant)``.
+"""
+
+import hashlib
+import io as _io
+import json
+import zipfile
+from collections.abc import Iterable, Iterator
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+from flask import current_app
+from sqlalchemy.orm import selectinload
+
+from app.extensions import db
+from app.models import Frame
+from app.models.studies import ANSWERED, Participant, Study, StudyFrame, Trial
+from app.services import media
+from egonet import clicks as egonet_clicks
+from egonet import io
+
+
+def settings_key(settings: dict[str, Any]) -> str:
+    """A short stable name for a set of superpixel options."""
+    return hashlib.sha256(json.dumps(settings, sort_keys=True).encode()).hexdigest()[:16]
+
+
+def labels_path(frame: Frame, settings: dict[str, Any]) -> Path:
+    """Where the frame's labels for these settings are cached (named by content, so re-imports share it)."""
+    root = Path(current_app.config["CACHE_ROOT"]) / "superpixels" / settings_key(settings)
+    return root / frame.content_hash[:2] / f"{frame.content_hash}.npz"
+
+
+def cached_superpixels(frame: Frame, settings: dict[str, Any]) -> bool:
+    return labels_path(frame, settings).exists()
+
+
+def superpixel_labels(frame: Frame, settings: dict[str, Any]) -> np.ndarray:
+    """The frame's superpixel labels, int (H, W): from the cache, or computed once and cached."""
+    path = labels_path(frame, settings)
+    try:
+        with np.load(path, allow_pickle=False) as data:
+            labels = data["labels"]
+        if labels.shape == (frame.height, frame.width):
+            return labels
+    except (OSError, ValueError, KeyError, zipfile.BadZipFile):
+        pass  # missing or unreadable: compute it again
+    rgb = io.read_image(media.absolute_path(frame.rgb_path))
+    labels = egonet_clicks.superpixels(rgb, **settings)
+    # uint16 holds any realistic region count and halves the file.
+    stored = labels.astype(np.uint16) if labels.max() < 2**16 else labels
+    buffer = _io.BytesIO()
+    np.savez_compressed(buffer, labels=stored)
+    media.write_atomic(path, buffer.getvalue())
+    return stored
+
+
+def precompute_superpixels(study: Study, *, on_progress=None) -> int:
+    """Compute and cache the superpixels of every study frame; return how many were computed."""
+    computed = 0
+    for sf in study.frames:
+        if not cached_superpixels(sf.frame, study.superpixels):
+            superpixel_labels(sf.frame, study.superpixels)
+            computed += 1
+        if on_progress is not None:
+            on_progress(1)
+    return computed
+
+
+def trial_soft_mask(trial: Trial) -> np.ndarray:
+    """The trial's soft mask, float32 (H, W) in [0, 1] at the frame's native size.
+
+    Raises:
+        ValueError: if the trial has no answer (pending or expired).
+    """
+    if trial.outcome not in ANSWERED:
+        raise ValueError(f"trial {trial.id} has no answer ({trial.outcome or 'pending'})")
+    frame, study = trial.frame, trial.participant.study
+    points = [(c.x, c.y) for c in trial.clicks]
+    if not points:  # an answer of none: no need for superpixels
+        return np.zeros((frame.height, frame.width), np.float32)
+    labels = superpixel_labels(frame, study.superpixels)
+    return egonet_clicks.soft_mask((frame.height, frame.width), points, sigma=study.sigma_px, labels=labels)
+
+
+def answered_trials(study_frame: StudyFrame) -> list[Trial]:
+    """The answered trials of one study frame, by participant number."""
+    return list(
+        db.session.execute(
+            db.select(Trial)
+            .join(Participant)
+            .where(Trial.study_frame_id == study_frame.id, Trial.outcome.in_(ANSWERED))
+            .order_by(Participant.number)
+            .options(selectinload(Trial.clicks))
+        ).scalars()
+    )
+
+
+def mean_soft_mask(study_frame: StudyFrame) -> tuple[np.ndarray | None, int]:
+    """The mean of the participants' soft masks of a frame (the paper's Fig. 5), and how many answered."""
+    mean = egonet_clicks.MaskMean()
+    for trial in answered_trials(study_frame):
+        mean.add(trial_soft_mask(trial))
+    return mean.mean(), mean.count
+
+
+def study_participants(study_ids: Iterable[int]) -> list[Participant]:
+    """The participants of these studies, by study and number (for the scorer)."""
+    return list(
+        db.session.execute(
+            db.select(Participant)
+            .where(Participant.study_id.in_(list(study_ids)))
+            .order_by(Participant.study_id, Participant.number)
+        ).scalars()
+    )
+
+
+def participant_soft_masks(participant: Participant) -> Iterator[tuple[Frame, np.ndarray]]:
+    """Each answered trial's frame and soft mask, float32 (H, W) in [0, 1], in trial order.
+
+    Answers of "none" give zeros; a time-out keeps the clicks made before it.
+    Expired and unanswered trials are left out (the participant gave no
+    answer).
+    """
+    trials = db.session.execute(
+        db.select(Trial)
+        .where(Trial.participant_id == participant.id, Trial.outcome.in_(ANSWERED))
+        .order_by(Trial.position)
+        .options(selectinload(Trial.clicks), selectinload(Trial.study_frame).selectinload(StudyFrame.frame))
+    ).scalars()
+    for trial in trials:
+        yield trial.frame, trial_soft_mask(trial)
+
+
+def mask_png(mask: np.ndarray) -> bytes:
+    """A soft mask as a 16-bit grayscale PNG (value * 65535), precise enough for 1/100 thresholds."""
+    return io.encode_probability_png(mask)
+
+
+def overlay_png(
+    frame: Frame,
+    mask: np.ndarray | None,
+    *,
+    points: Iterable[tuple[float, float]] = (),
+    outline: np.ndarray | None = None,
+    max_width: int = 640,
+) -> bytes:
+    """The frame with a soft mask as a heat map, clicks as rings and an optional outline (e.g. ground truth).
+
+    See ``egonet.clicks.overlay``: the heat map's opacity follows the mask,
+    so the frame shows through where the mask is low.
+    """
+    rgb = io.read_image(media.absolute_path(frame.rgb_path))
+    return io.encode_png(egonet_clicks.overlay(rgb, mask, points=list(points), outline=outline, max_width=max_width))

@@ -1,0 +1,98 @@
+"""The admin's overview of studies: participant progress, summaries, frames per activity, answers per frame."""
+
+from collections import defaultdict
+from collections.abc import Iterable
+from dataclasses import dataclass
+from typing import Any
+
+from sqlalchemy import func
+
+from app.extensions import db
+from app.models.studies import ANSWERED, Outcome, Participant, Study, StudyFrame, Trial
+from app.services.studies.building import eligible_counts
+from app.services.studies.common import now
+from app.services.studies.masks import cached_superpixels
+
+
+@dataclass
+class Progress:
+    participant: Participant
+    status: str
+    answered: int
+    closed: int
+    total: int
+    time_used_s: float | None
+
+
+def progress(participant: Participant) -> Progress:
+    """Trials answered and closed, and time used, for the admin's table."""
+    counts: dict[Outcome | None, int] = defaultdict(int)
+    for outcome, n in db.session.execute(
+        db.select(Trial.outcome, func.count()).where(Trial.participant_id == participant.id).group_by(Trial.outcome)
+    ):
+        counts[outcome] += n
+    total = sum(counts.values())
+    answered = sum(counts[o] for o in ANSWERED)
+    used = None
+    if participant.started_at is not None:
+        end = participant.finished_at or min(now(), participant.deadline)
+        used = max(0.0, (end - participant.started_at).total_seconds())
+    if participant.finished_at is not None:
+        status = participant.end_reason.value.replace("_", " ")
+    elif participant.started_at is not None:
+        status = "time up" if now() >= participant.deadline else "running"
+    elif participant.consented_at is not None:
+        status = "consented"
+    else:
+        status = "not started"
+    return Progress(participant, status, answered, total - counts[None], total, used)
+
+
+@dataclass
+class StudySummary:
+    study: Study
+    frames: int
+    participants: int
+    finished: int
+
+
+def study_summaries() -> list[StudySummary]:
+    """Every study, newest first, with its participant counts (the admin's list)."""
+    finished = dict(
+        db.session.execute(
+            db.select(Participant.study_id, func.count()).where(Participant.finished_at.is_not(None)).group_by(Participant.study_id)
+        ).all()
+    )
+    rows = []
+    for study in db.session.execute(db.select(Study).order_by(Study.created_at.desc(), Study.id.desc())).scalars():
+        rows.append(StudySummary(study, len(study.frames), len(study.participants), finished.get(study.id, 0)))
+    return rows
+
+
+def activity_table(study: Study) -> tuple[list[dict[str, Any]], int]:
+    """Per activity of a study: frames drawn and eligible now; and how many frames have cached superpixels."""
+    eligible = {activity.id: n for activity, n in eligible_counts()}
+    rows: dict[int, dict[str, Any]] = {}
+    cached = 0
+    for sf in study.frames:
+        activity = sf.frame.sequence.activity
+        row = rows.setdefault(activity.id, {"activity": activity, "drawn": 0, "eligible": eligible.get(activity.id, 0)})
+        row["drawn"] += 1
+        cached += cached_superpixels(sf.frame, study.superpixels)
+    return sorted(rows.values(), key=lambda r: r["activity"].name), cached
+
+
+def answered_counts(study_frames: Iterable[StudyFrame]) -> dict[int, int]:
+    """How many participants answered each of these study frames (by study frame id)."""
+    ids = [sf.id for sf in study_frames]
+    return dict(
+        db.session.execute(
+            db.select(Trial.study_frame_id, func.count())
+            .where(Trial.study_frame_id.in_(ids), Trial.outcome.in_(ANSWERED))
+            .group_by(Trial.study_frame_id)
+        ).all()
+    )
+
+
+# --------------------------------------------------------------------------
+# Superpixels (cached) and soft masks
