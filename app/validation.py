@@ -1,7 +1,7 @@
 """Request bodies checked against a schema at the boundary.
 
 A schema is a dict of field name -> field type. ``json_body(schema)`` parses
-the request's JSON and returns plain Python values, or raises a 400 ApiError
+the request's JSON and returns plain Python values, or raises a 400 Problem
 whose ``fields`` name every bad field (``"clicks[2].x": "must be >= 0"``).
 Unknown fields are refused, so a misspelt option never does nothing.
 
@@ -22,7 +22,7 @@ from typing import Any
 from flask import request
 
 from app import MAX_ID
-from app.errors import ApiError
+from app.errors import Problem
 
 MISSING = object()
 
@@ -163,14 +163,14 @@ def parse_object(schema: dict[str, Field], data: dict, errors: dict[str, str], *
 
 
 def validate(schema: dict[str, Field], data: Any) -> dict:
-    """Check decoded JSON against ``schema``; raise a 400 ApiError naming the bad fields."""
+    """Check decoded JSON against ``schema``; raise a 400 Problem naming the bad fields."""
     if not isinstance(data, dict):
-        raise ApiError(400, "the request body must be a JSON object", fields={"body": "must be a JSON object"})
+        raise Problem("the request body must be a JSON object", fields={"body": "must be a JSON object"})
     errors: dict[str, str] = {}
     out = parse_object(schema, data, errors)
     if errors:
         first = next(iter(sorted(errors)))
-        raise ApiError(400, f"invalid field {first}: {errors[first]}", fields=dict(sorted(errors.items())))
+        raise Problem(f"invalid field {first}: {errors[first]}", fields=dict(sorted(errors.items())))
     return out
 
 
@@ -179,7 +179,7 @@ def query_int(name: str, *, min: int | None = 1, max: int | None = MAX_ID) -> in
     None when it is absent or empty.
 
     Raises:
-        ApiError: 400 naming ``name`` when it is not such an integer.
+        Problem: 400 naming ``name`` when it is not such an integer.
     """
     text = request.args.get(name, "")
     if not text:
@@ -187,14 +187,14 @@ def query_int(name: str, *, min: int | None = 1, max: int | None = MAX_ID) -> in
     try:
         return Int(min=min, max=max).check(int(text))
     except ValueError:
-        raise ApiError(400, f"{name}: must be an integer", fields={name: "must be an integer"}) from None
+        raise Problem(f"{name}: must be an integer", fields={name: "must be an integer"}) from None
     except Invalid as exc:
-        raise ApiError(400, f"{name}: {exc.reason}", fields={name: exc.reason}) from None
+        raise Problem(f"{name}: {exc.reason}", fields={name: exc.reason}) from None
 
 
 def json_body(schema: dict[str, Field]) -> dict:
     """The request's JSON body, validated (see module doc)."""
     data = request.get_json(silent=True)
     if data is None and request.get_data(cache=True):
-        raise ApiError(400, "the request body is not valid JSON", fields={"body": "not valid JSON"})
+        raise Problem("the request body is not valid JSON", fields={"body": "not valid JSON"})
     return validate(schema, data if data is not None else {})

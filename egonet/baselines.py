@@ -32,6 +32,7 @@ from typing import Protocol, runtime_checkable
 import cv2
 import numpy as np
 
+from egonet.errors import EgonetError
 from egonet.io import check_rgb
 
 __all__ = [
@@ -69,15 +70,15 @@ def _check_frame(rgb: np.ndarray, dhg: np.ndarray | None) -> tuple[int, int]:
     if dhg is not None:
         if not isinstance(dhg, np.ndarray) or dhg.dtype != np.uint8 or dhg.shape != rgb.shape:
             desc = f"{dhg.dtype} {dhg.shape}" if isinstance(dhg, np.ndarray) else type(dhg).__name__
-            raise ValueError(f"dhg must be None or a uint8 array shaped like rgb {rgb.shape}, got {desc}")
+            raise EgonetError(f"dhg must be None or a uint8 array shaped like rgb {rgb.shape}, got {desc}", field="dhg")
     return h, w
 
 
 def _check_positive(value: float, name: str) -> float:
     if isinstance(value, bool) or not isinstance(value, (int, float, np.integer, np.floating)):
-        raise ValueError(f"{name} must be a positive number, got {value!r}")
+        raise EgonetError(f"{name} must be a positive number, got {value!r}", field=name)
     if not np.isfinite(value) or value <= 0:
-        raise ValueError(f"{name} must be a positive finite number, got {value}")
+        raise EgonetError(f"{name} must be a positive finite number, got {value}", field=name)
     return float(value)
 
 
@@ -87,7 +88,7 @@ def _check_size(size: tuple[int, int], name: str) -> tuple[int, int]:
         or len(size) != 2
         or any(isinstance(s, bool) or not isinstance(s, (int, np.integer)) or s < 1 for s in size)
     ):
-        raise ValueError(f"{name} must be (height, width) with positive ints, got {size!r}")
+        raise EgonetError(f"{name} must be (height, width) with positive ints, got {size!r}", field=name)
     return int(size[0]), int(size[1])
 
 
@@ -113,9 +114,9 @@ class ActionObjectPrior:
     def __init__(self, prior: np.ndarray) -> None:
         prior = np.asarray(prior, dtype=np.float32)
         if prior.ndim != 2 or prior.size == 0:
-            raise ValueError(f"prior must be a non-empty 2-D map (h, w), got shape {prior.shape}")
+            raise EgonetError(f"prior must be a non-empty 2-D map (h, w), got shape {prior.shape}", field="prior")
         if not np.all(np.isfinite(prior)) or prior.min() < 0 or prior.max() > 1:
-            raise ValueError("prior must hold finite values in [0, 1]")
+            raise EgonetError("prior must hold finite values in [0, 1]", field="prior")
         self.prior = prior
 
     @classmethod
@@ -144,14 +145,14 @@ class ActionObjectPrior:
         for i, mask in enumerate(masks):
             mask = np.asarray(mask)
             if mask.dtype != np.bool_ or mask.ndim != 2 or mask.size == 0:
-                raise ValueError(f"masks[{i}] must be a non-empty bool (H, W) mask, got {mask.dtype} {mask.shape}")
+                raise EgonetError(f"masks[{i}] must be a non-empty bool (H, W) mask, got {mask.dtype} {mask.shape}", field="masks")
             cover = mask.astype(np.float32)
             if cover.shape != (h, w):
                 cover = cv2.resize(cover, (w, h), interpolation=cv2.INTER_AREA)
             total += cover
             n += 1
         if n == 0:
-            raise ValueError("masks is empty: fit the prior on at least one training mask")
+            raise EgonetError("masks is empty: fit the prior on at least one training mask", field="masks")
         return cls(np.clip(total / n, 0.0, 1.0))
 
     def predict(self, rgb: np.ndarray, dhg: np.ndarray | None = None) -> np.ndarray:
@@ -235,7 +236,7 @@ class SpectralResidualSaliency:
 
     def __init__(self, *, width: int = 64, blur_sigma: float = 2.5) -> None:
         if isinstance(width, bool) or not isinstance(width, (int, np.integer)) or width < 8:
-            raise ValueError(f"width must be an int >= 8, got {width!r}")
+            raise EgonetError(f"width must be an int >= 8, got {width!r}", field="width")
         self.width = int(width)
         self.blur_sigma = _check_positive(blur_sigma, "blur_sigma")
 
@@ -359,11 +360,11 @@ def build_baseline(name: str, *, masks: Iterable[np.ndarray] | None = None) -> P
         'SpectralResidualSaliency'
     """
     if name not in BASELINES:
-        raise ValueError(f"unknown baseline {name!r}; valid names: {', '.join(sorted(BASELINES))}")
+        raise EgonetError(f"unknown baseline {name!r}; valid names: {', '.join(sorted(BASELINES))}", field="name")
     if name == "aop":
         if masks is None:
-            raise ValueError("masks is required for 'aop': pass the training masks of the fold")
+            raise EgonetError("masks is required for 'aop': pass the training masks of the fold", field="masks")
         return ActionObjectPrior.fit(masks)
     if masks is not None:
-        raise ValueError(f"masks must be None for {name!r}, which does not learn from training masks")
+        raise EgonetError(f"masks must be None for {name!r}, which does not learn from training masks", field="masks")
     return BASELINES[name]()

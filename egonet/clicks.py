@@ -138,15 +138,15 @@ def superpixels(
 
     h, w = check_rgb(image, "image", min_side=2)
     if method not in SUPERPIXEL_METHODS:
-        raise ValueError(f"unknown method {method!r}; valid methods: {', '.join(SUPERPIXEL_METHODS)}")
+        raise EgonetError(f"unknown method {method!r}; valid methods: {', '.join(SUPERPIXEL_METHODS)}", field="method")
     slic_only = {"n_segments": n_segments, "compactness": compactness}
     felz_only = {"scale": scale, "min_size": min_size}
     not_applicable = felz_only if method == "slic" else slic_only
     for name, value in not_applicable.items():
         if value is not None:
-            raise ValueError(f"{name} does not apply to method={method!r}")
+            raise EgonetError(f"{name} does not apply to method={method!r}", field=name)
     if max_side is not None and (isinstance(max_side, bool) or not isinstance(max_side, (int, np.integer)) or max_side < 8):
-        raise ValueError(f"max_side must be None or an int >= 8, got {max_side!r}")
+        raise EgonetError(f"max_side must be None or an int >= 8, got {max_side!r}", field="max_side")
 
     work = image
     if max_side is not None and max(h, w) > max_side:
@@ -158,17 +158,17 @@ def superpixels(
         n = SUPERPIXEL_DEFAULTS.n_segments if n_segments is None else n_segments
         c = SUPERPIXEL_DEFAULTS.compactness if compactness is None else compactness
         if isinstance(n, bool) or not isinstance(n, (int, np.integer)) or n < 1:
-            raise ValueError(f"n_segments must be a positive int, got {n!r}")
+            raise EgonetError(f"n_segments must be a positive int, got {n!r}", field="n_segments")
         if not np.isfinite(c) or c <= 0:
-            raise ValueError(f"compactness must be a positive number, got {c!r}")
+            raise EgonetError(f"compactness must be a positive number, got {c!r}", field="compactness")
         labels = slic(work, n_segments=int(n), compactness=float(c), start_label=0, channel_axis=-1)
     else:
         s = SUPERPIXEL_DEFAULTS.scale if scale is None else scale
         m = SUPERPIXEL_DEFAULTS.min_size if min_size is None else min_size
         if not np.isfinite(s) or s <= 0:
-            raise ValueError(f"scale must be a positive number, got {s!r}")
+            raise EgonetError(f"scale must be a positive number, got {s!r}", field="scale")
         if isinstance(m, bool) or not isinstance(m, (int, np.integer)) or m < 1:
-            raise ValueError(f"min_size must be a positive int, got {m!r}")
+            raise EgonetError(f"min_size must be a positive int, got {m!r}", field="min_size")
         labels = felzenszwalb(work, scale=float(s), sigma=0.8, min_size=int(m), channel_axis=-1)
 
     labels = np.asarray(labels, dtype=np.int32)
@@ -183,30 +183,31 @@ def _check_shape(shape: Sequence[int]) -> tuple[int, int]:
         or len(shape) != 2
         or any(isinstance(s, bool) or not isinstance(s, (int, np.integer)) or s < 1 for s in shape)
     ):
-        raise ValueError(f"shape must be (H, W) with positive ints, got {shape!r}")
+        raise EgonetError(f"shape must be (H, W) with positive ints, got {shape!r}", field="shape")
     return int(shape[0]), int(shape[1])
 
 
 def _check_sigma(sigma: float) -> float:
     if isinstance(sigma, bool) or not isinstance(sigma, (int, float, np.integer, np.floating)):
-        raise ValueError(f"sigma must be a positive number of pixels, got {sigma!r}")
+        raise EgonetError(f"sigma must be a positive number of pixels, got {sigma!r}", field="sigma")
     if not np.isfinite(sigma) or sigma <= 0:
-        raise ValueError(f"sigma must be a positive finite number of pixels, got {sigma}")
+        raise EgonetError(f"sigma must be a positive finite number of pixels, got {sigma}", field="sigma")
     return float(sigma)
 
 
 def _check_clicks(clicks: Sequence[Sequence[float]] | np.ndarray, shape: tuple[int, int]) -> np.ndarray:
     arr = np.asarray(clicks, dtype=np.float64) if len(clicks) else np.zeros((0, 2))
     if arr.ndim != 2 or arr.shape[1] != 2:
-        raise ValueError(f"clicks must be a sequence of (x, y) pairs, shape (N, 2), got shape {arr.shape}")
+        raise EgonetError(f"clicks must be a sequence of (x, y) pairs, shape (N, 2), got shape {arr.shape}", field="clicks")
     h, w = shape
     for i, (x, y) in enumerate(arr):
         if not (np.isfinite(x) and np.isfinite(y)):
-            raise ValueError(f"clicks[{i}] = ({x}, {y}) is not finite")
+            raise EgonetError(f"clicks[{i}] = ({x}, {y}) is not finite", field="clicks")
         if not (-0.5 <= x <= w - 0.5 and -0.5 <= y <= h - 0.5):
-            raise ValueError(
+            raise EgonetError(
                 f"clicks[{i}] = (x={x}, y={y}) lies outside the {w}x{h} frame "
-                f"(x in [-0.5, {w - 0.5}], y in [-0.5, {h - 0.5}])"
+                f"(x in [-0.5, {w - 0.5}], y in [-0.5, {h - 0.5}])",
+                field="clicks",
             )
     return arr
 
@@ -288,11 +289,13 @@ def project_to_regions(values: np.ndarray, labels: np.ndarray) -> np.ndarray:
 def _check_labels(labels: object, shape: tuple[int, ...]) -> np.ndarray:
     if not isinstance(labels, np.ndarray) or labels.dtype.kind not in "iu":
         desc = labels.dtype if isinstance(labels, np.ndarray) else type(labels).__name__
-        raise ValueError(f"labels must be an integer (H, W) array from superpixels(), got {desc}")
+        raise EgonetError(f"labels must be an integer (H, W) array from superpixels(), got {desc}", field="labels")
     if labels.shape != tuple(shape):
-        raise ValueError(f"labels has shape {labels.shape} but shape is {tuple(shape)}; compute labels on this frame")
+        raise EgonetError(
+            f"labels has shape {labels.shape} but shape is {tuple(shape)}; compute labels on this frame", field="labels"
+        )
     if labels.size and labels.dtype.kind == "i" and labels.min() < 0:
-        raise ValueError("labels must be non-negative")
+        raise EgonetError("labels must be non-negative", field="labels")
     return labels
 
 

@@ -109,6 +109,8 @@ from dataclasses import dataclass
 import cv2
 import numpy as np
 
+from egonet.errors import EgonetError
+
 # --- DHG codec --------------------------------------------------------------
 
 DEPTH_MAX_M = 7.62
@@ -194,13 +196,14 @@ class HeightEstimate:
 def _check_depth(depth_m: object, name: str = "depth_m", *, min_size: int = 1) -> np.ndarray:
     arr = np.asarray(depth_m)
     if arr.ndim != 2:
-        raise ValueError(f"{name} must be a 2-D map (H, W) in metres, got shape {arr.shape}")
+        raise EgonetError(f"{name} must be a 2-D map (H, W) in metres, got shape {arr.shape}", field=name)
     if arr.shape[0] < min_size or arr.shape[1] < min_size:
-        raise ValueError(f"{name} must be at least {min_size}x{min_size} pixels, got shape {arr.shape}")
+        raise EgonetError(f"{name} must be at least {min_size}x{min_size} pixels, got shape {arr.shape}", field=name)
     if not np.issubdtype(arr.dtype, np.floating):
-        raise ValueError(
+        raise EgonetError(
             f"{name} must be floating point metres, got dtype {arr.dtype}; "
-            "convert 16-bit millimetres with depth_mm.astype(np.float32) / 1000"
+            "convert 16-bit millimetres with depth_mm.astype(np.float32) / 1000",
+            field=name,
         )
     return arr
 
@@ -209,19 +212,21 @@ def _check_intrinsics(K: object) -> np.ndarray:
     try:
         arr = np.asarray(K, dtype=np.float64)
     except (TypeError, ValueError):
-        raise ValueError(f"K must be the 3x3 camera matrix, got {type(K).__name__}") from None
+        raise EgonetError(f"K must be the 3x3 camera matrix, got {type(K).__name__}", field="K") from None
     if arr.shape != (3, 3):
-        raise ValueError(
+        raise EgonetError(
             f"K must be the 3x3 camera matrix [[fx, 0, cx], [0, fy, cy], [0, 0, 1]], got shape {arr.shape}; "
-            "a flat Open3D list of 9 is column-major: np.reshape(values, (3, 3)).T"
+            "a flat Open3D list of 9 is column-major: np.reshape(values, (3, 3)).T",
+            field="K",
         )
     if not np.all(np.isfinite(arr)):
-        raise ValueError("K must contain only finite numbers")
+        raise EgonetError("K must contain only finite numbers", field="K")
     if not np.allclose(arr[2], (0.0, 0.0, 1.0), atol=1e-6):
-        raise ValueError(f"K's last row must be (0, 0, 1), got {tuple(arr[2])}; is K transposed?")
+        raise EgonetError(f"K's last row must be (0, 0, 1), got {tuple(arr[2])}; is K transposed?", field="K")
     if arr[0, 0] <= 0 or arr[1, 1] <= 0:
-        raise ValueError(
-            f"K's focal lengths fx = K[0, 0] and fy = K[1, 1] must be positive, got {arr[0, 0]}, {arr[1, 1]}"
+        raise EgonetError(
+            f"K's focal lengths fx = K[0, 0] and fy = K[1, 1] must be positive, got {arr[0, 0]}, {arr[1, 1]}",
+            field="K",
         )
     return arr
 
@@ -229,7 +234,7 @@ def _check_intrinsics(K: object) -> np.ndarray:
 def _check_positive(value: float, name: str, *, at_most: float = np.inf) -> float:
     if not isinstance(value, numbers.Real) or isinstance(value, bool) or not 0 < value <= at_most:
         limit = "" if at_most == np.inf else f" and at most {at_most}"
-        raise ValueError(f"{name} must be a positive number{limit}, got {value!r}")
+        raise EgonetError(f"{name} must be a positive number{limit}, got {value!r}", field=name)
     return float(value)
 
 
@@ -456,11 +461,12 @@ def estimate_height(
     with np.errstate(invalid="ignore"):
         valid = np.isfinite(z) & (z > 0)
     if not valid.any():
-        raise ValueError("depth_m has no valid pixel (all 0, negative or NaN): a height map needs depth")
+        raise EgonetError("depth_m has no valid pixel (all 0, negative or NaN): a height map needs depth", field="depth_m")
     if np.median(z[valid][:: max(1, int(valid.sum()) // 10_000)]) > _MAX_MEDIAN_DEPTH_M:
-        raise ValueError(
+        raise EgonetError(
             f"depth_m has a median depth above {_MAX_MEDIAN_DEPTH_M:g} m: it looks like millimetres; "
-            "pass metres (depth / 1000)"
+            "pass metres (depth / 1000)",
+            field="depth_m",
         )
     x, y = _normalised_coords(K, z.shape)
 
@@ -598,14 +604,17 @@ def encode_dhg(depth_m: np.ndarray, height_m: np.ndarray, gray: np.ndarray) -> n
     height = _check_depth(height_m, "height_m")
     gray_arr = np.asarray(gray)
     if height.shape != depth.shape:
-        raise ValueError(f"height_m has shape {height.shape} but depth_m has shape {depth.shape}; they must match")
+        raise EgonetError(
+            f"height_m has shape {height.shape} but depth_m has shape {depth.shape}; they must match", field="height_m"
+        )
     if gray_arr.shape != depth.shape:
-        raise ValueError(
+        raise EgonetError(
             f"gray must be a (H, W) image matching depth_m {depth.shape}, got shape {gray_arr.shape}; "
-            "convert RGB with cv2.cvtColor(rgb, cv2.COLOR_RGB2GRAY)"
+            "convert RGB with cv2.cvtColor(rgb, cv2.COLOR_RGB2GRAY)",
+            field="gray",
         )
     if gray_arr.dtype != np.uint8:
-        raise ValueError(f"gray must be uint8, got dtype {gray_arr.dtype}")
+        raise EgonetError(f"gray must be uint8, got dtype {gray_arr.dtype}", field="gray")
     with np.errstate(invalid="ignore"):
         depth_missing = ~(np.isfinite(depth) & (depth > 0))
     depth_f = np.where(depth_missing, np.nan, depth)
@@ -646,9 +655,9 @@ def decode_dhg(dhg: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """
     arr = np.asarray(dhg)
     if arr.ndim != 3 or arr.shape[2] != 3:
-        raise ValueError(f"dhg must be a (H, W, 3) image (depth, height, gray), got shape {arr.shape}")
+        raise EgonetError(f"dhg must be a (H, W, 3) image (depth, height, gray), got shape {arr.shape}", field="dhg")
     if arr.dtype != np.uint8:
-        raise ValueError(f"dhg must be uint8, got dtype {arr.dtype}")
+        raise EgonetError(f"dhg must be uint8, got dtype {arr.dtype}", field="dhg")
     depth = _decode_linear(arr[:, :, 0], 0.0, DEPTH_MAX_M)
     height = _decode_linear(arr[:, :, 1], HEIGHT_MIN_M, HEIGHT_MAX_M)
     return depth, height, arr[:, :, 2].copy()
@@ -674,9 +683,9 @@ def dhg_from_depth(depth_m: np.ndarray, K: np.ndarray, rgb: np.ndarray) -> np.nd
     depth = _check_depth(depth_m)
     image = np.asarray(rgb)
     if image.ndim != 3 or image.shape[2] != 3 or image.shape[:2] != depth.shape:
-        raise ValueError(f"rgb must be a (H, W, 3) image matching depth_m {depth.shape}, got shape {image.shape}")
+        raise EgonetError(f"rgb must be a (H, W, 3) image matching depth_m {depth.shape}, got shape {image.shape}", field="rgb")
     if image.dtype != np.uint8:
-        raise ValueError(f"rgb must be uint8, got dtype {image.dtype}")
+        raise EgonetError(f"rgb must be uint8, got dtype {image.dtype}", field="rgb")
     height, _ = height_map(depth, K)
     gray = cv2.cvtColor(np.ascontiguousarray(image), cv2.COLOR_RGB2GRAY)
     return encode_dhg(depth, height, gray)

@@ -50,10 +50,10 @@ def check_rgb(image: object, name: str, *, min_side: int = 1) -> tuple[int, int]
     """
     if not isinstance(image, np.ndarray) or image.dtype != np.uint8 or image.ndim != 3 or image.shape[2] != 3:
         desc = f"{image.dtype} {image.shape}" if isinstance(image, np.ndarray) else type(image).__name__
-        raise ValueError(f"{name} must be a uint8 (H, W, 3) RGB array, got {desc}")
+        raise EgonetError(f"{name} must be a uint8 (H, W, 3) RGB array, got {desc}", field=name)
     h, w = image.shape[:2]
     if h < min_side or w < min_side:
-        raise ValueError(f"{name} must be at least {min_side}x{min_side} pixels, got {w}x{h}")
+        raise EgonetError(f"{name} must be at least {min_side}x{min_side} pixels, got {w}x{h}", field=name)
     return h, w
 
 
@@ -111,7 +111,7 @@ def encode_png(image: np.ndarray) -> bytes:
         image = cv2.cvtColor(image, cv2.COLOR_RGB2BGR)
     ok, buf = cv2.imencode(".png", image)
     if not ok:
-        raise ValueError("image: could not encode as PNG")
+        raise EgonetError("image: could not encode as PNG", field="image")
     return buf.tobytes()
 
 

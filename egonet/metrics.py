@@ -86,9 +86,11 @@ class Counts(NamedTuple):
 
 def _check_thresholds(thresholds: int) -> int:
     if isinstance(thresholds, bool) or not isinstance(thresholds, (int, np.integer)):
-        raise ValueError(f"thresholds must be a positive int (the number T of thresholds k/(T+1)), got {thresholds!r}")
+        raise EgonetError(
+            f"thresholds must be a positive int (the number T of thresholds k/(T+1)), got {thresholds!r}", field="thresholds"
+        )
     if thresholds < 1 or thresholds > 1_000_000:
-        raise ValueError(f"thresholds must be between 1 and 1000000, got {thresholds}")
+        raise EgonetError(f"thresholds must be between 1 and 1000000, got {thresholds}", field="thresholds")
     return int(thresholds)
 
 
@@ -160,29 +162,30 @@ def _bin_index(prob: np.ndarray, thresholds: int) -> np.ndarray:
 def _as_prob(prob: object, name: str) -> np.ndarray:
     arr = np.asarray(prob)
     if arr.ndim != 2:
-        raise ValueError(f"{name} must be a 2-D probability map (H, W), got shape {arr.shape}")
+        raise EgonetError(f"{name} must be a 2-D probability map (H, W), got shape {arr.shape}", field=name)
     if arr.dtype == np.float16:
         arr = arr.astype(np.float32)
     elif arr.dtype not in (np.float32, np.float64):
-        raise ValueError(
+        raise EgonetError(
             f"{name} must be a float32 or float64 map of probabilities in [0, 1], got dtype {arr.dtype}; "
-            "convert scores to probabilities first (never min-max normalise them)"
+            "convert scores to probabilities first (never min-max normalise them)",
+            field=name,
         )
     if arr.size:
         lo, hi = arr.min(), arr.max()
         if np.isnan(lo) or np.isnan(hi):
-            raise ValueError(f"{name} contains NaN")
+            raise EgonetError(f"{name} contains NaN", field=name)
         if lo < 0 or hi > 1:
-            raise ValueError(f"{name} must lie in [0, 1], got values in [{lo}, {hi}]")
+            raise EgonetError(f"{name} must lie in [0, 1], got values in [{lo}, {hi}]", field=name)
     return arr
 
 
 def _as_mask(mask: object, name: str, shape: tuple[int, ...]) -> np.ndarray:
     arr = np.asarray(mask)
     if arr.dtype != np.bool_:
-        raise ValueError(f"{name} must be a bool mask, got dtype {arr.dtype}; pass mask > 0 or mask.astype(bool)")
+        raise EgonetError(f"{name} must be a bool mask, got dtype {arr.dtype}; pass mask > 0 or mask.astype(bool)", field=name)
     if arr.shape != shape:
-        raise ValueError(f"{name} has shape {arr.shape} but its probability map has shape {shape}")
+        raise EgonetError(f"{name} has shape {arr.shape} but its probability map has shape {shape}", field=name)
     return arr
 
 
@@ -293,9 +296,9 @@ def _readonly(a: np.ndarray) -> np.ndarray:
 
 def _check_beta2(beta2: float) -> float:
     if isinstance(beta2, bool) or not isinstance(beta2, (int, float, np.integer, np.floating)):
-        raise ValueError(f"beta2 must be a positive number, got {beta2!r}")
+        raise EgonetError(f"beta2 must be a positive number, got {beta2!r}", field="beta2")
     if not np.isfinite(beta2) or beta2 <= 0:
-        raise ValueError(f"beta2 must be a positive finite number, got {beta2}")
+        raise EgonetError(f"beta2 must be a positive finite number, got {beta2}", field="beta2")
     return float(beta2)
 
 
@@ -360,7 +363,10 @@ class Score:
         p = np.asarray(precision, dtype=np.float64)
         r = np.asarray(recall, dtype=np.float64)
         if p.ndim != 1 or p.shape != r.shape or p.size == 0:
-            raise ValueError(f"precision and recall must be non-empty 1-D arrays of equal length, got {p.shape} and {r.shape}")
+            raise EgonetError(
+                f"precision and recall must be non-empty 1-D arrays of equal length, got {p.shape} and {r.shape}",
+                field="precision",
+            )
         denom = beta2 * p + r
         f = np.divide((1.0 + beta2) * p * r, denom, out=np.zeros_like(p), where=(p + r) > 0)
         best = int(np.argmax(f))
@@ -454,7 +460,7 @@ class ScoreAccumulator:
         """
         arrays = [np.asarray(c, dtype=np.int64) for c in counts]
         if any(a.shape != (self.thresholds,) for a in arrays):
-            raise ValueError(f"counts must hold arrays of shape ({self.thresholds},)")
+            raise EgonetError(f"counts must hold arrays of shape ({self.thresholds},)", field="counts")
         for total, a in zip(self.counts, arrays, strict=True):
             total += a
         precision, recall = curve_from_counts(Counts(*arrays))
@@ -472,7 +478,7 @@ class ScoreAccumulator:
             ValueError: If the numbers of thresholds differ.
         """
         if other.thresholds != self.thresholds:
-            raise ValueError(f"other has {other.thresholds} thresholds, this accumulator {self.thresholds}")
+            raise EgonetError(f"other has {other.thresholds} thresholds, this accumulator {self.thresholds}", field="other")
         for total, a in zip(self.counts, other.counts, strict=True):
             total += a
         self.precision_sum += other.precision_sum
@@ -624,9 +630,9 @@ def score_maps(
             break
         if prob is sentinel or mask is sentinel:
             longer = "masks" if prob is sentinel else "probs"
-            raise ValueError(f"probs and masks differ in length: {longer} has more than {index} items")
+            raise EgonetError(f"probs and masks differ in length: {longer} has more than {index} items", field=longer)
         acc.add(prob, mask, name=f"probs[{index}]")
         index += 1
     if index == 0:
-        raise ValueError("probs is empty: score at least one map")
+        raise EgonetError("probs is empty: score at least one map", field="probs")
     return acc.score(beta2=beta2, per_image=per_image)

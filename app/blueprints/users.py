@@ -13,7 +13,7 @@ from wtforms import PasswordField, SelectChoice, SelectField, StringField
 from wtforms.validators import DataRequired, EqualTo, Length
 
 from app.blueprints.auth import sign_in
-from app.errors import ApiError
+from app.errors import Problem
 from app.extensions import db
 from app.forms import Form
 from app.models import Role, User
@@ -51,7 +51,7 @@ def _staff_user(user_id: int) -> User:
     """A staff account by id; participants are managed in their study (404 here)."""
     user = db.session.get(User, user_id)
     if user is None or user.role is Role.PARTICIPANT:
-        raise ApiError(404, "no such staff account")
+        raise Problem("no such staff account", status=404)
     return user
 
 
@@ -122,7 +122,7 @@ def set_role(user_id: int):
     user = _staff_user(user_id)
     form = RoleForm()
     if not form.validate_on_submit():
-        raise ApiError(400, "choose one of the staff roles", fields={"role": "; ".join(form.role.errors) or "missing"})
+        raise Problem("choose one of the staff roles", fields={"role": "; ".join(form.role.errors) or "missing"})
     try:
         changed = users.set_role(user, form.role.data)
     except users.UserProblem as exc:
@@ -145,7 +145,7 @@ def activate(user_id: int):
 
 def _set_active(user: User, active: bool):
     if not ConfirmForm().validate_on_submit():
-        raise ApiError(400, "the form is not valid; reload the page and try again")
+        raise Problem("the form is not valid; reload the page and try again")
     try:
         users.set_active(user, active)
     except users.UserProblem as exc:
@@ -164,7 +164,7 @@ def _set_active(user: User, active: bool):
 def reset_password(user_id: int):
     user = _staff_user(user_id)
     if not ConfirmForm().validate_on_submit():
-        raise ApiError(400, "the form is not valid; reload the page and try again")
+        raise Problem("the form is not valid; reload the page and try again")
     password = users.set_password(user)
     return _new_password_page(user, password, created=False)
 

@@ -107,12 +107,13 @@ def discover(
     """
     path = Path(path)
     if not path.exists():
-        raise ImportProblem(f"{path}: no such file or folder")
+        raise ImportProblem(f"{path}: no such file or folder", field="path")
     if path.is_file():
         if path.suffix.lower() not in io.VIDEO_SUFFIXES:
             raise ImportProblem(
                 f"{path}: unknown format {path.suffix!r} (give a folder of images, a .zip of one, or a video: "
-                f"{', '.join(io.VIDEO_SUFFIXES)})"
+                f"{', '.join(io.VIDEO_SUFFIXES)})",
+                field="path",
             )
         source = Source(name=path.stem, video=path)
     else:
@@ -123,16 +124,18 @@ def discover(
         source.masks_dir = _subdir(path, MASK_DIRS)
         jsons = sorted(p for p in path.glob("*.json") if not p.name.startswith("."))
         if len(jsons) > 1 and intrinsics is None:
-            raise ImportProblem(f"{path}: several JSON files {[p.name for p in jsons]}; name the intrinsics with --intrinsics")
+            raise ImportProblem(
+                f"{path}: several JSON files {[p.name for p in jsons]}; name the intrinsics with --intrinsics", field="intrinsics"
+            )
         source.intrinsics = jsons[0] if jsons else None
     for attr, value in (("depth_dir", depth_dir), ("dhg_dir", dhg_dir), ("masks_dir", masks_dir)):
         if value is not None:
             if not Path(value).is_dir():
-                raise ImportProblem(f"{value}: not a folder (--{attr.replace('_dir', '')})")
+                raise ImportProblem(f"{value}: not a folder (--{attr.replace('_dir', '')})", field=attr)
             setattr(source, attr, Path(value))
     if intrinsics is not None:
         if not Path(intrinsics).is_file():
-            raise ImportProblem(f"{intrinsics}: no such file (--intrinsics)")
+            raise ImportProblem(f"{intrinsics}: no such file (--intrinsics)", field="intrinsics")
         source.intrinsics = Path(intrinsics)
     return source
 
@@ -162,7 +165,7 @@ def import_path(
         egonet.io.MediaError: a file that cannot be used, naming the file.
     """
     if stride < 1:
-        raise ImportProblem(f"--stride must be >= 1, got {stride}")
+        raise ImportProblem(f"--stride must be >= 1, got {stride}", field="stride")
     path = Path(path)
     if path.suffix.lower() == ".zip":
         with unpacked(path) as folder:
@@ -195,7 +198,7 @@ def import_path(
         total = len(kept)
         frames = ((p.stem, str(p), i * stride, io.read_bytes(p), p.suffix.lower(), None) for i, p in enumerate(kept))
         if total == 0:
-            raise ImportProblem(f"{path}: no images (jpg/png) found")
+            raise ImportProblem(f"{path}: no images (jpg/png) found", field="path")
 
     def items() -> Iterator[FrameItem]:
         for stem, origin, index, data, suffix, timestamp in frames:
@@ -284,9 +287,9 @@ def add_frames(
     activity = activity.strip()
     sequence = sequence.strip()
     if not activity:
-        raise ImportProblem("--activity must not be empty")
+        raise ImportProblem("--activity must not be empty", field="activity")
     if not sequence:
-        raise ImportProblem("--sequence must not be empty")
+        raise ImportProblem("--sequence must not be empty", field="sequence")
     report = ImportReport(activity=activity, sequence=sequence)
     with media.transaction() as written:
         act = db.session.execute(db.select(Activity).filter_by(name=activity)).scalar_one_or_none()

@@ -8,6 +8,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from egonet.errors import EgonetError
 from egonet.synth.layouts import _ACTIVITY_SPECS, ACTIVITIES
 from egonet.synth.raycast import _cast, _Cast
 from egonet.synth.sampling import _build_scene
@@ -227,7 +228,7 @@ def _valid_scene(activity: str, index: int, *, seed: int, width: int, height: in
 def _check_activity(activity: object) -> int:
     if not isinstance(activity, str) or activity not in ACTIVITIES:
         valid = ", ".join(repr(a) for a in ACTIVITIES)
-        raise ValueError(f"activity must be one of {valid}; got {activity!r}")
+        raise EgonetError(f"activity must be one of {valid}; got {activity!r}", field="activity")
     return ACTIVITIES.index(activity)
 
 
@@ -238,12 +239,12 @@ def _is_int(value: object) -> bool:
 def _check_index(value: object, name: str) -> None:
     # Below 2**32 so each value is one word of the generator's seed.
     if not _is_int(value) or not 0 <= value < 2**32:
-        raise ValueError(f"{name} must be an integer in [0, 2**32); got {value!r}")
+        raise EgonetError(f"{name} must be an integer in [0, 2**32); got {value!r}", field=name)
 
 
 def _check_size(value: object, name: str) -> None:
     if not _is_int(value) or value <= 0:
-        raise ValueError(f"{name} must be an integer > 0 (pixels); got {value!r}")
+        raise EgonetError(f"{name} must be an integer > 0 (pixels); got {value!r}", field=name)
 
 
 # ---------------------------------------------------------------------------

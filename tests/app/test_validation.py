@@ -2,7 +2,7 @@ import pytest
 from hypothesis import given
 from hypothesis import strategies as st
 
-from app.errors import ApiError
+from app.errors import Problem
 from app.validation import Bool, Float, Int, List, Obj, Str, validate
 
 CLICK = Obj({"x": Float(min=0, max=1279), "y": Float(min=0, max=959)})
@@ -16,7 +16,7 @@ SCHEMA = {
 
 
 def fields_of(data):
-    with pytest.raises(ApiError) as info:
+    with pytest.raises(Problem) as info:
         validate(SCHEMA, data)
     assert info.value.status == 400
     return info.value.fields
@@ -44,7 +44,7 @@ def test_non_finite_huge_and_wrong_container():
         "clicks[0].x": "must be a finite number"
     }
     assert fields_of({"clicks": {}, "label": "fg", "radius": 10**30}) == {"clicks": "must be a list", "radius": "must be <= 200"}
-    with pytest.raises(ApiError, match="JSON object"):
+    with pytest.raises(Problem, match="JSON object"):
         validate(SCHEMA, [1, 2])
 
 
@@ -59,5 +59,5 @@ json_values = st.recursive(
 def test_any_json_gives_a_result_or_a_400(data):
     try:
         validate(SCHEMA, data)
-    except ApiError as exc:
+    except Problem as exc:
         assert exc.status == 400 and exc.fields
