@@ -5,15 +5,20 @@ the handlers below answer it, and ``app.cli`` prints it as one line.
 
 API errors are ``{"error": <short name>, "message": <sentence>, "fields":
 {<field>: <reason>}}``. A request is an API call when its path starts with
-``/api/`` or it prefers JSON. A 500 rolls the session back first.
+``/api/`` or it prefers JSON. A 500 rolls the session back first; so does
+a ``MediaError`` about one of the instance's own files, which is the
+server's fault, not the user's.
 """
 
-from flask import Flask, jsonify, render_template, request
+from pathlib import Path
+
+from flask import Flask, current_app, jsonify, render_template, request
 from flask_wtf.csrf import CSRFError
 from werkzeug.exceptions import HTTPException, InternalServerError
 
 from app.extensions import db
 from egonet.errors import EgonetError
+from egonet.io import MediaError
 
 
 class Problem(Exception):
@@ -73,6 +78,12 @@ def error_response(status: int, name: str, message: str, fields: dict[str, str] 
     return render_template("error.html", status=status, name=name, message=message, fields=fields or {}), status
 
 
+def _is_stored(path: str) -> bool:
+    """Whether ``path`` is one of the instance's own files (media, caches, checkpoints)."""
+    roots = (current_app.instance_path, current_app.config["MEDIA_ROOT"], current_app.config["CACHE_ROOT"])
+    return any(Path(path).resolve().is_relative_to(Path(root).resolve()) for root in roots)
+
+
 def register(app: Flask) -> None:
     @app.errorhandler(Problem)
     def handle_problem(exc: Problem):
@@ -80,6 +91,8 @@ def register(app: Flask) -> None:
 
     @app.errorhandler(EgonetError)
     def handle_egonet_error(exc: EgonetError):
+        if isinstance(exc, MediaError) and _is_stored(exc.path):
+            return handle_unexpected(exc)  # our own file is broken: the server's fault, and its path stays private
         return handle_problem(Problem.from_egonet(exc))
 
     @app.errorhandler(CSRFError)

@@ -15,7 +15,6 @@ from app.errors import Problem
 from egonet.errors import EgonetError
 
 
-
 class EgonetGroup(AppGroup):
     """The command group; its one handler prints a ``Problem`` or ``EgonetError`` as one line."""
 

@@ -4,12 +4,15 @@ The views and the command below are throwaways registered on the test's
 app, so the handlers are tested without relying on any product view.
 """
 
+from pathlib import Path
+
 import click
 import pytest
 
 from app.errors import Problem
 from app.security import public
 from egonet.errors import EgonetError
+from egonet.io import MediaError
 
 JSON = {"Accept": "application/json"}
 HTML = {"Accept": "text/html"}
@@ -23,7 +26,11 @@ def raising_app(app):
     def problem():
         raise Problem("no such frame", status=404)
 
+    def broken_media():
+        raise MediaError(Path(app.config["MEDIA_ROOT"]) / "ab" / "abc.png", "not a readable image (corrupt or unknown format)")
+
     app.add_url_rule("/_test/egonet-error", view_func=public(egonet_error))
+    app.add_url_rule("/_test/broken-media", view_func=public(broken_media))
     app.add_url_rule("/_test/problem", view_func=public(problem))
     return app
 
@@ -45,6 +52,13 @@ def test_egonet_error_in_a_page_is_the_html_error_page(raising_app):
     page = response.get_data(as_text=True)
     assert "radius: must be a positive number of pixels, got -1" in page
     assert "<code>radius</code>" in page
+
+
+def test_a_broken_stored_file_is_the_servers_fault_and_its_path_stays_private(raising_app):
+    response = raising_app.test_client().get("/_test/broken-media", headers=JSON)
+    assert response.status_code == 500
+    assert response.get_json()["error"] == "internal_server_error"
+    assert raising_app.config["MEDIA_ROOT"] not in response.get_data(as_text=True)
 
 
 def test_problem_in_a_view_keeps_its_status(raising_app):
