@@ -203,7 +203,7 @@ class GrabCutSession:
         box = _grow_box(prev.box, *footprint, r, self.shape) if new.fg else prev.box
         guide = self._guide_for(box)
         new_roi = box != prev.box
-        # A new ROI: start the cut from the current mask, keep the models.
+        # In a new ROI the cut starts from the current mask (the models carry over either way).
         prior = _downsample(self._mask, guide.geom) if new_roi else prev.low
         low, models = _recut(guide, prev.models, strokes, prior)
         snap = _Snapshot(box=box, strokes=strokes, models=models, low=low)
