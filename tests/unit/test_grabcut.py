@@ -1,7 +1,9 @@
 """Tests for egonet.grabcut: the interactive GrabCut session."""
 
 import doctest
+import importlib
 import io
+import pkgutil
 import subprocess
 import sys
 
@@ -130,7 +132,7 @@ def test_box_recovers_object_640x480():
 def test_box_through_an_object_keeps_its_part_in_the_box():
     # A demo frame where a box over the left part of a frying pan once came
     # back empty: the pan goes on into the ROI's margin, so the margin's
-    # colours include the pan's (see GrabCutSession._rescue).
+    # colours include the pan's (see egonet.grabcut.cut._rescue).
     frame = list(synth.render_activity("cooking", 3, seed=0, width=320, height=240))[2]
     x0, y0, x1, y1 = box = (77, 82, 159, 147)
     part = np.zeros_like(frame.mask)
@@ -400,7 +402,11 @@ def test_bad_state_type(scene):
 
 
 def test_docstring_examples_run():
-    result = doctest.testmod(grabcut, optionflags=doctest.ELLIPSIS)
+    # The package and each of its modules (testmod skips re-exported names).
+    modules = [grabcut] + [importlib.import_module(m.name)
+                           for m in pkgutil.iter_modules(grabcut.__path__, "egonet.grabcut.")]
+    runs = [doctest.testmod(m, optionflags=doctest.ELLIPSIS) for m in modules]
+    result = doctest.TestResults(sum(r.failed for r in runs), sum(r.attempted for r in runs))
     assert result.failed == 0 and result.attempted > 0
 
 

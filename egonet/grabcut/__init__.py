@@ -1,0 +1,59 @@
+"""Interactive GrabCut: a box, corrective strokes, undo, and a resumable state.
+
+``GrabCutSession`` segments one object in one RGB frame the way an annotator
+works: a box gives the first mask, each brush stroke ("fg" or "bg") corrects
+it, ``undo`` steps back. The session is fast enough to feel interactive on
+1280x960 frames and larger, on one CPU core:
+
+* All work happens in a region of interest (ROI): the box plus a margin. The
+  graph cut runs on the ROI scaled so its long side is ``work_size`` pixels
+  (``cv2.grabCut`` in ``GC_EVAL`` mode, with colour models that the session
+  keeps between calls, so a stroke costs one re-estimation and one cut).
+* The low-resolution label is brought back to full resolution with a fast
+  guided filter (He & Sun 2015): its local linear coefficients are fitted
+  between the low-resolution image and label, upsampled, and applied to the
+  full-resolution colours, only in a narrow band along the boundary, so the
+  edge follows the image at full resolution.
+* After a stroke only the part of the ROI whose low-resolution label changed is
+  brought back again; the rest of the full-resolution mask is kept.
+* Strokes are hard constraints: pixels under a foreground stroke are in the
+  returned mask and pixels under a background stroke are out, exactly. A
+  stroke changes the mask only its own way (a foreground stroke only adds
+  pixels, a background stroke only removes them).
+
+Pixel conventions: points are ``(x, y)`` with ``x`` the column and ``y`` the
+row, in full-resolution pixel units, and pixel ``(x, y)`` sits at integer
+coordinates. A box ``(x0, y0, x1, y1)`` covers columns ``x0 <= x < x1`` and
+rows ``y0 <= y < y1`` (slice convention). A stroke covers the pixels whose
+distance to its polyline is at most ``radius`` (see ``stroke_footprint``).
+
+Modules: :mod:`~egonet.grabcut.session` (``GrabCutSession``: box, stroke,
+undo, and the loop that composes the rest), :mod:`~egonet.grabcut.geometry`
+(box -> ROI -> low-resolution grid), :mod:`~egonet.grabcut.colour` (the
+colour models), :mod:`~egonet.grabcut.cut` (the graph cut at the work size:
+a box's first cut, its rescue, re-cuts with strokes),
+:mod:`~egonet.grabcut.refine` (the guided filter back to full resolution),
+:mod:`~egonet.grabcut.strokes` (checks and footprints) and
+:mod:`~egonet.grabcut.state` (undo levels and ``state()``'s format).
+
+Example:
+    >>> import numpy as np
+    >>> image = np.zeros((120, 160, 3), np.uint8)
+    >>> image[...] = (40, 120, 40)
+    >>> image[40:80, 50:110] = (200, 60, 60)
+    >>> session = GrabCutSession(image)
+    >>> mask = session.box(40, 30, 120, 90)
+    >>> bool(mask[60, 80]), bool(mask[10, 10])
+    (True, False)
+    >>> mask = session.stroke([(80, 60)], "bg", 3)
+    >>> bool(mask[60, 80])
+    False
+    >>> bool(session.undo()[60, 80])
+    True
+"""
+
+from egonet.grabcut.session import GrabCutSession
+from egonet.grabcut.state import STATE_FORMAT
+from egonet.grabcut.strokes import LABELS, stroke_footprint
+
+__all__ = ["GrabCutSession", "stroke_footprint", "LABELS", "STATE_FORMAT"]

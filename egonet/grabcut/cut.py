@@ -1,0 +1,176 @@
+"""The graph cut at the work size: a box's first cut, its rescue, and re-cuts.
+
+The cut runs on the ROI at low resolution (``_Guide.image``) with
+``cv2.grabCut`` in ``GC_EVAL`` mode and colour models the session keeps
+between calls, so a stroke costs one re-estimation and one cut. Results are
+bool labels on the ROI's low-resolution grid; ``refine`` brings them back to
+full resolution.
+"""
+
+from __future__ import annotations
+
+import math
+
+import cv2
+import numpy as np
+
+from egonet.grabcut.colour import _first_models, _fit_model
+from egonet.grabcut.geometry import _Geometry
+from egonet.grabcut.refine import _Guide
+from egonet.grabcut.strokes import _Stroke
+
+_BOX_ITERATIONS = 5  # graph-cut iterations for a new box (as plain GC_INIT_WITH_RECT)
+_STROKE_ITERATIONS = 1  # re-estimation + cut per stroke
+_CONVERGED = 0.005  # stop iterating when a cut changes at most this fraction of undecided pixels
+_SPARSE = 0.25  # a box whose first cut keeps less than this fraction of it is cut again (``_rescue``)
+_OUTSIDE_SAMPLES = 100_000  # most frame pixels read for the background model of that cut
+
+
+def _cut(image: np.ndarray, gc: np.ndarray, models: np.ndarray, iterations: int) -> tuple[np.ndarray, np.ndarray]:
+    """Run the graph cut on the low-resolution ROI.
+
+    Each iteration re-estimates the colour models from the current labels
+    (starting from ``models``, so their components carry over) and cuts.
+    Stops early once an iteration changes at most ``_CONVERGED`` of the
+    undecided pixels: later iterations only nudge the boundary.
+
+    Args:
+        image: uint8 ``(h, w, 3)`` low-resolution ROI.
+        gc: uint8 ``(h, w)`` OpenCV GC_* labels; updated in place.
+        models: ``(2, 65)`` background and foreground models.
+        iterations: Most iterations to run.
+
+    Returns:
+        ``(label, models)``: the bool foreground label and the new models.
+    """
+    bgd = models[0:1].copy()
+    fgd = models[1:2].copy()
+    undecided = max(1, np.count_nonzero(gc >= cv2.GC_PR_BGD))
+    for _ in range(iterations):
+        is_fg = (gc & 1).astype(bool)
+        # Re-estimating a model from no pixels is undefined (OpenCV asserts),
+        # so the models stay fixed when one side is empty.
+        mode = cv2.GC_EVAL if is_fg.any() and not is_fg.all() else cv2.GC_EVAL_FREEZE_MODEL
+        cv2.grabCut(image, gc, None, bgd, fgd, 1, mode)
+        if mode != cv2.GC_EVAL or np.count_nonzero(is_fg != (gc & 1)) <= _CONVERGED * undecided:
+            break
+    return (gc & 1).astype(bool), np.concatenate([bgd, fgd])
+
+
+def _box_labels(geom: _Geometry) -> np.ndarray:
+    """The GC_* labels a box starts from: ``GC_PR_FGD`` on the box, ``GC_BGD`` around it."""
+    gc = np.full((geom.low_h, geom.low_w), cv2.GC_BGD, np.uint8)
+    rows, cols = geom.box_low()
+    gc[rows, cols] = cv2.GC_PR_FGD
+    return gc
+
+
+def _box_cut(frame: np.ndarray, guide: _Guide, gc: np.ndarray, work_size: int) -> tuple[np.ndarray, np.ndarray]:
+    """A new box's cut, from first models; a box it keeps little of is cut again (``_rescue``).
+
+    Args:
+        frame: Full frame, uint8 ``(H, W, 3)``.
+        guide: The low-resolution guide of the box's ROI.
+        gc: The box's labels (``_box_labels``), with some background; updated in place.
+        work_size: The session's work size.
+
+    Returns:
+        ``(label, models)``: the bool low-resolution label and the ``(2, 65)`` models.
+    """
+    rows, cols = guide.geom.box_low()
+    # Initial colour models from k-means on a fixed-seed sample of each side
+    # (plain grabCut runs k-means on every pixel, which is most of its cost).
+    initial = _first_models(guide.image, gc, np.random.default_rng(0))
+    start = gc.copy()
+    low, models = _cut(guide.image, gc, initial, _BOX_ITERATIONS)
+    if low[rows, cols].mean() < _SPARSE:
+        low, models = _rescue(frame, guide, start, initial, low, models, work_size)
+    return low, models
+
+
+def _rescue(frame: np.ndarray, guide: _Guide, start: np.ndarray, initial: np.ndarray, low: np.ndarray,
+            models: np.ndarray, work_size: int) -> tuple[np.ndarray, np.ndarray]:
+    """Cut a box whose first cut kept little of it again; the cut that keeps most wins.
+
+    That usually happens when the box cuts through an object that goes on
+    into the margin: the margin's colours, the background model, then
+    include the object's. Plain grabCut takes its background from the whole
+    frame outside the box, where that continuation is a small part. So:
+    first one cut with such a background model held fixed (and the box's
+    first foreground model); if that too keeps little, plain grabCut on the
+    whole frame at the work size, brought onto the ROI's grid.
+
+    Args:
+        frame: Full frame, uint8 ``(H, W, 3)``.
+        guide: The low-resolution guide of the box's ROI.
+        start: The box's labels before the first cut.
+        initial: The first cut's initial ``(2, 65)`` models.
+        low: The first cut's label.
+        models: The first cut's models.
+        work_size: The session's work size.
+    """
+    geom = guide.geom
+    box = geom.box
+    rows, cols = geom.box_low()
+    h, w = frame.shape[:2]
+    rng = np.random.default_rng(0)
+    step = max(1, round(1 / min(geom.sx, geom.sy)), math.ceil(math.sqrt(h * w / _OUTSIDE_SAMPLES)))
+    outside = np.ones((h, w), bool)
+    outside[box[1] : box[3], box[0] : box[2]] = False
+    bgd = _fit_model(frame[::step, ::step][outside[::step, ::step]], rng)
+    fgd = initial[1:2].copy()
+    gc = start.copy()
+    cv2.grabCut(guide.image, gc, None, bgd, fgd, 1, cv2.GC_EVAL_FREEZE_MODEL)
+    candidates = [(low, models), ((gc & 1).astype(bool), np.concatenate([bgd, fgd]))]
+    if candidates[1][0][rows, cols].mean() < _SPARSE:
+        whole = _whole_frame_cut(frame, geom, work_size, rng)
+        if whole is not None:
+            candidates.append(whole)
+    return max(candidates, key=lambda c: np.count_nonzero(c[0]))
+
+
+def _whole_frame_cut(frame: np.ndarray, geom: _Geometry, work_size: int,
+                     rng: np.random.Generator) -> tuple[np.ndarray, np.ndarray] | None:
+    """Plain grabCut of ``geom``'s box on the whole frame at the work size, on the ROI's grid.
+
+    Returns:
+        ``(label, models)`` with the label on ``geom``'s low-resolution grid,
+        or None when the box covers the whole reduced frame.
+    """
+    h, w = frame.shape[:2]
+    scale = min(1.0, work_size / max(h, w))
+    whole = _Geometry(geom.box, (0, 0, w, h), max(1, round(w * scale)), max(1, round(h * scale)))
+    image = cv2.resize(frame, (whole.low_w, whole.low_h), interpolation=cv2.INTER_AREA)
+    gc = _box_labels(whole)
+    if not (gc == cv2.GC_BGD).any():
+        return None
+    cut, whole_models = _cut(image, gc, _first_models(image, gc, rng), _BOX_ITERATIONS)
+    full = cv2.resize(cut.view(np.uint8), (w, h), interpolation=cv2.INTER_NEAREST)
+    rx0, ry0, rx1, ry1 = geom.roi
+    share = cv2.resize(full[ry0:ry1, rx0:rx1] * np.uint8(255), (geom.low_w, geom.low_h),
+                       interpolation=cv2.INTER_AREA)
+    return share >= 128, whole_models
+
+
+def _recut(guide: _Guide, models: np.ndarray, strokes: tuple[_Stroke, ...],
+           prior: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Cut again with ``strokes`` as hard labels, starting from the label ``prior``.
+
+    Returns:
+        ``(label, models)``. The label moves only the last stroke's way from
+        ``prior`` (see ``GrabCutSession.stroke``).
+    """
+    geom = guide.geom
+    rows, cols = geom.box_low()
+    gc = np.full((geom.low_h, geom.low_w), cv2.GC_BGD, np.uint8)
+    gc[rows, cols] = np.where(prior[rows, cols], cv2.GC_PR_FGD, cv2.GC_PR_BGD)
+    for s in strokes:
+        hit = guide.footprint(s)
+        if hit is not None:
+            crop, (y0, x0) = hit
+            view = gc[y0 : y0 + crop.shape[0], x0 : x0 + crop.shape[1]]
+            view[crop] = cv2.GC_FGD if s.fg else cv2.GC_BGD
+    low, models = _cut(guide.image, gc, models, _STROKE_ITERATIONS)
+    # A stroke only moves the label its own way (see ``GrabCutSession.stroke``).
+    low = (low | prior) if strokes[-1].fg else (low & prior)
+    return low, models

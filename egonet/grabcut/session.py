@@ -1,0 +1,372 @@
+"""The interactive session: a box, corrective strokes, undo, and its state.
+
+``GrabCutSession`` keeps the undo levels (``state._Snapshot``) and the
+current full-resolution mask, and composes the parts: the geometry of the
+box's ROI (``geometry``), the graph cut at the work size (``cut``, with the
+colour models of ``colour``), the refinement back to full resolution
+(``refine``) and the strokes as hard constraints (``strokes``).
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import math
+import weakref
+from collections.abc import Mapping, Sequence
+
+import cv2
+import numpy as np
+
+from egonet.errors import EgonetError
+from egonet.grabcut.cut import _box_cut, _box_labels, _recut
+from egonet.grabcut.geometry import _clip_to_box, _downsample, _Geometry, _grow_box
+from egonet.grabcut.refine import _BAND, _GF_RADIUS, _Guide, _upsample_mask
+from egonet.grabcut.state import STATE_FORMAT, _decode_levels, _encode_state, _Snapshot, _unpack
+from egonet.grabcut.strokes import LABELS, _check_points, _check_radius, _polyline_distance_mask, _Stroke
+
+
+def _check_image(image: object) -> np.ndarray:
+    if not isinstance(image, np.ndarray):
+        raise EgonetError(f"image: expected a numpy array, got {type(image).__name__}", field="image")
+    if image.dtype != np.uint8 or image.ndim != 3 or image.shape[2] != 3:
+        raise EgonetError(f"image: expected RGB uint8 of shape (H, W, 3), got {image.dtype} {image.shape}", field="image")
+    if image.shape[0] < 2 or image.shape[1] < 2:
+        raise EgonetError(f"image: needs at least 2x2 pixels, got {image.shape[1]}x{image.shape[0]}", field="image")
+    return np.ascontiguousarray(image).copy()
+
+
+def _as_int(value: object, name: str) -> int:
+    if isinstance(value, bool) or not isinstance(value, (int, float, np.integer, np.floating)):
+        raise EgonetError(f"{name}: expected a number, got {value!r}", field=name)
+    if not math.isfinite(float(value)):
+        raise EgonetError(f"{name}: must be finite, got {value!r}", field=name)
+    return int(round(float(value)))
+
+
+class GrabCutSession:
+    """Interactive GrabCut segmentation of one object in one RGB frame.
+
+    Args:
+        image: RGB uint8 ``(H, W, 3)`` frame at full resolution (copied).
+        work_size: Long side, in pixels, of the region of interest when the
+            graph cut runs (smaller is faster, coarser before refinement).
+        max_undo: Undo levels kept (and serialised by ``state``).
+
+    Raises:
+        ValueError: If ``image`` is not RGB uint8 ``(H, W, 3)`` or a setting
+            is out of range.
+
+    Example:
+        >>> import numpy as np
+        >>> image = np.full((90, 120, 3), 30, np.uint8)
+        >>> image[30:60, 40:80] = 220
+        >>> s = GrabCutSession(image)
+        >>> int(s.box(30, 20, 90, 70).sum())
+        1200
+    """
+
+    def __init__(self, image: np.ndarray, *, work_size: int = 272, max_undo: int = 20) -> None:
+        self._image = _check_image(image)
+        if isinstance(work_size, bool) or not isinstance(work_size, (int, np.integer)) or work_size < 32:
+            raise EgonetError(f"work_size: expected an integer >= 32, got {work_size!r}", field="work_size")
+        if isinstance(max_undo, bool) or not isinstance(max_undo, (int, np.integer)) or max_undo < 0:
+            raise EgonetError(f"max_undo: expected an integer >= 0, got {max_undo!r}", field="max_undo")
+        self._work_size = int(work_size)
+        self._max_undo = int(max_undo)
+        self._history: list[_Snapshot] = []
+        self._now = _Snapshot()
+        self._mask = np.zeros(self._image.shape[:2], bool)
+        self._guide: _Guide | None = None
+        # Full-resolution stroke footprints: (crop, origin), per stroke.
+        self._footprints: weakref.WeakKeyDictionary[_Stroke, tuple[np.ndarray, tuple[int, int]] | None] = (
+            weakref.WeakKeyDictionary())
+
+    # ---------------------------------------------------------------- public
+
+    @property
+    def shape(self) -> tuple[int, int]:
+        """``(H, W)`` of the frame."""
+        return self._mask.shape  # type: ignore[return-value]
+
+    @property
+    def mask(self) -> np.ndarray:
+        """The current bool ``(H, W)`` mask (a copy)."""
+        return self._mask.copy()
+
+    @property
+    def box_coords(self) -> tuple[int, int, int, int] | None:
+        """The current box ``(x0, y0, x1, y1)``, or None before ``box``."""
+        return self._now.box
+
+    @property
+    def can_undo(self) -> bool:
+        """Whether ``undo`` has a previous state to restore."""
+        return bool(self._history)
+
+    @property
+    def strokes(self) -> list[tuple[np.ndarray, str, float]]:
+        """The current object's strokes since its box, oldest first: ``(points (K, 2), label, radius)``."""
+        return [(s.points.copy(), "fg" if s.fg else "bg", s.radius) for s in self._now.strokes]
+
+    @property
+    def nbytes(self) -> int:
+        """Bytes held in the session's arrays: the frame's copy, the mask, the
+        ROI's guide, the undo levels and the cached stroke footprints."""
+        arrays = [self._image, self._mask]
+        if self._guide is not None:
+            g = self._guide
+            arrays += [g.image, g.colour, g.mean, g.inverse]
+            arrays += [hit[0] for hit in g._footprints.values() if hit is not None]
+        for snap in self._history + [self._now]:
+            arrays += [snap.models, snap.low, snap.mask_bits] + [s.points for s in snap.strokes]
+        arrays += [hit[0] for hit in self._footprints.values() if hit is not None]
+        unique = {id(a): a.nbytes for a in arrays if a is not None}  # undo levels share their strokes
+        return sum(unique.values())
+
+    def box(self, x0: float, y0: float, x1: float, y1: float) -> np.ndarray:
+        """Start a new object from a box and return its first mask.
+
+        Clears the strokes and colour models of the previous object (``undo``
+        brings them back). Coordinates are rounded to whole pixels.
+
+        Args:
+            x0: Left column (inclusive).
+            y0: Top row (inclusive).
+            x1: Right column (exclusive), ``x0 < x1 <= W``.
+            y1: Bottom row (exclusive), ``y0 < y1 <= H``.
+
+        Returns:
+            Bool ``(H, W)`` mask; nothing outside the box is selected.
+
+        Raises:
+            ValueError: If the box is empty or not inside the frame (clip it
+                to the frame first), or leaves no background around it.
+        """
+        h, w = self.shape
+        bx0, by0 = _as_int(x0, "x0"), _as_int(y0, "y0")
+        bx1, by1 = _as_int(x1, "x1"), _as_int(y1, "y1")
+        if not (0 <= bx0 < bx1 <= w and 0 <= by0 < by1 <= h):
+            raise EgonetError(
+                f"box: ({bx0}, {by0}, {bx1}, {by1}) must satisfy 0 <= x0 < x1 <= {w} and "
+                f"0 <= y0 < y1 <= {h} (clip it to the {w}x{h} frame and keep it non-empty)", field="box"
+            )
+        box = (bx0, by0, bx1, by1)
+        guide = self._guide_for(box)
+        gc = _box_labels(guide.geom)
+        if not (gc == cv2.GC_BGD).any():
+            raise EgonetError("box: leaves no background in the frame around it; draw a tighter box", field="box")
+        low, models = _box_cut(self._image, guide, gc, self._work_size)
+        snap = _Snapshot(box=box, strokes=(), models=models, low=low)
+        self._commit(guide, snap, self._full_mask(guide, snap))
+        return self.mask
+
+    def stroke(self, points: Sequence[Sequence[float]] | np.ndarray, label: str, radius: float) -> np.ndarray:
+        """Add a corrective brush stroke and return the updated mask.
+
+        Pixels under a ``"fg"`` stroke are in the returned mask, pixels under a
+        ``"bg"`` stroke are out, exactly (later strokes win where strokes
+        overlap). The colour models are re-estimated with the stroke, so
+        similar pixels elsewhere can follow it, but only in the stroke's
+        direction: a foreground stroke never removes pixels from the mask and
+        a background stroke never adds any. (Without that rule, re-estimating
+        the models can drop an unrelated part far from the stroke, such as a
+        thin part of the object the low-resolution cut finds costly.) A
+        foreground stroke that reaches outside the box grows the box to take
+        it in.
+
+        Args:
+            points: ``(x, y)`` pixel coordinates of the polyline, at least one
+                (one point paints a disk).
+            label: ``"fg"`` (object) or ``"bg"`` (background).
+            radius: Brush radius in pixels, > 0.
+
+        Returns:
+            Bool ``(H, W)`` mask.
+
+        Raises:
+            ValueError: If there is no box yet, or ``points``, ``label`` or
+                ``radius`` is invalid, or the stroke misses the frame.
+        """
+        prev = self._now
+        if prev.box is None:
+            raise EgonetError("box: stroke() needs an object first; call box(x0, y0, x1, y1)", field="box")
+        pts = _check_points(points)
+        if label not in LABELS:
+            raise EgonetError(f"label: expected one of {LABELS}, got {label!r}", field="label")
+        r = _check_radius(radius)
+        footprint = _polyline_distance_mask(self.shape, pts, r)
+        if footprint is None:
+            raise EgonetError(f"points: the stroke covers no pixel of the {self.shape[1]}x{self.shape[0]} frame", field="points")
+        new = _Stroke(pts, label == "fg", r)
+        self._footprints[new] = footprint
+        strokes = prev.strokes + (new,)
+        box = _grow_box(prev.box, *footprint, r, self.shape) if new.fg else prev.box
+        guide = self._guide_for(box)
+        new_roi = box != prev.box
+        # In a new ROI the cut starts from the current mask (the models carry over either way).
+        prior = _downsample(self._mask, guide.geom) if new_roi else prev.low
+        low, models = _recut(guide, prev.models, strokes, prior)
+        snap = _Snapshot(box=box, strokes=strokes, models=models, low=low)
+        if new_roi:
+            # Both masks honour every stroke, so their union does too.
+            mask = self._mask | self._full_mask(guide, snap)
+        else:
+            mask = self._refresh_changed(guide, snap, prev.low, new.fg)
+            self._apply_strokes(mask, strokes)
+        self._commit(guide, snap, mask)
+        return self.mask
+
+    def undo(self) -> np.ndarray:
+        """Restore the previous mask and state, and return the mask.
+
+        Raises:
+            RuntimeError: If there is nothing to undo (see ``can_undo``).
+        """
+        if not self._history:
+            raise RuntimeError("undo: nothing to undo")
+        self._restore(self._history.pop())
+        return self.mask
+
+    def state(self) -> dict[str, np.ndarray | int | float | str]:
+        """A small, serialisable description of the session (undo levels too).
+
+        Every value is a numpy array, int, float or str, so the dict can go
+        through ``np.savez`` (or a database blob) and back into
+        ``from_state``. The image itself is not included.
+
+        Returns:
+            Dict with ``format``, the frame size, the settings, and per undo
+            level (oldest first, the current one last) the box, the strokes,
+            the two colour models (OpenCV grabCut's bgdModel/fgdModel layout),
+            the low-resolution cut (packed bits) and the mask inside the box
+            (run lengths, row-major, starting with a background run).
+        """
+        return _encode_state(self._history + [self._now], height=int(self.shape[0]), width=int(self.shape[1]),
+                             work_size=self._work_size, max_undo=self._max_undo)
+
+    @classmethod
+    def from_state(cls, image: np.ndarray, state: Mapping[str, object]) -> GrabCutSession:
+        """Resume a session from ``state()`` and the same image.
+
+        Args:
+            image: The RGB uint8 ``(H, W, 3)`` frame the state was made on.
+            state: A dict from ``state()``, possibly after ``np.savez`` and
+                ``np.load`` (0-d arrays are accepted for the scalars).
+
+        Returns:
+            A session that continues exactly where the saved one stopped,
+            undo levels included.
+
+        Raises:
+            ValueError: If ``image`` is invalid, or ``state`` is malformed or
+                was made on a frame of another size.
+
+        Example:
+            >>> import numpy as np
+            >>> image = np.full((90, 120, 3), 30, np.uint8)
+            >>> image[30:60, 40:80] = 220
+            >>> s = GrabCutSession(image)
+            >>> _ = s.box(30, 20, 90, 70)
+            >>> t = GrabCutSession.from_state(image, s.state())
+            >>> bool((t.stroke([(50, 40)], "bg", 4) == s.stroke([(50, 40)], "bg", 4)).all())
+            True
+        """
+        _check_image(image)
+        if not isinstance(state, Mapping):
+            raise EgonetError(f"state: expected the dict from GrabCutSession.state(), got {type(state).__name__}", field="state")
+        try:
+            return cls._from_state(image, state)
+        except (KeyError, IndexError, TypeError, ValueError) as exc:
+            if str(exc).startswith("state:"):
+                raise
+            raise EgonetError(f"state: malformed GrabCut session state ({type(exc).__name__}: {exc})", field="state") from exc
+
+    @classmethod
+    def _from_state(cls, image: np.ndarray, state: Mapping[str, object]) -> GrabCutSession:
+        def scalar(key: str) -> object:
+            return np.asarray(state[key]).item()
+
+        if scalar("format") != STATE_FORMAT:
+            raise EgonetError(f"state: format {scalar('format')!r} is not {STATE_FORMAT!r}", field="state")
+        session = cls(image, work_size=int(scalar("work_size")), max_undo=int(scalar("max_undo")))
+        h, w = session.shape
+        if (int(scalar("height")), int(scalar("width"))) != (h, w):
+            raise EgonetError(f"state: made on a {scalar('width')}x{scalar('height')} frame, the image is {w}x{h}", field="state")
+        levels = _decode_levels(state, h, w)
+        session._history = levels[:-1]
+        session._restore(levels[-1])
+        return session
+
+    # --------------------------------------------------------------- helpers
+
+    def _guide_for(self, box: tuple[int, int, int, int]) -> _Guide:
+        """The low-resolution guide of ``box``'s ROI (cached for the current one)."""
+        geom = _Geometry.for_box(box, *self.shape, self._work_size)
+        if self._guide is not None and self._guide.geom == geom:
+            return self._guide
+        return _Guide.build(geom, self._image)
+
+    def _full_mask(self, guide: _Guide, snap: _Snapshot) -> np.ndarray:
+        """The full-resolution mask of ``snap``, computed over the whole ROI."""
+        mask = np.zeros(self.shape, bool)
+        part, (oy, ox) = _upsample_mask(guide, self._image, snap.low)
+        mask[oy : oy + part.shape[0], ox : ox + part.shape[1]] = part
+        _clip_to_box(mask, snap.box)
+        self._apply_strokes(mask, snap.strokes)
+        return mask
+
+    def _refresh_changed(self, guide: _Guide, snap: _Snapshot, prior: np.ndarray, fg: bool) -> np.ndarray:
+        """The current mask after a stroke in the same ROI, before its hard constraints.
+
+        Only the part of the ROI whose low-resolution label changed from
+        ``prior`` (plus the filter's reach) is brought back to full resolution
+        again; the rest is kept. Like the label, the mask moves only the
+        stroke's way: a foreground stroke only adds pixels (inside the box),
+        a background stroke only removes them.
+        """
+        mask = self._mask.copy()
+        changed = np.nonzero(snap.low != prior)
+        if not len(changed[0]):
+            return mask
+        geom = guide.geom
+        d = 2 * _GF_RADIUS + _BAND + 2
+        window = (max(0, int(changed[0].min()) - d), min(geom.low_h, int(changed[0].max()) + d + 1),
+                  max(0, int(changed[1].min()) - d), min(geom.low_w, int(changed[1].max()) + d + 1))
+        part, (oy, ox) = _upsample_mask(guide, self._image, snap.low, window)
+        view = mask[oy : oy + part.shape[0], ox : ox + part.shape[1]]
+        if fg:
+            x0, y0, x1, y1 = snap.box
+            view[max(0, y0 - oy) : max(0, y1 - oy), max(0, x0 - ox) : max(0, x1 - ox)] |= (
+                part[max(0, y0 - oy) : max(0, y1 - oy), max(0, x0 - ox) : max(0, x1 - ox)])
+        else:
+            view &= part
+        return mask
+
+    def _apply_strokes(self, mask: np.ndarray, strokes: tuple[_Stroke, ...]) -> None:
+        """Make every stroke's pixels its label, in order (later ones win)."""
+        for s in strokes:
+            if s not in self._footprints:
+                self._footprints[s] = _polyline_distance_mask(mask.shape, s.points, s.radius)
+            hit = self._footprints[s]
+            if hit is not None:
+                crop, (y0, x0) = hit
+                view = mask[y0 : y0 + crop.shape[0], x0 : x0 + crop.shape[1]]
+                view[crop] = s.fg
+
+    def _commit(self, guide: _Guide, snap: _Snapshot, mask: np.ndarray) -> None:
+        """Make ``snap`` current (the old current goes on the undo stack)."""
+        x0, y0, x1, y1 = snap.box
+        self._history.append(self._now)
+        del self._history[: max(0, len(self._history) - self._max_undo)]
+        self._now = dataclasses.replace(snap, mask_bits=np.packbits(mask[y0:y1, x0:x1], axis=None))
+        self._mask = mask
+        self._guide = guide
+
+    def _restore(self, snap: _Snapshot) -> None:
+        """Make ``snap`` current without touching the undo stack."""
+        self._now = snap
+        self._mask = np.zeros(self.shape, bool)
+        if snap.box is not None:
+            x0, y0, x1, y1 = snap.box
+            self._mask[y0:y1, x0:x1] = _unpack(snap)
+            self._guide = self._guide_for(snap.box)
