@@ -653,21 +653,8 @@ def fit(
 
     def save(metrics: dict, *, complete: bool) -> None:
         if checkpoint_path is not None and rank == 0:
-            save_checkpoint(checkpoint_path, {
-                "format": CHECKPOINT_FORMAT,
-                "model": {"name": model.config.name, "options": dict(model.config.options)},
-                "state_dict": model.state_dict(),
-                "config": config.to_dict(),
-                "fold": fold,
-                **keys,
-                "epoch": epoch,
-                "iteration": iteration,
-                "complete": complete,
-                "metrics": metrics,
-                "history": history,
-                "optimizer": optimizer.state_dict(),
-                "rng": _rng_state(),
-            })
+            progress = {"epoch": epoch, "iteration": iteration, "complete": complete, "metrics": metrics, "history": history}
+            save_checkpoint(checkpoint_path, _fold_state(model, optimizer, config=config, fold=fold, keys=keys, **progress))
 
     while epoch < config.epochs:
         epoch += 1
@@ -698,6 +685,37 @@ def fit(
     _barrier()
     model.eval()
     return model, FoldResult(fold, checkpoint_path if rank == 0 else None, metrics, history, **keys)
+
+
+def _fold_state(
+    model: EgoNetModel,
+    optimizer: torch.optim.Optimizer,
+    *,
+    config: TrainConfig,
+    fold: str,
+    keys: Mapping[str, list],
+    epoch: int,
+    iteration: int,
+    complete: bool,
+    metrics: dict,
+    history: list[dict],
+) -> dict:
+    """What a checkpoint holds (see the module docstring): enough to rebuild, score or continue the fold."""
+    return {
+        "format": CHECKPOINT_FORMAT,
+        "model": {"name": model.config.name, "options": dict(model.config.options)},
+        "state_dict": model.state_dict(),
+        "config": config.to_dict(),
+        "fold": fold,
+        **keys,
+        "epoch": epoch,
+        "iteration": iteration,
+        "complete": complete,
+        "metrics": metrics,
+        "history": history,
+        "optimizer": optimizer.state_dict(),
+        "rng": _rng_state(),
+    }
 
 
 def _initial_model(config: TrainConfig, *, device: torch.device, world_size: int, from_checkpoint: bool) -> EgoNetModel:
