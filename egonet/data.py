@@ -47,9 +47,10 @@ import torch
 from torch.utils.data import Dataset
 
 from egonet import io
+from egonet.errors import EgonetError
 from egonet.io import check_rgb
 
-__all__ = ["Augment", "FrameDataset", "Sample", "load_sample", "resize_frame"]
+__all__ = ["Augment", "FrameDataset", "Sample", "check_size", "load_sample", "resize_frame", "resize_probability"]
 
 MIN_SIDE = 8
 
@@ -100,11 +101,11 @@ class Augment:
 
     def __post_init__(self) -> None:
         if not (isinstance(self.max_zoom, int | float) and 1.0 <= self.max_zoom <= 4.0):
-            raise ValueError(f"max_zoom must be a number in [1, 4], got {self.max_zoom!r}")
+            raise EgonetError(f"max_zoom must be a number in [1, 4], got {self.max_zoom!r}", field="max_zoom")
         for name in ("brightness", "contrast", "saturation"):
             value = getattr(self, name)
             if not (isinstance(value, int | float) and 0.0 <= value < 1.0):
-                raise ValueError(f"{name} must be a number in [0, 1), got {value!r}")
+                raise EgonetError(f"{name} must be a number in [0, 1), got {value!r}", field=name)
 
 
 def load_sample(sample: Sample) -> tuple[np.ndarray, np.ndarray | None, np.ndarray]:
@@ -126,15 +127,15 @@ def load_sample(sample: Sample) -> tuple[np.ndarray, np.ndarray | None, np.ndarr
     if dhg is not None:
         check_rgb(dhg, f"{name}: dhg", min_side=MIN_SIDE)
         if dhg.shape != rgb.shape:
-            raise ValueError(f"{name}: dhg is {dhg.shape[1]}x{dhg.shape[0]}, the RGB frame {width}x{height}")
+            raise EgonetError(f"{name}: dhg is {dhg.shape[1]}x{dhg.shape[0]}, the RGB frame {width}x{height}", field="dhg")
     if sample.mask is None:
         mask = np.zeros((height, width), bool)
     else:
         mask = _read(sample.mask, io.read_mask)
         if not isinstance(mask, np.ndarray) or mask.dtype != np.bool_ or mask.ndim != 2:
-            raise ValueError(f"{name}: mask must be a bool (H, W) array, got {_describe(mask)}")
+            raise EgonetError(f"{name}: mask must be a bool (H, W) array, got {_describe(mask)}", field="mask")
         if mask.shape != (height, width):
-            raise ValueError(f"{name}: mask is {mask.shape[1]}x{mask.shape[0]}, the RGB frame {width}x{height}")
+            raise EgonetError(f"{name}: mask is {mask.shape[1]}x{mask.shape[0]}, the RGB frame {width}x{height}", field="mask")
     return rgb, dhg, mask
 
 
@@ -154,6 +155,17 @@ def resize_frame(image: np.ndarray, size: tuple[int, int], *, nearest: bool = Fa
     return cv2.resize(image, (width, height), interpolation=cv2.INTER_AREA if shrink else cv2.INTER_LINEAR)
 
 
+def resize_probability(probability: np.ndarray, shape: tuple[int, int]) -> np.ndarray:
+    """A probability map at the training size back to a frame's ``shape = (H, W)``.
+
+    Bilinear, clipped to ``[0, 1]``, float32. The held-out maps of training
+    and every prediction go through here, so the two agree.
+    """
+    if probability.shape != tuple(shape):
+        probability = cv2.resize(probability, (shape[1], shape[0]), interpolation=cv2.INTER_LINEAR)
+    return np.clip(probability, 0.0, 1.0).astype(np.float32, copy=False)
+
+
 class FrameDataset(Dataset):
     """Samples at a fixed training size, optionally augmented.
 
@@ -170,7 +182,7 @@ class FrameDataset(Dataset):
             read (about ``7 * H * W`` bytes a frame), shared with subsets.
 
     Raises:
-        ValueError: If ``samples`` is empty or ``size`` is invalid.
+        EgonetError: If ``samples`` is empty or ``size`` is invalid.
     """
 
     def __init__(
@@ -184,12 +196,14 @@ class FrameDataset(Dataset):
     ) -> None:
         samples = list(samples)
         if not samples:
-            raise ValueError("samples is empty: give at least one labelled frame")
+            raise EgonetError("samples is empty: give at least one labelled frame", field="samples")
         for i, sample in enumerate(samples):
             if not isinstance(sample, Sample):
-                raise ValueError(f"samples[{i}] must be an egonet.data.Sample, got {type(sample).__name__}")
+                raise EgonetError(
+                    f"samples[{i}] must be an egonet.data.Sample, got {type(sample).__name__}", field=f"samples[{i}]"
+                )
         self.samples = samples
-        self.size = _check_size(size)
+        self.size = check_size(size)
         self.augment = augment
         self.seed = int(seed)
         self.epoch = 0
@@ -312,15 +326,18 @@ def _read(source: object, reader) -> object:
     return source
 
 
+def check_size(size: object) -> tuple[int, int]:
+    """``size`` as ``(height, width)`` ints, each >= 8.
 
-
-def _check_size(size: object) -> tuple[int, int]:
+    Raises:
+        EgonetError: naming ``size``.
+    """
     if (
         not isinstance(size, tuple | list)
         or len(size) != 2
         or any(isinstance(s, bool) or not isinstance(s, int | np.integer) or s < MIN_SIDE for s in size)
     ):
-        raise ValueError(f"size must be (height, width) with integers >= {MIN_SIDE}, got {size!r}")
+        raise EgonetError(f"size must be (height, width) with integers >= {MIN_SIDE}, got {size!r}", field="size")
     return int(size[0]), int(size[1])
 
 

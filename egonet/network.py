@@ -51,6 +51,8 @@ import torch
 import torch.nn.functional as F
 from torch import Tensor, nn
 
+from egonet.errors import EgonetError
+
 __all__ = [
     "MIN_SIDE",
     "MODELS",
@@ -148,9 +150,9 @@ class InputNormalization(nn.Module):
     ) -> None:
         super().__init__()
         if not (len(mean) == len(std) == len(channel_order)):
-            raise ValueError("mean, std and channel_order must have the same length")
+            raise EgonetError("mean, std and channel_order must have the same length", field="channel_order")
         if any(s <= 0 for s in std):
-            raise ValueError(f"std must be positive, got {tuple(std)}")
+            raise EgonetError(f"std must be positive, got {tuple(std)}", field="std")
         c = len(mean)
         self.register_buffer("mean", torch.tensor(mean, dtype=torch.float32).view(1, c, 1, 1))
         self.register_buffer("std", torch.tensor(std, dtype=torch.float32).view(1, c, 1, 1))
@@ -437,7 +439,7 @@ class LiteStream(nn.Module):
                 the 1x1 ``fc7`` projection keeps its random initialisation.
 
         Raises:
-            ValueError: If a backbone tensor is missing or has the wrong shape.
+            EgonetError: If a backbone tensor is missing or has the wrong shape.
         """
         renames = {
             "_conv_stem.": "stem.conv.", "_bn0.": "stem.bn.",
@@ -462,12 +464,13 @@ class LiteStream(nn.Module):
         own = {k: v for k, v in self.state_dict().items() if k.startswith(("stem.", "blocks."))}
         missing = sorted(set(own) - set(mapped))
         if missing:
-            raise ValueError(
-                f"state_dict lacks EfficientNet-Lite0 tensors for {missing[:5]} ({len(missing)} in all)"
+            raise EgonetError(
+                f"state_dict lacks EfficientNet-Lite0 tensors for {missing[:5]} ({len(missing)} in all)",
+                field="state_dict",
             )
         wrong = [k for k in own if own[k].shape != mapped[k].shape]
         if wrong:
-            raise ValueError(f"state_dict has wrong shapes for {wrong[:5]}: is it EfficientNet-Lite0?")
+            raise EgonetError(f"state_dict has wrong shapes for {wrong[:5]}: is it EfficientNet-Lite0?", field="state_dict")
         self.load_state_dict(mapped, strict=False)
 
 
@@ -551,18 +554,19 @@ class EgoNetModel(nn.Module):
             Caffe's ``Interp``) to ``(H, W)``.
 
         Raises:
-            ValueError: If an input has the wrong type, dtype, shape or range.
+            EgonetError: If an input has the wrong type, dtype, shape or range.
         """
         _check_input(rgb, "rgb")
         if dhg is None:
             if self.uses_dhg:
-                raise ValueError(f"dhg is required by {self.config.name!r}: pass a (N, 3, H, W) DHG tensor")
+                raise EgonetError(f"dhg is required by {self.config.name!r}: pass a (N, 3, H, W) DHG tensor", field="dhg")
         else:
             _check_input(dhg, "dhg")
             if dhg.shape != rgb.shape:
-                raise ValueError(
+                raise EgonetError(
                     f"dhg must have the shape of rgb {tuple(rgb.shape)}, got {tuple(dhg.shape)}: "
-                    "resize both to the same frame size"
+                    "resize both to the same frame size",
+                    field="dhg",
                 )
             if not self.uses_dhg:
                 dhg = None
@@ -619,9 +623,9 @@ class TwoStreamEgoNet(EgoNetModel):
         dhg_norm: InputNormalization | None,
     ) -> None:
         if rgb_stream is None and dhg_stream is None:
-            raise ValueError("rgb_stream and dhg_stream are both None: give at least one stream")
+            raise EgonetError("rgb_stream and dhg_stream are both None: give at least one stream", field="rgb_stream")
         if (rgb_stream is None) != (rgb_norm is None) or (dhg_stream is None) != (dhg_norm is None):
-            raise ValueError("give a normalisation exactly for each stream present")
+            raise EgonetError("give a normalisation exactly for each stream present", field="rgb_norm")
         super().__init__(config=config, uses_dhg=dhg_stream is not None)
         self.rgb_norm, self.rgb_stream = rgb_norm, rgb_stream
         self.dhg_norm, self.dhg_stream = dhg_norm, dhg_stream
@@ -857,7 +861,7 @@ def build_egonet_lite(
     _check_coords(coords)
     dropout = _check_dropout(dropout)
     if not isinstance(pretrained, bool):
-        raise ValueError(f"pretrained must be True or False, got {pretrained!r}")
+        raise EgonetError(f"pretrained must be True or False, got {pretrained!r}", field="pretrained")
     weights = efficientnet_lite0_state_dict() if pretrained else None
     streams = [LiteStream(out_channels=256, dropout=dropout) for _ in range(2)]
     if weights is not None:
@@ -925,7 +929,7 @@ def build_model(name: str, **options: object) -> EgoNetModel:
         The model, with ``model.config`` recording ``name`` and the options.
 
     Raises:
-        ValueError: If ``name`` is unknown (the message lists the valid names)
+        EgonetError: If ``name`` is unknown (the message lists the valid names)
             or an option is not one the builder takes.
 
     Example:
@@ -934,14 +938,15 @@ def build_model(name: str, **options: object) -> EgoNetModel:
         'released'
     """
     if name not in MODELS:
-        raise ValueError(f"unknown model name {name!r}: choose one of {', '.join(sorted(MODELS))}")
+        raise EgonetError(f"unknown model name {name!r}: choose one of {', '.join(sorted(MODELS))}", field="name")
     builder = MODELS[name]
     accepted = list(inspect.signature(builder).parameters)
     unknown = sorted(set(options) - set(accepted))
     if unknown:
-        raise ValueError(
+        raise EgonetError(
             f"{name!r} takes no option {', '.join(map(repr, unknown))}: "
-            f"its options are {', '.join(accepted) or 'none'}"
+            f"its options are {', '.join(accepted) or 'none'}",
+            field=unknown[0],
         )
     return builder(**options)
 
@@ -951,31 +956,36 @@ def build_model(name: str, **options: object) -> EgoNetModel:
 
 def _check_coords(coords: object) -> None:
     if coords not in COORD_CONVENTIONS:
-        raise ValueError(f"coords must be one of {', '.join(map(repr, COORD_CONVENTIONS))}, got {coords!r}")
+        raise EgonetError(
+            f"coords must be one of {', '.join(map(repr, COORD_CONVENTIONS))}, got {coords!r}", field="coords"
+        )
 
 
 def _check_dropout(dropout: object) -> float:
     if isinstance(dropout, bool) or not isinstance(dropout, (int, float)) or not 0.0 <= dropout < 1.0:
-        raise ValueError(f"dropout must be a number in [0, 1), got {dropout!r}")
+        raise EgonetError(f"dropout must be a number in [0, 1), got {dropout!r}", field="dropout")
     return float(dropout)
 
 
 def _check_input(x: object, name: str) -> None:
     if not isinstance(x, Tensor):
-        raise ValueError(f"{name} must be a torch.Tensor (N, 3, H, W), got {type(x).__name__}")
+        raise EgonetError(f"{name} must be a torch.Tensor (N, 3, H, W), got {type(x).__name__}", field=name)
     if not x.is_floating_point():
-        raise ValueError(
-            f"{name} must be a float tensor scaled to [0, 1], got dtype {x.dtype}: use x.float() / 255"
+        raise EgonetError(
+            f"{name} must be a float tensor scaled to [0, 1], got dtype {x.dtype}: use x.float() / 255", field=name
         )
     if x.ndim != 4 or x.shape[1] != 3:
-        raise ValueError(f"{name} must have shape (N, 3, H, W), got {tuple(x.shape)}")
+        raise EgonetError(f"{name} must have shape (N, 3, H, W), got {tuple(x.shape)}", field=name)
     if x.shape[0] < 1 or min(x.shape[-2:]) < MIN_SIDE:
-        raise ValueError(f"{name} must hold at least one frame with H, W >= {MIN_SIDE}, got {tuple(x.shape)}")
+        raise EgonetError(
+            f"{name} must hold at least one frame with H, W >= {MIN_SIDE}, got {tuple(x.shape)}", field=name
+        )
     if x.is_meta:  # shape-only tensors (used to check sizes cheaply) carry no values
         return
     low, high = torch.aminmax(x.detach())
     if bool(low < 0) or bool(high > 1):
-        raise ValueError(
+        raise EgonetError(
             f"{name} must be scaled to [0, 1], got values in [{float(low):.3g}, {float(high):.3g}]: "
-            "divide 8-bit images by 255 and clamp after resampling"
+            "divide 8-bit images by 255 and clamp after resampling",
+            field=name,
         )

@@ -63,7 +63,6 @@ from collections.abc import Callable, Iterator, Mapping, Sequence
 from dataclasses import dataclass, field
 from pathlib import Path
 
-import cv2
 import numpy as np
 import torch
 import torch.distributed as dist
@@ -72,14 +71,8 @@ from torch.nn.parallel import DistributedDataParallel
 from torch.utils.data import DataLoader, DistributedSampler
 
 from egonet.baselines import ActionObjectPrior
-from egonet.data import (
-    MIN_SIDE,
-    Augment,
-    FrameDataset,
-    Sample,
-    load_sample,
-    resize_frame,
-)
+from egonet.data import MIN_SIDE, Augment, FrameDataset, Sample, resize_probability
+from egonet.errors import EgonetError
 from egonet.metrics import ScoreAccumulator
 from egonet.network import MODELS, EgoNetModel, build_model
 
@@ -97,7 +90,6 @@ __all__ = [
     "load_checkpoint",
     "make_folds",
     "model_from_checkpoint",
-    "predict_frame",
     "resolve_device",
     "train_one_epoch",
 ]
@@ -170,14 +162,18 @@ class TrainConfig:
 
     def __post_init__(self) -> None:
         if self.model not in MODELS:
-            raise ValueError(f"model: unknown name {self.model!r}; choose one of {', '.join(sorted(MODELS))}")
+            raise EgonetError(
+                f"model: unknown name {self.model!r}; choose one of {', '.join(sorted(MODELS))}", field="model"
+            )
         if not isinstance(self.model_options, Mapping):
-            raise ValueError(f"model_options must be a dict of builder options, got {self.model_options!r}")
+            raise EgonetError(
+                f"model_options must be a dict of builder options, got {self.model_options!r}", field="model_options"
+            )
         object.__setattr__(self, "model_options", dict(self.model_options))
         if self.folds not in FOLD_MODES:
-            raise ValueError(f"folds must be one of {', '.join(FOLD_MODES)}, got {self.folds!r}")
+            raise EgonetError(f"folds must be one of {', '.join(FOLD_MODES)}, got {self.folds!r}", field="folds")
         if self.device not in DEVICES:
-            raise ValueError(f"device must be one of {', '.join(DEVICES)}, got {self.device!r}")
+            raise EgonetError(f"device must be one of {', '.join(DEVICES)}, got {self.device!r}", field="device")
         _check_number(self.test_fraction, "test_fraction", low=0.0, high=1.0, open_low=True, open_high=True)
         _check_int(self.epochs, "epochs", low=1)
         _check_int(self.batch_size, "batch_size", low=1)
@@ -192,7 +188,9 @@ class TrainConfig:
         _check_number(self.weight_decay, "weight_decay", low=0.0, high=1.0)
         _check_number(self.lr_power, "lr_power", low=0.0, high=10.0)
         if self.augment is not None and not isinstance(self.augment, Augment):
-            raise ValueError(f"augment must be an egonet.data.Augment or None, got {type(self.augment).__name__}")
+            raise EgonetError(
+                f"augment must be an egonet.data.Augment or None, got {type(self.augment).__name__}", field="augment"
+            )
 
     @property
     def size(self) -> tuple[int, int]:
@@ -214,7 +212,7 @@ class TrainConfig:
         data = dict(data)
         unknown = sorted(set(data) - {f.name for f in dataclasses.fields(cls)})
         if unknown:
-            raise ValueError(f"unknown training options {', '.join(unknown)}")
+            raise EgonetError(f"unknown training options {', '.join(unknown)}", field=unknown[0])
         if data.get("augment") is not None:
             data["augment"] = Augment(**data["augment"])
         return cls(**data)
@@ -222,7 +220,7 @@ class TrainConfig:
 
 def _check_int(value: object, name: str, *, low: int) -> None:
     if isinstance(value, bool) or not isinstance(value, int) or value < low:
-        raise ValueError(f"{name} must be an integer >= {low}, got {value!r}")
+        raise EgonetError(f"{name} must be an integer >= {low}, got {value!r}", field=name)
 
 
 def _check_number(
@@ -232,7 +230,7 @@ def _check_number(
     ok = ok and (value > low if open_low else value >= low) and (value < high if open_high else value <= high)
     if not ok:
         interval = f"{'(' if open_low else '['}{low}, {high}{')' if open_high else ']'}"
-        raise ValueError(f"{name} must be a number in {interval}, got {value!r}")
+        raise EgonetError(f"{name} must be a number in {interval}, got {value!r}", field=name)
 
 
 # --------------------------------------------------------------------------- folds
@@ -265,7 +263,7 @@ def make_folds(groups: Sequence[str], *, mode: str, test_fraction: float = 0.2) 
         test_fraction: See ``mode``.
 
     Raises:
-        ValueError: If a split would leave no training or no test frame
+        EgonetError: If a split would leave no training or no test frame
             (fewer than two activities for ``"loao"``).
 
     Example:
@@ -273,15 +271,16 @@ def make_folds(groups: Sequence[str], *, mode: str, test_fraction: float = 0.2) 
         [('a', [0, 1]), ('b', [2])]
     """
     if mode not in FOLD_MODES:
-        raise ValueError(f"mode must be one of {', '.join(FOLD_MODES)}, got {mode!r}")
+        raise EgonetError(f"mode must be one of {', '.join(FOLD_MODES)}, got {mode!r}", field="mode")
     by_group: dict[str, list[int]] = {}
     for i, group in enumerate(groups):
         by_group.setdefault(group, []).append(i)
     if mode == "loao":
         if len(by_group) < 2:
-            raise ValueError(
+            raise EgonetError(
                 f"leave-one-activity-out needs frames from at least two activities, got {len(by_group)}: "
-                "label more activities or use a single split"
+                "label more activities or use a single split",
+                field="groups",
             )
         return [
             Fold(name, [i for g, ids in by_group.items() if g != name for i in ids], list(test))
@@ -293,7 +292,7 @@ def make_folds(groups: Sequence[str], *, mode: str, test_fraction: float = 0.2) 
         train += ids[: len(ids) - n_test]
         test += ids[len(ids) - n_test :]
     if not test:
-        raise ValueError("a single split needs an activity with at least two labelled frames")
+        raise EgonetError("a single split needs an activity with at least two labelled frames", field="groups")
     return [Fold("single", train, test)]
 
 
@@ -304,12 +303,14 @@ def resolve_device(device: str) -> torch.device:
     """``"auto"`` -> CUDA when available, else CPU; under torchrun, this process's GPU.
 
     Raises:
-        ValueError: If ``device`` is unknown, or ``"cuda"`` without a usable GPU.
+        EgonetError: If ``device`` is unknown, or ``"cuda"`` without a usable GPU.
     """
     if device not in DEVICES:
-        raise ValueError(f"device must be one of {', '.join(DEVICES)}, got {device!r}")
+        raise EgonetError(f"device must be one of {', '.join(DEVICES)}, got {device!r}", field="device")
     if device == "cuda" and not torch.cuda.is_available():
-        raise ValueError("device 'cuda' was asked for but torch sees no CUDA GPU: use --device cpu or auto")
+        raise EgonetError(
+            "device 'cuda' was asked for but torch sees no CUDA GPU: use --device cpu or auto", field="device"
+        )
     if device == "cpu" or not torch.cuda.is_available():
         return torch.device("cpu")
     return torch.device("cuda", int(os.environ.get("LOCAL_RANK", "0")))
@@ -505,7 +506,7 @@ def evaluate(
         probabilities = logits.softmax(dim=1)[:, 1].cpu().numpy()
         for item, probability in zip(items, probabilities, strict=True):
             mask = dataset.native_mask(item["index"])
-            probability = _resize_probability(probability, mask.shape)
+            probability = resize_probability(probability, mask.shape)
             scores.add(probability, mask)
             if prior is not None:
                 prior_scores.add(prior.predict(np.zeros((*mask.shape, 3), np.uint8)), mask)
@@ -517,47 +518,6 @@ def evaluate(
         aop = prior_scores.score()
         out |= {"aop_max_f": aop.max_f, "aop_ap": aop.ap}
     return out
-
-
-@torch.no_grad()
-def predict_frame(
-    model: EgoNetModel, rgb: np.ndarray, dhg: np.ndarray | None, *, size: tuple[int, int]
-) -> np.ndarray:
-    """Run a trained model on one frame as training saw it.
-
-    The frame is resized to the training ``size`` (as :class:`FrameDataset`
-    does), the probabilities are resized back (bilinear).
-
-    Args:
-        model: The model, on any device.
-        rgb: uint8 ``(H, W, 3)``.
-        dhg: uint8 ``(H, W, 3)``, or ``None`` for models that do not read DHG.
-        size: The training size ``(H, W)`` (``TrainConfig.size``).
-
-    Returns:
-        float32 ``(H, W)`` action-object probabilities in ``[0, 1]``.
-
-    Raises:
-        ValueError: If the arrays are not uint8 ``(H, W, 3)`` of one size, or
-            ``dhg`` is missing for a model that reads it.
-    """
-    rgb, dhg, _ = load_sample(Sample(rgb=rgb, dhg=dhg, mask=None))
-    if dhg is None and model.uses_dhg:
-        raise ValueError(f"dhg is required by {model.config.name!r}: pass the frame's uint8 (H, W, 3) DHG image")
-    parameter = next(model.parameters())
-
-    def tensor(image: np.ndarray) -> torch.Tensor:
-        x = torch.from_numpy(np.ascontiguousarray(resize_frame(image, size).transpose(2, 0, 1)))
-        return x[None].to(parameter.device, parameter.dtype).div_(255.0)
-
-    probability = model.predict(tensor(rgb), tensor(dhg) if dhg is not None else None)[0]
-    return _resize_probability(probability.float().cpu().numpy(), rgb.shape[:2])
-
-
-def _resize_probability(probability: np.ndarray, shape: tuple[int, int]) -> np.ndarray:
-    if probability.shape != tuple(shape):
-        probability = cv2.resize(probability, (shape[1], shape[0]), interpolation=cv2.INTER_LINEAR)
-    return np.clip(probability, 0.0, 1.0).astype(np.float32, copy=False)
 
 
 # --------------------------------------------------------------------------- checkpoints
@@ -581,14 +541,14 @@ def load_checkpoint(path: str | Path) -> dict:
     """Read a checkpoint on the CPU, tensors and plain types only.
 
     Raises:
-        ValueError: If the file is not an EgoNet checkpoint (the message names it).
+        EgonetError: If the file is not an EgoNet checkpoint (the file is the field).
     """
     try:
         state = torch.load(Path(path), map_location="cpu", weights_only=True)
     except Exception as exc:  # noqa: BLE001 - torch.load raises many kinds for bad files (struct, pickle, zip...)
-        raise ValueError(f"{path}: cannot read the checkpoint ({exc})") from None
+        raise EgonetError(f"{path}: cannot read the checkpoint ({exc})", field=str(path)) from None
     if not isinstance(state, dict) or state.get("format") != CHECKPOINT_FORMAT:
-        raise ValueError(f"{path}: not an EgoNet checkpoint (expected format {CHECKPOINT_FORMAT!r})")
+        raise EgonetError(f"{path}: not an EgoNet checkpoint (expected format {CHECKPOINT_FORMAT!r})", field=str(path))
     return state
 
 
@@ -671,69 +631,34 @@ def fit(
         The trained model (on its device, eval mode) and the fold's result.
 
     Raises:
-        ValueError: If ``start`` has already done more epochs than ``config.epochs``.
+        EgonetError: If ``start`` has already done more epochs than ``config.epochs``.
     """
     device = resolve_device(config.device)
     rank, world_size = setup_distributed(device)
     tracker = tracker or _Tracker(steps=0, folds=1, epochs=config.epochs, callback=None)
-    torch.manual_seed(config.seed)  # the same initial weights in every fold and process
-    options = dict(config.model_options)
-    if config.pretrained and start is None:  # a checkpoint brings its own weights
-        options["pretrained"] = True
-    model = build_model(config.model, **options).to(device)
-    if world_size > 1:
-        # Gradients of channels-last activations (the lite streams) come in channels-last
-        # layout; DDP's buckets copy them fastest when the parameters share it.
-        model = model.to(memory_format=torch.channels_last)
+    model = _initial_model(config, device=device, world_size=world_size, from_checkpoint=start is not None)
     optimizer = torch.optim.SGD(
         model.parameters(), lr=config.learning_rate, momentum=config.momentum, weight_decay=config.weight_decay
     )
-    sampler = DistributedSampler(train_set, num_replicas=world_size, rank=rank, shuffle=True, seed=config.seed)
-    per_process = max(1, config.batch_size // world_size)
-    loader = DataLoader(
-        train_set, batch_size=per_process, sampler=sampler, num_workers=config.num_workers,
-        pin_memory=device.type == "cuda", persistent_workers=False,
-    )
-    steps_per_epoch = len(loader)
-    total_iterations = steps_per_epoch * config.epochs
-    epoch, iteration, history = 0, 0, []
+    sampler, loader = _training_loader(train_set, config, device=device, rank=rank, world_size=world_size)
+    per_process = loader.batch_size
+    lr_at = _poly_schedule(config, iterations=len(loader) * config.epochs)
+    epoch, iteration, history, metrics = 0, 0, [], {}
     if start is not None:
-        model.load_state_dict(start["state_dict"])
-        optimizer.load_state_dict(start["optimizer"])
-        epoch, iteration, history = int(start["epoch"]), int(start["iteration"]), list(start["history"])
-        if epoch > config.epochs:
-            raise ValueError(f"the checkpoint has trained {epoch} epochs already: ask for more than {epoch}")
-        _set_rng_state(start["rng"])
-        tracker.skip(epoch * steps_per_epoch)
+        epoch, iteration, history, metrics = _restore(start, model, optimizer, epochs=config.epochs)
+        tracker.skip(epoch * len(loader))
     trainer = model if world_size == 1 else DistributedDataParallel(model, device_ids=[device] if device.type == "cuda" else None)
     prior = ActionObjectPrior.fit(train_set.base(i)[2] for i in range(len(train_set)))
     keys = {"train_keys": [s.key for s in _samples(train_set)], "test_keys": [s.key for s in _samples(test_set)]}
 
-    def lr_at(i: int) -> float:
-        return config.learning_rate * (1.0 - min(i, total_iterations - 1) / total_iterations) ** config.lr_power
+    def save(metrics: dict, *, complete: bool) -> None:
+        if checkpoint_path is not None and rank == 0:
+            progress = {"epoch": epoch, "iteration": iteration, "complete": complete, "metrics": metrics, "history": history}
+            save_checkpoint(checkpoint_path, _fold_state(model, optimizer, config=config, fold=fold, keys=keys, **progress))
 
-    def checkpoint(metrics: dict, *, complete: bool) -> None:
-        if checkpoint_path is None or rank != 0:
-            return
-        save_checkpoint(checkpoint_path, {
-            "format": CHECKPOINT_FORMAT,
-            "model": {"name": model.config.name, "options": dict(model.config.options)},
-            "state_dict": model.state_dict(),
-            "config": config.to_dict(),
-            "fold": fold,
-            **keys,
-            "epoch": epoch,
-            "iteration": iteration,
-            "complete": complete,
-            "metrics": metrics,
-            "history": history,
-            "optimizer": optimizer.state_dict(),
-            "rng": _rng_state(),
-        })
-
-    metrics: dict = dict(start["metrics"]) if start is not None else {}
     while epoch < config.epochs:
         epoch += 1
+        # Shuffling and augmentation draw from (seed, epoch): a resumed epoch repeats exactly.
         sampler.set_epoch(epoch)
         train_set.set_epoch(epoch)
         tracker.update(fold=fold, epoch=epoch, loss=None, phase="train")
@@ -742,31 +667,120 @@ def fit(
             on_step=lambda loss: tracker.update(steps=1, loss=loss),
         )
         record = {"epoch": epoch, "train_loss": train_loss, "lr": lr_at(iteration - 1)}
+        # The last epoch is scored below, with the prior and the maps; scoring it here too would be twice.
         last = epoch == config.epochs
         if not last and config.eval_every and epoch % config.eval_every == 0 and rank == 0:
             tracker.update(phase="evaluate")
             record |= evaluate(model, test_set, device=device, batch_size=per_process)
         history.append(record)
         metrics = {"train_loss": train_loss, "epochs": epoch}
-        checkpoint(metrics, complete=False)
+        save(metrics, complete=False)
         _barrier()
 
     if rank == 0:  # the final scores, and the held-out maps for the caller
         tracker.update(fold=fold, epoch=epoch, phase="evaluate")
         final = evaluate(model, test_set, device=device, batch_size=per_process, prior=prior, on_map=on_map)
-        metrics = {
-            **final,
-            "train_loss": history[-1]["train_loss"] if history else None,
-            "epochs": epoch,
-            "train_frames": len(train_set),
-            "test_frames": len(test_set),
-        }
-        if history:
-            history[-1] |= {k: final[k] for k in ("loss", "max_f", "ap")}
-        checkpoint(metrics, complete=True)
+        metrics = _final_metrics(final, history, epoch=epoch, train_frames=len(train_set), test_frames=len(test_set))
+        save(metrics, complete=True)
     _barrier()
     model.eval()
     return model, FoldResult(fold, checkpoint_path if rank == 0 else None, metrics, history, **keys)
+
+
+def _fold_state(
+    model: EgoNetModel,
+    optimizer: torch.optim.Optimizer,
+    *,
+    config: TrainConfig,
+    fold: str,
+    keys: Mapping[str, list],
+    epoch: int,
+    iteration: int,
+    complete: bool,
+    metrics: dict,
+    history: list[dict],
+) -> dict:
+    """What a checkpoint holds (see the module docstring): enough to rebuild, score or continue the fold."""
+    return {
+        "format": CHECKPOINT_FORMAT,
+        "model": {"name": model.config.name, "options": dict(model.config.options)},
+        "state_dict": model.state_dict(),
+        "config": config.to_dict(),
+        "fold": fold,
+        **keys,
+        "epoch": epoch,
+        "iteration": iteration,
+        "complete": complete,
+        "metrics": metrics,
+        "history": history,
+        "optimizer": optimizer.state_dict(),
+        "rng": _rng_state(),
+    }
+
+
+def _initial_model(config: TrainConfig, *, device: torch.device, world_size: int, from_checkpoint: bool) -> EgoNetModel:
+    """The fold's model before training: seeded, so every fold and process starts from the same weights."""
+    torch.manual_seed(config.seed)
+    options = dict(config.model_options)
+    if config.pretrained and not from_checkpoint:  # a checkpoint brings its own weights
+        options["pretrained"] = True
+    model = build_model(config.model, **options).to(device)
+    if world_size > 1:
+        # Gradients of channels-last activations (the lite streams) come in channels-last
+        # layout; DDP's buckets copy them fastest when the parameters share it.
+        model = model.to(memory_format=torch.channels_last)
+    return model
+
+
+def _training_loader(
+    train_set: FrameDataset, config: TrainConfig, *, device: torch.device, rank: int, world_size: int
+) -> tuple[DistributedSampler, DataLoader]:
+    """Shuffled batches of this process's share of the frames (all of them in one process)."""
+    sampler = DistributedSampler(train_set, num_replicas=world_size, rank=rank, shuffle=True, seed=config.seed)
+    loader = DataLoader(
+        train_set, batch_size=max(1, config.batch_size // world_size), sampler=sampler,
+        num_workers=config.num_workers, pin_memory=device.type == "cuda", persistent_workers=False,
+    )
+    return sampler, loader
+
+
+def _poly_schedule(config: TrainConfig, *, iterations: int) -> Callable[[int], float]:
+    """DeepLab's "poly" learning rate over a fold's ``iterations``: ``lr * (1 - i / N) ** lr_power``."""
+
+    def lr_at(i: int) -> float:
+        # Never quite zero: the last iteration still takes a (small) step.
+        return config.learning_rate * (1.0 - min(i, iterations - 1) / iterations) ** config.lr_power
+
+    return lr_at
+
+
+def _restore(
+    start: Mapping, model: EgoNetModel, optimizer: torch.optim.Optimizer, *, epochs: int
+) -> tuple[int, int, list[dict], dict]:
+    """Load a checkpoint's weights, optimiser and RNG; return its ``(epoch, iteration, history, metrics)``."""
+    model.load_state_dict(start["state_dict"])
+    optimizer.load_state_dict(start["optimizer"])
+    epoch, iteration, history = int(start["epoch"]), int(start["iteration"]), list(start["history"])
+    if epoch > epochs:
+        raise EgonetError(
+            f"the checkpoint has trained {epoch} epochs already: ask for more than {epoch}", field="epochs"
+        )
+    # The torch RNG where the checkpoint left it: the next epoch's loader draws as it would have.
+    _set_rng_state(start["rng"])
+    return epoch, iteration, history, dict(start["metrics"])
+
+
+def _final_metrics(final: dict, history: list[dict], *, epoch: int, train_frames: int, test_frames: int) -> dict:
+    """The fold's result from its final evaluation; the last epoch's record gets the held-out scores."""
+    if history:
+        history[-1] |= {k: final[k] for k in ("loss", "max_f", "ap")}
+    return {
+        **final,
+        "train_loss": history[-1]["train_loss"] if history else None,
+        "epochs": epoch,
+        "train_frames": train_frames,
+        "test_frames": test_frames,
+    }
 
 
 def _samples(dataset: FrameDataset) -> Iterator[Sample]:
@@ -824,16 +838,11 @@ def cross_validate(
     dataset = FrameDataset(samples, size=config.size, seed=config.seed)
     folds = list(folds) if folds is not None else make_folds(dataset.groups, mode=config.folds, test_fraction=config.test_fraction)
     if start is not None and len(folds) != 1:
-        raise ValueError("continuing a checkpoint trains exactly one fold")
-    per_process = max(1, config.batch_size // world_size)
-    steps = sum(config.epochs * math.ceil(math.ceil(len(f.train) / world_size) / per_process) for f in folds)
+        raise EgonetError("continuing a checkpoint trains exactly one fold", field="start")
+    steps = _planned_steps(folds, config, world_size=world_size)
     tracker = _Tracker(steps=steps, folds=len(folds), epochs=config.epochs, callback=on_progress)
     if rank == 0:
-        out_dir.mkdir(parents=True, exist_ok=True)
-        resolved = config.to_dict() | {"lr": config.learning_rate}
-        environment = {"device": str(device), "world_size": world_size, "torch": torch.__version__}
-        plan = [{"fold": f.name, "train_frames": len(f.train), "test_frames": len(f.test)} for f in folds]
-        (out_dir / "config.json").write_text(json.dumps({"config": resolved, "environment": environment, "folds": plan}, indent=2))
+        _write_config(out_dir, config, folds, device=device, world_size=world_size)
 
     results = []
     for index, fold in enumerate(folds):
@@ -857,3 +866,18 @@ def cross_validate(
         results.append(result)
     tracker.update(phase="done")
     return results
+
+
+def _planned_steps(folds: Sequence[Fold], config: TrainConfig, *, world_size: int) -> int:
+    """Optimiser steps of the whole run: each process takes its share of a fold's frames per epoch."""
+    per_process = max(1, config.batch_size // world_size)
+    return sum(config.epochs * math.ceil(math.ceil(len(f.train) / world_size) / per_process) for f in folds)
+
+
+def _write_config(out_dir: Path, config: TrainConfig, folds: Sequence[Fold], *, device: torch.device, world_size: int) -> None:
+    """``out_dir/config.json``: the resolved configuration, where it ran and the folds, beside the checkpoints."""
+    out_dir.mkdir(parents=True, exist_ok=True)
+    resolved = config.to_dict() | {"lr": config.learning_rate}
+    environment = {"device": str(device), "world_size": world_size, "torch": torch.__version__}
+    plan = [{"fold": f.name, "train_frames": len(f.train), "test_frames": len(f.test)} for f in folds]
+    (out_dir / "config.json").write_text(json.dumps({"config": resolved, "environment": environment, "folds": plan}, indent=2))

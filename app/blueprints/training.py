@@ -28,7 +28,7 @@ from wtforms import (
 from wtforms.validators import InputRequired, Length, NumberRange, Optional
 from wtforms.widgets import CheckboxInput, ListWidget
 
-from app.errors import ApiError
+from app.errors import Problem
 from app.extensions import db
 from app.forms import Form
 from app.models import Activity, Role
@@ -154,7 +154,7 @@ def status():
     try:
         wanted = [int(x) for x in ids.split(",") if x.strip()]
     except ValueError:
-        raise ApiError(400, "ids must be run ids separated by commas", fields={"ids": "must be integers"}) from None
+        raise Problem("ids must be run ids separated by commas", fields={"ids": "must be integers"}) from None
     query = db.select(TrainingRun).where(TrainingRun.id.in_(wanted)) if wanted else db.select(TrainingRun)
     runs = db.session.execute(query.order_by(TrainingRun.id.desc()).limit(100)).scalars()
     return {"runs": [run_json(run) for run in runs]}

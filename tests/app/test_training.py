@@ -146,7 +146,7 @@ def test_frames_without_dhg_are_refused_for_models_that_read_it(ctx, demo, tmp_p
 
 def test_a_cancelled_run_stops_and_resumes_keeping_finished_folds(ctx, demo, monkeypatch):
     run = training.create_run(training.RunRequest(**TINY, activity_ids=two_activities(demo)))
-    monkeypatch.setattr(training, "PROGRESS_INTERVAL_S", 0.0)
+    monkeypatch.setattr(training.job, "PROGRESS_INTERVAL_S", 0.0)
 
     def cancel_in_second_fold(progress):
         if progress.fold_index == 1 and progress.loss is not None:

@@ -26,6 +26,7 @@ from egonet.network import (
     VGGDeepLabStream,
     build_model,
 )
+from egonet.data import resize_frame, resize_probability
 from egonet.predictor import NetworkPredictor
 
 VGG_NAMES = ["egonet", "egonet-rgb", "egonet-dhg", "single-stream", "no-coords", "no-embedding"]
@@ -377,7 +378,7 @@ def test_predictor_round_trip_odd_size(lite):
     rgb = rng.integers(0, 256, (57, 75, 3), dtype=np.uint8)
     dhg = rng.integers(0, 256, (57, 75, 3), dtype=np.uint8)
     rgb.flags.writeable = False  # read-only frames (e.g. memory-mapped) must work
-    probability = NetworkPredictor(lite, device="cpu").predict(rgb, dhg)
+    probability = NetworkPredictor(lite, size=(57, 75), device="cpu").predict(rgb, dhg)
     assert probability.shape == (57, 75) and probability.dtype == np.float32
     assert probability.min() >= 0 and probability.max() <= 1
     as_tensor = lambda a: torch.from_numpy(a.copy()).permute(2, 0, 1)[None].float() / 255  # noqa: E731
@@ -385,21 +386,26 @@ def test_predictor_round_trip_odd_size(lite):
     np.testing.assert_allclose(probability, expected, atol=1e-6)
 
 
-def test_predictor_max_side_downscales_and_restores_size(lite):
+def test_predictor_runs_at_the_training_size_and_restores_the_frame_size(lite):
     rng = np.random.default_rng(1)
     rgb = rng.integers(0, 256, (57, 75, 3), dtype=np.uint8)
     dhg = rng.integers(0, 256, (57, 75, 3), dtype=np.uint8)
-    predictor = NetworkPredictor(lite, max_side=32)
-    assert predictor._forward_size(57, 75) == (24, 32)
+    predictor = NetworkPredictor(lite, size=(24, 32))
     probability = predictor.predict(rgb, dhg)
     assert probability.shape == (57, 75) and probability.dtype == np.float32
     assert 0 <= probability.min() <= probability.max() <= 1
     assert predictor.device == torch.device("cpu")
+    # As training sees a frame: resized to the training size like FrameDataset, probabilities bilinear back.
+    as_tensor = lambda a: torch.from_numpy(resize_frame(a, (24, 32)).transpose(2, 0, 1).copy())[None].float() / 255  # noqa: E731
+    expected = resize_probability(lite.predict(as_tensor(rgb), as_tensor(dhg))[0].numpy(), (57, 75))
+    np.testing.assert_array_equal(probability, expected)
+    big = np.ascontiguousarray(rgb[:48, :64])  # larger than the training size too
+    assert predictor.predict(big, big).shape == (48, 64)
 
 
 def test_predictor_rgb_only_model_accepts_none():
     torch.manual_seed(0)
-    predictor = NetworkPredictor(lite_rgb_only())
+    predictor = NetworkPredictor(lite_rgb_only(), size=(13, 11))
     rgb = np.full((13, 11, 3), 128, np.uint8)
     np.testing.assert_array_equal(predictor.predict(rgb, None), predictor.predict(rgb, rgb))
 
@@ -418,11 +424,11 @@ def test_predictor_rgb_only_model_accepts_none():
 )
 def test_predictor_bad_input_raises(lite, rgb, dhg, match):
     with pytest.raises(ValueError, match=match):
-        NetworkPredictor(lite).predict(rgb, dhg)
+        NetworkPredictor(lite, size=(16, 16)).predict(rgb, dhg)
 
 
 def test_predictor_bad_construction_raises(lite):
     with pytest.raises(ValueError, match="model must be an EgoNetModel"):
-        NetworkPredictor(torch.nn.Conv2d(3, 2, 1))
-    with pytest.raises(ValueError, match="max_side"):
-        NetworkPredictor(lite, max_side=4)
+        NetworkPredictor(torch.nn.Conv2d(3, 2, 1), size=(16, 16))
+    with pytest.raises(ValueError, match=r"size must be \(height, width\)"):
+        NetworkPredictor(lite, size=(4, 16))

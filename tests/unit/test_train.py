@@ -16,6 +16,7 @@ import torch
 from egonet import synth
 from egonet.data import Sample
 from egonet.dhg import encode_dhg
+from egonet.predictor import NetworkPredictor
 from egonet.train import (
     CHECKPOINT_FORMAT,
     DEFAULT_LR,
@@ -26,7 +27,6 @@ from egonet.train import (
     load_checkpoint,
     make_folds,
     model_from_checkpoint,
-    predict_frame,
     resolve_device,
 )
 
@@ -152,14 +152,12 @@ def test_a_checkpoint_rebuilds_the_model_that_wrote_it(tmp_path):
     (result,) = cross_validate(samples, TrainConfig(**TINY, epochs=1), out_dir=tmp_path, folds=[Fold("x", [0, 1, 2], [3])])
     model = model_from_checkpoint(load_checkpoint(result.checkpoint))
     again = model_from_checkpoint(load_checkpoint(result.checkpoint))
-    probability = predict_frame(model, samples[3].rgb, samples[3].dhg, size=(24, 32))
+    probability = NetworkPredictor(model, size=(24, 32)).predict(samples[3].rgb, samples[3].dhg)
     assert probability.shape == (24, 32) and probability.dtype == np.float32
     assert 0 <= probability.min() and probability.max() <= 1
-    assert np.array_equal(probability, predict_frame(again, samples[3].rgb, samples[3].dhg, size=(24, 32)))
-    big = cv2.resize(samples[3].rgb, (64, 48))
-    assert predict_frame(model, big, big, size=(24, 32)).shape == (48, 64)
-    with pytest.raises(ValueError, match="dhg is required"):
-        predict_frame(model, big, None, size=(24, 32))
+    assert np.array_equal(probability, NetworkPredictor(again, size=(24, 32)).predict(samples[3].rgb, samples[3].dhg))
+    # The checkpoint knows its training size.
+    assert np.array_equal(probability, NetworkPredictor.from_checkpoint(load_checkpoint(result.checkpoint)).predict(samples[3].rgb, samples[3].dhg))
 
 
 def stop_in_epoch(epoch):

