@@ -54,13 +54,6 @@ class Problem(Exception):
         return cls(exc.message, field=exc.field, fields={exc.field: exc.reason} if exc.field else {})
 
 
-class ApiError(Problem):
-    """Transitional spelling of ``Problem(message, status=...)``; being removed."""
-
-    def __init__(self, status: int, message: str, *, fields: dict[str, str] | None = None, **extra):
-        super().__init__(message, status=status, fields=fields or {}, **extra)
-
-
 ERROR_NAMES = {400: "bad_request", 404: "not_found", 409: "conflict", 413: "too_large"}
 
 
