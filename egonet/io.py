@@ -104,11 +104,11 @@ def read_image(path: str | Path) -> np.ndarray:
 
 
 def encode_png(image: np.ndarray) -> bytes:
-    """Encode an RGB uint8 (H, W, 3), a gray uint8/uint16 (H, W) or a bool (H, W) array as PNG bytes."""
+    """Encode an RGB or RGBA uint8 (H, W, 3 or 4), a gray uint8/uint16 (H, W) or a bool (H, W) array as PNG bytes."""
     if image.dtype == bool:
         image = image.astype(np.uint8) * 255
     if image.ndim == 3:
-        image = cv2.cvtColor(image, cv2.COLOR_RGB2BGR)
+        image = cv2.cvtColor(image, cv2.COLOR_RGBA2BGRA if image.shape[2] == 4 else cv2.COLOR_RGB2BGR)
     ok, buf = cv2.imencode(".png", image)
     if not ok:
         raise EgonetError("image: could not encode as PNG", field="image")

@@ -1,5 +1,6 @@
 import json
 
+import cv2
 import numpy as np
 import pytest
 
@@ -74,3 +75,11 @@ def test_masks_must_be_binary(tmp_path):
     (tmp_path / "g.png").write_bytes(io.encode_png(np.arange(25, dtype=np.uint8).reshape(5, 5)))
     with pytest.raises(io.MediaError, match="binary"):
         io.read_mask(tmp_path / "g.png")
+
+
+def test_rgba_png_round_trip(tmp_path):
+    rgba = np.random.default_rng(0).integers(0, 256, (5, 7, 4), dtype=np.uint8)
+    path = tmp_path / "layer.png"
+    path.write_bytes(io.encode_png(rgba))
+    back = cv2.cvtColor(cv2.imread(str(path), cv2.IMREAD_UNCHANGED), cv2.COLOR_BGRA2RGBA)
+    assert np.array_equal(back, rgba)

@@ -4,7 +4,7 @@ Soft masks: ``egonet.clicks.soft_mask`` on superpixels computed once per
 frame and cached under ``CACHE_ROOT/superpixels/<settings key>/`` as a
 compressed ``.npz`` named by the frame's content hash, written atomically.
 The mean map of a frame and the overlays are ``egonet.clicks.MaskMean`` and
-``egonet.clicks.overlay``; this module finds the trials and the files.
+``egonet.overlay.overlay``; this module finds the trials and the files.
 
 For the scorer: ``study_participants(study_ids)`` and
 ``participant_soft_masks(participant)``.
@@ -28,6 +28,7 @@ from app.models.studies import ANSWERED, Participant, Study, StudyFrame, Trial
 from app.services import media
 from egonet import clicks as egonet_clicks
 from egonet import io
+from egonet.overlay import overlay as egonet_overlay
 
 
 def settings_key(settings: dict[str, Any]) -> str:
@@ -157,8 +158,8 @@ def overlay_png(
 ) -> bytes:
     """The frame with a soft mask as a heat map, clicks as rings and an optional outline (e.g. ground truth).
 
-    See ``egonet.clicks.overlay``: the heat map's opacity follows the mask,
+    See ``egonet.overlay.overlay``: the heat map's opacity follows the mask,
     so the frame shows through where the mask is low.
     """
     rgb = io.read_image(media.absolute_path(frame.rgb_path))
-    return io.encode_png(egonet_clicks.overlay(rgb, mask, points=list(points), outline=outline, max_width=max_width))
+    return io.encode_png(egonet_overlay(rgb, mask, points=list(points), outline=outline, max_width=max_width))

@@ -11,7 +11,6 @@ For the scorer: ``held_out_predictions(run)``.
 from collections.abc import Callable, Iterable, Iterator
 from pathlib import Path
 
-import cv2
 import numpy as np
 from flask import current_app
 
@@ -21,6 +20,7 @@ from app.models.training import Checkpoint, Prediction, TrainingRun
 from app.services import media
 from app.services.training.control import TrainingProblem, checkpoint_root
 from egonet import io
+from egonet.overlay import heatmap
 
 
 def held_out_predictions(run: TrainingRun) -> Iterator[tuple[Frame, np.ndarray]]:
@@ -73,7 +73,7 @@ def frame_predictions(run: TrainingRun, *, limit: int = 24) -> list[Prediction]:
 
 
 def prediction_overlay(prediction: Prediction) -> Path:
-    """A colour PNG of the prediction (turbo colour map, opacity = probability), cached.
+    """A colour PNG of the prediction (``egonet.overlay.heatmap``: turbo colours, faint where unlikely), cached.
 
     Prediction files are content-addressed, so the overlay is cached under
     the file's name and never goes stale.
@@ -82,9 +82,7 @@ def prediction_overlay(prediction: Prediction) -> Path:
     path = root / f"overlay-{Path(prediction.path).stem}.png"
     if not path.exists():
         probability = read_probability(prediction.path)
-        bgr = cv2.applyColorMap(np.round(probability * 255).astype(np.uint8), cv2.COLORMAP_TURBO)
-        alpha = np.round(np.clip(probability * 1.4, 0, 1) * 220).astype(np.uint8)  # faint where unlikely
-        media.write_atomic(path, cv2.imencode(".png", np.dstack([bgr, alpha]))[1].tobytes())
+        media.write_atomic(path, io.encode_png(heatmap(probability)))
     return path
 
 
