@@ -16,8 +16,12 @@ Conventions:
 
 import io as _io
 import json
+import os
+import tempfile
 import warnings
+from collections.abc import Callable
 from pathlib import Path
+from typing import BinaryIO
 
 import cv2
 import numpy as np
@@ -40,6 +44,39 @@ class MediaError(EgonetError):
     def __init__(self, path: str | Path, reason: str):
         super().__init__(f"{path}: {reason}", field=str(path), reason=reason)
         self.path = str(path)
+
+
+def write_atomic(path: str | Path, data: bytes | Callable[[BinaryIO], None], *, durable: bool = False) -> None:
+    """Write a file through a temporary file in the same folder and a rename.
+
+    Readers see the old file or the new one, never half of one; a failure
+    leaves no temporary file behind. This is the project's one atomic writer
+    (media, caches, checkpoints).
+
+    Args:
+        path: The file to (re)place; its folder is created.
+        data: The bytes, or a function that writes into the open binary file
+            (e.g. ``lambda fh: torch.save(state, fh)``, so a large object is
+            never held twice in memory).
+        durable: Also flush the data to disk before the rename (for files a
+            committed database row will point at).
+    """
+    path = Path(path)
+    path.parent.mkdir(parents=True, exist_ok=True)
+    fd, tmp = tempfile.mkstemp(dir=path.parent, prefix=".tmp-", suffix=path.suffix)
+    try:
+        with os.fdopen(fd, "wb") as fh:
+            if callable(data):
+                data(fh)
+            else:
+                fh.write(data)
+            if durable:
+                fh.flush()
+                os.fsync(fh.fileno())
+        os.replace(tmp, path)
+    except BaseException:
+        Path(tmp).unlink(missing_ok=True)
+        raise
 
 
 def check_rgb(image: object, name: str, *, min_side: int = 1) -> tuple[int, int]:

@@ -57,7 +57,6 @@ import json
 import math
 import os
 import re
-import tempfile
 import time
 from collections.abc import Callable, Iterator, Mapping, Sequence
 from dataclasses import dataclass, field
@@ -73,6 +72,7 @@ from torch.utils.data import DataLoader, DistributedSampler
 from egonet.baselines import ActionObjectPrior
 from egonet.data import MIN_SIDE, Augment, FrameDataset, Sample, resize_probability
 from egonet.errors import EgonetError
+from egonet.io import write_atomic
 from egonet.metrics import ScoreAccumulator
 from egonet.network import MODELS, EgoNetModel, build_model
 
@@ -524,17 +524,8 @@ def evaluate(
 
 
 def save_checkpoint(path: Path, state: Mapping) -> None:
-    """``torch.save`` atomically: a temporary file in the same folder, then a rename."""
-    path = Path(path)
-    path.parent.mkdir(parents=True, exist_ok=True)
-    fd, tmp = tempfile.mkstemp(dir=path.parent, prefix=".tmp-", suffix=".pt")
-    try:
-        with os.fdopen(fd, "wb") as fh:
-            torch.save(dict(state), fh)
-        os.replace(tmp, path)
-    except BaseException:
-        Path(tmp).unlink(missing_ok=True)
-        raise
+    """``torch.save`` atomically (``egonet.io.write_atomic``)."""
+    write_atomic(path, lambda fh: torch.save(dict(state), fh))
 
 
 def load_checkpoint(path: str | Path) -> dict:

@@ -8,14 +8,14 @@ bytes twice is a no-op. The database stores the relative path.
 
 import contextlib
 import hashlib
-import os
-import tempfile
 import time
 from collections.abc import Iterator
 from dataclasses import dataclass, field
 from pathlib import Path
 
 from flask import current_app
+
+from egonet.io import write_atomic  # the one atomic writer: media, caches and checkpoints
 
 
 def media_root() -> Path:
@@ -51,27 +51,6 @@ def store(data: bytes, suffix: str, *, written: list[Path] | None = None) -> str
     if written is not None:
         written.append(path)
     return rel
-
-
-def write_atomic(path: Path, data: bytes, *, durable: bool = False) -> None:
-    """Write a file through a temporary file in the same folder and a rename.
-
-    Readers see the old file or the new one, never half of one. ``durable``
-    also flushes the data to disk before the rename (for media a committed
-    row will point at).
-    """
-    path.parent.mkdir(parents=True, exist_ok=True)
-    fd, tmp = tempfile.mkstemp(dir=path.parent, prefix=".tmp-", suffix=path.suffix)
-    try:
-        with os.fdopen(fd, "wb") as fh:
-            fh.write(data)
-            if durable:
-                fh.flush()
-                os.fsync(fh.fileno())
-        os.replace(tmp, path)
-    except BaseException:
-        Path(tmp).unlink(missing_ok=True)
-        raise
 
 
 @contextlib.contextmanager

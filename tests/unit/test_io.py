@@ -83,3 +83,19 @@ def test_rgba_png_round_trip(tmp_path):
     path.write_bytes(io.encode_png(rgba))
     back = cv2.cvtColor(cv2.imread(str(path), cv2.IMREAD_UNCHANGED), cv2.COLOR_BGRA2RGBA)
     assert np.array_equal(back, rgba)
+
+
+def test_write_atomic_writes_bytes_or_through_a_function_and_leaves_nothing_on_failure(tmp_path):
+    target = tmp_path / "sub" / "a.bin"
+    io.write_atomic(target, b"first")
+    io.write_atomic(target, lambda fh: fh.write(b"second"), durable=True)
+    assert target.read_bytes() == b"second"
+
+    def fail(fh):
+        fh.write(b"half")
+        raise RuntimeError("disk full")
+
+    with pytest.raises(RuntimeError):
+        io.write_atomic(target, fail)
+    assert target.read_bytes() == b"second"
+    assert sorted(p.name for p in target.parent.iterdir()) == ["a.bin"]
