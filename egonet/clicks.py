@@ -39,7 +39,7 @@ import numpy as np
 from egonet.errors import EgonetError
 from egonet.io import check_rgb
 
-__all__ = ["DEFAULT_SIGMA", "SUPERPIXEL_DEFAULTS", "MaskMean", "SuperpixelDefaults", "click_gaussian", "overlay",
+__all__ = ["DEFAULT_SIGMA", "SUPERPIXEL_DEFAULTS", "MaskMean", "SuperpixelDefaults", "click_gaussian",
            "project_to_regions", "soft_mask", "superpixels"]
 
 DEFAULT_SIGMA = 60.0
