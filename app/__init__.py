@@ -78,6 +78,14 @@ def normalise_database_url(url: str) -> str:
 
 
 def create_app(test_config: dict | None = None, *, instance_path: str | None = None) -> Flask:
+    """Build the application: configuration, then extensions, then blueprints,
+    the CLI and the error handlers.
+
+    Args:
+        test_config: settings applied last, in place of ``instance/config.py``
+            and the ``FLASK_*`` environment variables.
+        instance_path: the instance folder (Flask's default if not given).
+    """
     app = Flask(
         __name__,
         instance_path=instance_path,
@@ -85,9 +93,16 @@ def create_app(test_config: dict | None = None, *, instance_path: str | None = N
         template_folder="../templates",
         static_folder="../static",
     )
-    instance = Path(app.instance_path)
     app.url_map.converters["int"] = IdConverter
-    app.config.from_mapping(
+    _configure(app, test_config)
+    _init_extensions(app)
+    _register(app)
+    return app
+
+
+def _default_config(instance: Path) -> dict:
+    """The settings every deployment starts from; the data live in ``instance``."""
+    return dict(
         SECRET_KEY=None,
         SQLALCHEMY_DATABASE_URI=f"sqlite:///{instance / 'egonet.sqlite3'}",
         SQLALCHEMY_ENGINE_OPTIONS={"pool_pre_ping": True},
@@ -121,6 +136,16 @@ def create_app(test_config: dict | None = None, *, instance_path: str | None = N
         GRABCUT_IMAGE_CACHE_BYTES=64 * 1024**2,
         PRODUCTION=False,
     )
+
+
+def _configure(app: Flask, test_config: dict | None) -> None:
+    """Defaults, then ``instance/config.py`` and ``FLASK_*`` variables (or the
+    test mapping instead); then the database URL's driver and the secret key,
+    and in production the key's length check and HTTPS-only cookies."""
+    from app import security
+
+    instance = Path(app.instance_path)
+    app.config.from_mapping(_default_config(instance))
     if test_config is None:
         app.config.from_pyfile("config.py", silent=True)
         app.config.from_prefixed_env()
@@ -130,7 +155,11 @@ def create_app(test_config: dict | None = None, *, instance_path: str | None = N
     os.makedirs(app.instance_path, exist_ok=True)
     if not app.config.get("SECRET_KEY"):
         app.config["SECRET_KEY"] = instance_secret_key(instance)
+    security.require_production_safety(app)
 
+
+def _init_extensions(app: Flask) -> None:
+    """Bind the database, migrations, CSRF and log-in to the app."""
     from app.extensions import csrf, db, login_manager, migrate
 
     db.init_app(app)
@@ -139,11 +168,21 @@ def create_app(test_config: dict | None = None, *, instance_path: str | None = N
     login_manager.init_app(app)
     login_manager.login_view = "auth.login"
 
+    @login_manager.user_loader
+    def load_user(user_id: str):
+        # "<id>:<session token>" (User.get_id): only the current token signs in.
+        from app.services.users import user_for_session
+
+        return user_for_session(user_id)
+
+
+def _register(app: Flask) -> None:
+    """The throttle, the queue, the error handlers, the access checks and
+    security headers, the blueprints, the navigation and the ``flask egonet`` CLI."""
     from app import errors, queue, security, throttle
     from app.blueprints import api, auth, frames, label, navigation, participate, scores, studies, training, users
     from app.cli import bp as cli_bp
 
-    security.require_production_safety(app)
     throttle.init_app(app)
     queue.init_app(app)
     errors.register(app)
@@ -153,12 +192,3 @@ def create_app(test_config: dict | None = None, *, instance_path: str | None = N
         app.register_blueprint(module.bp)
     app.context_processor(navigation)
     app.register_blueprint(cli_bp)
-
-    @login_manager.user_loader
-    def load_user(user_id: str):
-        # "<id>:<session token>" (User.get_id): only the current token signs in.
-        from app.services.users import user_for_session
-
-        return user_for_session(user_id)
-
-    return app

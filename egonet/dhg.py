@@ -412,6 +412,55 @@ def _find_floor(
     return level, float(inliers.sum()) / max(n_windows, 1)
 
 
+def _metric_depth(depth: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Depth as float64 and where it is valid; refuses a map with no valid
+    pixel, or one that looks like millimetres."""
+    z = depth.astype(np.float64)
+    with np.errstate(invalid="ignore"):
+        valid = np.isfinite(z) & (z > 0)
+    if not valid.any():
+        raise EgonetError("depth_m has no valid pixel (all 0, negative or NaN): a height map needs depth", field="depth_m")
+    if np.median(z[valid][:: max(1, int(valid.sum()) // 10_000)]) > _MAX_MEDIAN_DEPTH_M:
+        raise EgonetError(
+            f"depth_m has a median depth above {_MAX_MEDIAN_DEPTH_M:g} m: it looks like millimetres; "
+            "pass metres (depth / 1000)",
+            field="depth_m",
+        )
+    return z, valid
+
+
+def _place_floor(
+    raw_valid: np.ndarray,
+    normals: np.ndarray,
+    points: np.ndarray,
+    up: np.ndarray,
+    n_windows: int,
+    *,
+    assumed_camera_height_m: float,
+    min_camera_height_m: float,
+    min_floor_fraction: float,
+) -> tuple[float, float, bool]:
+    """The floor's height along up relative to the camera, its share of the
+    windows and whether it is in view; if it is not, the assumed floor (see
+    the module docstring). ``raw_valid`` holds the valid pixels' heights
+    relative to the camera."""
+    floor = None
+    floor_fraction = 0.0
+    if len(normals) >= _MIN_NORMALS:
+        floor, floor_fraction = _find_floor(normals, points, up, n_windows, min_floor_fraction=min_floor_fraction)
+    floor_visible = (
+        floor is not None
+        and -floor >= min_camera_height_m
+        # Nothing substantial may lie below the floor (else it is a table top).
+        and np.count_nonzero(raw_valid < floor - _BELOW_FLOOR_M) <= _MAX_BELOW_FLOOR_FRACTION * raw_valid.size
+    )
+    if not floor_visible:
+        floor_fraction = 0.0
+        lowest = float(np.percentile(raw_valid, _LOW_PERCENTILE))
+        floor = min(lowest, -assumed_camera_height_m)
+    return floor, floor_fraction, floor_visible
+
+
 def estimate_height(
     depth_m: np.ndarray,
     K: np.ndarray,
@@ -457,17 +506,7 @@ def estimate_height(
     min_camera_height_m = _check_positive(min_camera_height_m, "min_camera_height_m")
     min_floor_fraction = _check_positive(min_floor_fraction, "min_floor_fraction", at_most=1.0)
 
-    z = depth.astype(np.float64)
-    with np.errstate(invalid="ignore"):
-        valid = np.isfinite(z) & (z > 0)
-    if not valid.any():
-        raise EgonetError("depth_m has no valid pixel (all 0, negative or NaN): a height map needs depth", field="depth_m")
-    if np.median(z[valid][:: max(1, int(valid.sum()) // 10_000)]) > _MAX_MEDIAN_DEPTH_M:
-        raise EgonetError(
-            f"depth_m has a median depth above {_MAX_MEDIAN_DEPTH_M:g} m: it looks like millimetres; "
-            "pass metres (depth / 1000)",
-            field="depth_m",
-        )
+    z, valid = _metric_depth(depth)
     x, y = _normalised_coords(K, z.shape)
 
     normals, points, n_windows = _plane_normals(z, valid, x, y)
@@ -480,22 +519,16 @@ def estimate_height(
     along = up[0] * x + up[1] * y + up[2]
     raw = np.where(valid, np.where(valid, z, 0.0) * along, np.nan)
 
-    raw_valid = raw[valid]
-    floor = None
-    floor_fraction = 0.0
-    if len(normals) >= _MIN_NORMALS:
-        floor, floor_fraction = _find_floor(normals, points, up, n_windows, min_floor_fraction=min_floor_fraction)
-    floor_visible = (
-        floor is not None
-        and -floor >= min_camera_height_m
-        # Nothing substantial may lie below the floor (else it is a table top).
-        and np.count_nonzero(raw_valid < floor - _BELOW_FLOOR_M) <= _MAX_BELOW_FLOOR_FRACTION * raw_valid.size
+    floor, floor_fraction, floor_visible = _place_floor(
+        raw[valid],
+        normals,
+        points,
+        up,
+        n_windows,
+        assumed_camera_height_m=assumed_camera_height_m,
+        min_camera_height_m=min_camera_height_m,
+        min_floor_fraction=min_floor_fraction,
     )
-    if not floor_visible:
-        floor_fraction = 0.0
-        lowest = float(np.percentile(raw_valid, _LOW_PERCENTILE))
-        floor = min(lowest, -assumed_camera_height_m)
-
     height = (raw - floor).astype(np.float32)
     return HeightEstimate(
         height_m=height,

@@ -184,6 +184,23 @@ def import_path(
                 on_progress=on_progress,
             )
     source = discover(path, depth_dir=depth_dir, dhg_dir=dhg_dir, masks_dir=masks_dir, intrinsics=intrinsics)
+    total, items = _frame_items(source, path, stride)
+    if on_start:
+        on_start(total)
+    return add_frames(
+        activity=activity,
+        sequence=sequence or source.name,
+        items=items,
+        source=str(path),
+        mask_author=mask_author,
+        mask_status=mask_status,
+        on_progress=on_progress,
+    )
+
+
+def _frame_items(source: Source, path: Path, stride: int) -> tuple[int, Iterator[FrameItem]]:
+    """How many frames ``source`` gives at ``stride``, and the frames with
+    their companions (read one frame at a time, as they are added)."""
     K = io.read_intrinsics(source.intrinsics) if source.intrinsics else None
     companions = {
         "depth": _by_stem(source.depth_dir, io.DEPTH_SUFFIXES),
@@ -199,31 +216,25 @@ def import_path(
         frames = ((p.stem, str(p), i * stride, io.read_bytes(p), p.suffix.lower(), None) for i, p in enumerate(kept))
         if total == 0:
             raise ImportProblem(f"{path}: no images (jpg/png) found", field="path")
+    return total, _with_companions(frames, companions, K=K, by_index=source.video is not None)
 
-    def items() -> Iterator[FrameItem]:
-        for stem, origin, index, data, suffix, timestamp in frames:
-            key = index if source.video is not None else stem
-            item = FrameItem(stem, index, origin, rgb=data, rgb_suffix=suffix, timestamp_s=timestamp, K=K)
-            if (p := companions["depth"].get(key)) is not None:
-                item.depth_m = io.read_depth(p)
-                item.meta["depth_file"] = p.name
-            if (p := companions["dhg"].get(key)) is not None:
-                item.dhg = io.read_dhg(p)
-            if (p := companions["mask"].get(key)) is not None:
-                item.mask = io.read_mask(p)
-            yield item
 
-    if on_start:
-        on_start(total)
-    return add_frames(
-        activity=activity,
-        sequence=sequence or source.name,
-        items=items(),
-        source=str(path),
-        mask_author=mask_author,
-        mask_status=mask_status,
-        on_progress=on_progress,
-    )
+def _with_companions(
+    frames: Iterator[tuple], companions: dict[str, dict], *, K: np.ndarray | None, by_index: bool
+) -> Iterator[FrameItem]:
+    """One FrameItem per frame, with the depth, DHG and mask files matched to
+    it by frame number (``by_index``, a video's) or by file stem."""
+    for stem, origin, index, data, suffix, timestamp in frames:
+        key = index if by_index else stem
+        item = FrameItem(stem, index, origin, rgb=data, rgb_suffix=suffix, timestamp_s=timestamp, K=K)
+        if (p := companions["depth"].get(key)) is not None:
+            item.depth_m = io.read_depth(p)
+            item.meta["depth_file"] = p.name
+        if (p := companions["dhg"].get(key)) is not None:
+            item.dhg = io.read_dhg(p)
+        if (p := companions["mask"].get(key)) is not None:
+            item.mask = io.read_mask(p)
+        yield item
 
 
 @contextlib.contextmanager

@@ -73,6 +73,22 @@ def _ceiling() -> _Mat:
 # ---------------------------------------------------------------------------
 
 
+def _kitchen_room(scene: _Scene, rng, xl, xr, back, *, tile: tuple[float, float, float], tile_scale: float) -> None:
+    """A kitchen's room: the back wall (y+) tiled with ``tile`` squares of ``tile_scale`` metres."""
+    scene.room(
+        (xl, -rng.uniform(1.5, 2.5), 0.0),
+        (xr, back, rng.uniform(2.4, 2.7)),
+        [
+            _wall(rng),
+            _wall(rng),
+            _wall(rng),
+            _Mat(tile, _darker(tile, 0.8), _TILES, tile_scale),
+            _floor(rng, "tiles"),
+            _ceiling(),
+        ],
+    )
+
+
 def _counter_with_cabinets(scene: _Scene, rng, x0, x1, y0, y1, top_z, top_mat: int, door_mat: int) -> None:
     scene.block((x0, y0 + 0.04, 0.0), (x1, y1, top_z - 0.04), door_mat)
     scene.block((x0, y0 + 0.02, 0.0), (x1, y0 + 0.05, 0.1), scene.material(_Mat((0.15, 0.15, 0.15))))
@@ -84,21 +100,7 @@ def _layout_cooking(scene: _Scene, rng: np.random.Generator, seated: bool) -> No
     front = rng.uniform(0.22, 0.3)
     back = front + rng.uniform(0.58, 0.66)
     xl, xr = -rng.uniform(1.6, 2.4), rng.uniform(1.6, 2.4)
-    tile = _jitter((0.85, 0.85, 0.82), rng, 0.1)
-    scene.room(
-        (xl, -rng.uniform(1.5, 2.5), 0.0),
-        (xr, back, rng.uniform(2.4, 2.7)),
-        [
-            _wall(rng),
-            _wall(rng),
-            _wall(rng),
-            _Mat(tile,
-            _darker(tile, 0.8),
-            _TILES, 0.15),
-            _floor(rng, "tiles"),
-            _ceiling(),
-        ],
-    )
+    _kitchen_room(scene, rng, xl, xr, back, tile=_jitter((0.85, 0.85, 0.82), rng, 0.1), tile_scale=0.15)
     stone = _jitter(rng.choice([(0.85, 0.84, 0.8), (0.3, 0.3, 0.32), (0.6, 0.55, 0.5)]), rng, 0.08)
     top_mat = scene.material(_Mat(stone, _darker(stone, 0.9), _FABRIC, 200.0, spec=0.2))
     door_rgb = rng.choice([(0.9, 0.9, 0.88), (0.35, 0.45, 0.55), (0.55, 0.4, 0.28)])
@@ -331,31 +333,51 @@ def _layout_dishwashing(scene: _Scene, rng: np.random.Generator, seated: bool) -
     front = rng.uniform(0.2, 0.28)
     back = front + rng.uniform(0.58, 0.65)
     xl, xr = -rng.uniform(1.5, 2.2), rng.uniform(1.5, 2.2)
-    tile = _jitter((0.8, 0.85, 0.88), rng, 0.08)
-    scene.room(
-        (xl, -rng.uniform(1.5, 2.5), 0.0),
-        (xr, back, rng.uniform(2.4, 2.7)),
-        [
-            _wall(rng),
-            _wall(rng),
-            _wall(rng),
-            _Mat(tile,
-            _darker(tile, 0.8),
-            _TILES, 0.12),
-            _floor(rng, "tiles"),
-            _ceiling(),
-        ],
-    )
+    _kitchen_room(scene, rng, xl, xr, back, tile=_jitter((0.8, 0.85, 0.88), rng, 0.08), tile_scale=0.12)
     stone = _jitter(rng.choice([(0.85, 0.84, 0.8), (0.3, 0.3, 0.32), (0.55, 0.5, 0.45)]), rng, 0.08)
     top_mat = scene.material(_Mat(stone, _darker(stone, 0.9), _FABRIC, 200.0, spec=0.2))
     door = scene.material(_Mat(_jitter(rng.choice([(0.9, 0.9, 0.88), (0.4, 0.5, 0.45)]), rng, 0.08)))
     steel = scene.material(_Mat((0.6, 0.62, 0.64), spec=0.6))
-    # Sink opening (sx0..sx1, sy0..sy1), basin floor at `bottom`.
+    sink = _counter_with_sink(scene, rng, xl, xr, front, back, top, top_mat, door, steel)
+    # Window above the sink.
+    scene.block((sink.xc - 0.5, back - 0.01, 1.2), (sink.xc + 0.5, back, 2.0), scene.material(_Mat((0.85, 0.9, 0.97))))
+    upper_z = rng.uniform(1.45, 1.55)
+    scene.block((xl, back - 0.33, upper_z), (sink.xc - 0.6, back, upper_z + 0.7), door)
+    scene.block((sink.xc + 0.6, back - 0.33, upper_z), (xr, back, upper_z + 0.7), door)
+    dish_kinds = frozenset({"plate", "bowl", "cup", "mug", "pan", "glass", "pot", "sponge"})
+    scene.surfaces.extend(
+        [
+            _Surface(
+                sink.x0 + 0.01, sink.x1 - 0.01, sink.y0 + 0.01, sink.y1 - 0.01, sink.bottom + 0.005, kinds=dish_kinds
+            ),
+            _Surface(xl + 0.05, sink.x0 - 0.03, front + 0.03, back - 0.05, top),
+            _Surface(sink.x1 + 0.03, xr - 0.05, front + 0.03, back - 0.05, top),
+        ]
+    )
+    scene.rests.append(_Surface(-0.35, 0.35, front, front + 0.07, top))
+
+
+@dataclass(frozen=True)
+class _Sink:
+    """A sink's opening in the worktop (x0..x1, y0..y1, centred at x = xc) and its basin floor."""
+
+    xc: float
+    x0: float
+    x1: float
+    y0: float
+    y1: float
+    bottom: float
+
+
+def _counter_with_sink(
+    scene: _Scene, rng, xl, xr, front, back, top, top_mat: int, door_mat: int, steel_mat: int
+) -> _Sink:
+    """Cabinets, a worktop around a sink opening, a steel basin and a tap."""
     sxc = rng.uniform(-0.2, 0.2)
     sx0, sx1 = sxc - rng.uniform(0.25, 0.32), sxc + rng.uniform(0.25, 0.32)
     sy0, sy1 = front + 0.08, front + rng.uniform(0.44, 0.5)
     bottom = top - rng.uniform(0.18, 0.22)
-    scene.block((xl, front + 0.02, 0.0), (xr, back, bottom), door)  # cabinets below
+    scene.block((xl, front + 0.02, 0.0), (xr, back, bottom), door_mat)  # cabinets below
     for lo, hi in (
         ((xl, front, bottom), (sx0, back, top)),
         ((sx1, front, bottom), (xr, back, top)),
@@ -364,29 +386,16 @@ def _layout_dishwashing(scene: _Scene, rng: np.random.Generator, seated: bool) -
     ):
         scene.block(lo, hi, top_mat)
     # Steel liners make the basin walls and floor.
-    scene.block((sx0, sy0, bottom), (sx1, sy1, bottom + 0.005), steel)
-    scene.block((sx0, sy0, bottom), (sx0 + 0.006, sy1, top - 0.002), steel)
-    scene.block((sx1 - 0.006, sy0, bottom), (sx1, sy1, top - 0.002), steel)
-    scene.block((sx0, sy0, bottom), (sx1, sy0 + 0.006, top - 0.002), steel)
-    scene.block((sx0, sy1 - 0.006, bottom), (sx1, sy1, top - 0.002), steel)
+    scene.block((sx0, sy0, bottom), (sx1, sy1, bottom + 0.005), steel_mat)
+    scene.block((sx0, sy0, bottom), (sx0 + 0.006, sy1, top - 0.002), steel_mat)
+    scene.block((sx1 - 0.006, sy0, bottom), (sx1, sy1, top - 0.002), steel_mat)
+    scene.block((sx0, sy0, bottom), (sx1, sy0 + 0.006, top - 0.002), steel_mat)
+    scene.block((sx0, sy1 - 0.006, bottom), (sx1, sy1, top - 0.002), steel_mat)
     # Tap.
     tx = sxc + rng.uniform(-0.05, 0.05)
-    scene.add(_CYL, (tx, sy1 + 0.06, top + 0.13), (0.018, 0.018, 0.13), steel)
-    scene.add(_BOX, (tx, sy1 - 0.04, top + 0.25), (0.014, 0.1, 0.012), steel)
-    # Window above the sink.
-    scene.block((sxc - 0.5, back - 0.01, 1.2), (sxc + 0.5, back, 2.0), scene.material(_Mat((0.85, 0.9, 0.97))))
-    upper_z = rng.uniform(1.45, 1.55)
-    scene.block((xl, back - 0.33, upper_z), (sxc - 0.6, back, upper_z + 0.7), door)
-    scene.block((sxc + 0.6, back - 0.33, upper_z), (xr, back, upper_z + 0.7), door)
-    dish_kinds = frozenset({"plate", "bowl", "cup", "mug", "pan", "glass", "pot", "sponge"})
-    scene.surfaces.extend(
-        [
-            _Surface(sx0 + 0.01, sx1 - 0.01, sy0 + 0.01, sy1 - 0.01, bottom + 0.005, kinds=dish_kinds),
-            _Surface(xl + 0.05, sx0 - 0.03, front + 0.03, back - 0.05, top),
-            _Surface(sx1 + 0.03, xr - 0.05, front + 0.03, back - 0.05, top),
-        ]
-    )
-    scene.rests.append(_Surface(-0.35, 0.35, front, front + 0.07, top))
+    scene.add(_CYL, (tx, sy1 + 0.06, top + 0.13), (0.018, 0.018, 0.13), steel_mat)
+    scene.add(_BOX, (tx, sy1 - 0.04, top + 0.25), (0.014, 0.1, 0.012), steel_mat)
+    return _Sink(xc=sxc, x0=sx0, x1=sx1, y0=sy0, y1=sy1, bottom=bottom)
 
 
 @dataclass(frozen=True)

@@ -52,6 +52,8 @@ def _albedo(
 
     Vectors come as per-component rows; each texture gathers only the rows it
     needs at its own pixels (1-D integer gathers are much cheaper than masks).
+    A texture multiplies the base colour by a factor, mixes it towards the
+    material's second colour by a weight, or both.
     """
     rgb = np.array([m.rgb for m in mats]).T
     rgb2 = np.array([m.rgb2 for m in mats]).T
@@ -68,56 +70,22 @@ def _albedo(
         sc = scale[m]
         factor = None  # multiply the base colour
         blend = None  # (weight, colour 2): mix towards the second colour
-        if kind == _WOOD:  # grain lines along the longer horizontal axis, slightly wavy
-            lx, ly, lz = (local[k][idx] for k in range(3))
-            x_long = size[0][idx] >= size[1][idx]
-            along = np.where(x_long, lx, ly)
-            across = np.where(x_long, ly, lx)
-            wobble = 0.006 * _wave(along * 1.1) + 0.002 * _wave(along * 5.0 + lz * 6.0)
-            g = _wave(sc * (across + lz * 0.3 + wobble) / (2.0 * math.pi))
-            g *= g
-            blend = g * g
-        elif kind == _LABEL:  # a band around the middle and a thin stripe above it
-            zr = local[2][idx] / np.maximum(size[2][idx], 1e-6)
-            side = np.abs(n_local[2][idx]) < 0.5
-            blend = ((np.abs(zr) < 0.45) & side).astype(np.float64)
-            factor = 1.0 - 0.4 * ((np.abs(zr - 0.65) < 0.06) & side)
-        elif kind == _SCREEN:  # a lit picture on the front face inside a bezel
-            s0, s1, s2 = (np.maximum(size[k][idx], 1e-6) for k in range(3))
-            xr = np.abs(local[0][idx]) / s0
-            zr = local[2][idx] / s2
-            front = (n_local[1][idx] < -0.5) & (xr < 0.93) & (np.abs(zr) < 0.88)
-            # Flat screens (phones) show it on top.
-            front |= (s2 < 0.01) & (n_local[2][idx] > 0.5) & (xr < 0.93) & (np.abs(local[1][idx]) / s1 < 0.9)
-            glow = 0.6 + 0.4 * _wave(zr + xr * 0.5)
-            blend = front.astype(np.float64)
+        c2 = [rgb2[k][m] for k in range(3)]
+        if kind == _WOOD:
+            blend = _wood_grain(idx, sc, local, size)
+        elif kind == _LABEL:
+            factor, blend = _label_band(idx, local, n_local, size)
+        elif kind == _SCREEN:
+            blend, glow = _screen(idx, local, n_local, size)
             c2 = [0.3 + 0.7 * rgb2[k][m] * glow for k in range(3)]
-        elif kind == _PAPER:  # faint printed lines within margins
-            lx, ly = local[0][idx], local[1][idx]
-            yy = ly * sc
-            line = ((yy - np.floor(yy)) < 0.35) & (np.abs(lx) < 0.8 * size[0][idx])
-            line &= (np.abs(ly) < 0.85 * size[1][idx]) & (n_local[2][idx] > 0.5)
-            blend = 0.4 * line
-            factor = 1.0 - 0.4 * line
-        elif kind == _KEYS:  # a grid of dark gaps on the top face
-            ax = local[0][idx] * sc
-            ay = local[1][idx] * sc
-            gap = ((ax - np.floor(ax)) < 0.18) | ((ay - np.floor(ay)) < 0.18)
-            blend = (gap & (n_local[2][idx] > 0.5)).astype(np.float64)
-        elif kind == _TILES:  # world-aligned squares with grout, each a slightly different shade
-            px, py, pz = (points[k][idx] for k in range(3))
-            horizontal = np.abs(normal[2][idx]) > 0.5
-            a = np.where(horizontal | (np.abs(normal[1][idx]) > 0.5), px, py) / sc
-            b = np.where(horizontal, py, pz) / sc
-            fa, fb = np.floor(a), np.floor(b)
-            factor = 0.88 + 0.24 * _hash2(fa, fb)
-            blend = (((a - fa) < 0.035) | ((b - fb) < 0.035)).astype(np.float64)
-        elif kind == _FABRIC:  # a fine weave
-            px, py, pz = (points[k][idx] for k in range(3))
-            f = 0.5 / math.pi
-            factor = 0.93 + 0.07 * (2.0 * _wave(px * sc * f) - 1.0) * (2.0 * _wave((py + pz) * sc * f) - 1.0)
-        if kind != _SCREEN:
-            c2 = [rgb2[k][m] for k in range(3)]
+        elif kind == _PAPER:
+            factor, blend = _printed_lines(idx, sc, local, n_local, size)
+        elif kind == _KEYS:
+            blend = _key_gaps(idx, sc, local, n_local)
+        elif kind == _TILES:
+            factor, blend = _tiles(idx, sc, points, normal)
+        elif kind == _FABRIC:
+            factor = _weave(idx, sc, points)
         for k in range(3):
             c = col[k][idx]
             if factor is not None:
@@ -126,6 +94,87 @@ def _albedo(
                 c = c + (c2[k] - c) * blend
             col[k][idx] = c
     return np.stack(col), spec
+
+
+# The textures. Each takes the indices ``idx`` of its hit points and, where it
+# uses one, their materials' scale ``sc``, and gathers the rows it needs.
+
+
+def _wood_grain(idx: np.ndarray, sc: np.ndarray, local: list[np.ndarray], size: np.ndarray) -> np.ndarray:
+    """Grain lines along the longer horizontal axis, slightly wavy: the weight of colour 2."""
+    lx, ly, lz = (local[k][idx] for k in range(3))
+    x_long = size[0][idx] >= size[1][idx]
+    along = np.where(x_long, lx, ly)
+    across = np.where(x_long, ly, lx)
+    wobble = 0.006 * _wave(along * 1.1) + 0.002 * _wave(along * 5.0 + lz * 6.0)
+    g = _wave(sc * (across + lz * 0.3 + wobble) / (2.0 * math.pi))
+    g *= g
+    return g * g
+
+
+def _label_band(
+    idx: np.ndarray, local: list[np.ndarray], n_local: list[np.ndarray], size: np.ndarray
+) -> tuple[np.ndarray, np.ndarray]:
+    """A band around the middle and a thin dark stripe above it: (factor, weight)."""
+    zr = local[2][idx] / np.maximum(size[2][idx], 1e-6)
+    side = np.abs(n_local[2][idx]) < 0.5
+    blend = ((np.abs(zr) < 0.45) & side).astype(np.float64)
+    factor = 1.0 - 0.4 * ((np.abs(zr - 0.65) < 0.06) & side)
+    return factor, blend
+
+
+def _screen(
+    idx: np.ndarray, local: list[np.ndarray], n_local: list[np.ndarray], size: np.ndarray
+) -> tuple[np.ndarray, np.ndarray]:
+    """A lit picture on the front face inside a bezel: (weight, glow of colour 2)."""
+    s0, s1, s2 = (np.maximum(size[k][idx], 1e-6) for k in range(3))
+    xr = np.abs(local[0][idx]) / s0
+    zr = local[2][idx] / s2
+    front = (n_local[1][idx] < -0.5) & (xr < 0.93) & (np.abs(zr) < 0.88)
+    # Flat screens (phones) show it on top.
+    front |= (s2 < 0.01) & (n_local[2][idx] > 0.5) & (xr < 0.93) & (np.abs(local[1][idx]) / s1 < 0.9)
+    glow = 0.6 + 0.4 * _wave(zr + xr * 0.5)
+    return front.astype(np.float64), glow
+
+
+def _printed_lines(
+    idx: np.ndarray, sc: np.ndarray, local: list[np.ndarray], n_local: list[np.ndarray], size: np.ndarray
+) -> tuple[np.ndarray, np.ndarray]:
+    """Faint printed lines within margins on the top face: (factor, weight)."""
+    lx, ly = local[0][idx], local[1][idx]
+    yy = ly * sc
+    line = ((yy - np.floor(yy)) < 0.35) & (np.abs(lx) < 0.8 * size[0][idx])
+    line &= (np.abs(ly) < 0.85 * size[1][idx]) & (n_local[2][idx] > 0.5)
+    return 1.0 - 0.4 * line, 0.4 * line
+
+
+def _key_gaps(idx: np.ndarray, sc: np.ndarray, local: list[np.ndarray], n_local: list[np.ndarray]) -> np.ndarray:
+    """A grid of dark gaps on the top face: the weight of colour 2."""
+    ax = local[0][idx] * sc
+    ay = local[1][idx] * sc
+    gap = ((ax - np.floor(ax)) < 0.18) | ((ay - np.floor(ay)) < 0.18)
+    return (gap & (n_local[2][idx] > 0.5)).astype(np.float64)
+
+
+def _tiles(
+    idx: np.ndarray, sc: np.ndarray, points: np.ndarray, normal: list[np.ndarray]
+) -> tuple[np.ndarray, np.ndarray]:
+    """World-aligned squares with grout, each a slightly different shade: (factor, weight)."""
+    px, py, pz = (points[k][idx] for k in range(3))
+    horizontal = np.abs(normal[2][idx]) > 0.5
+    a = np.where(horizontal | (np.abs(normal[1][idx]) > 0.5), px, py) / sc
+    b = np.where(horizontal, py, pz) / sc
+    fa, fb = np.floor(a), np.floor(b)
+    factor = 0.88 + 0.24 * _hash2(fa, fb)
+    blend = (((a - fa) < 0.035) | ((b - fb) < 0.035)).astype(np.float64)
+    return factor, blend
+
+
+def _weave(idx: np.ndarray, sc: np.ndarray, points: np.ndarray) -> np.ndarray:
+    """A fine weave: the factor."""
+    px, py, pz = (points[k][idx] for k in range(3))
+    f = 0.5 / math.pi
+    return 0.93 + 0.07 * (2.0 * _wave(px * sc * f) - 1.0) * (2.0 * _wave((py + pz) * sc * f) - 1.0)
 
 
 @dataclass
