@@ -26,7 +26,15 @@ def activity(activity_id: int):
     if page > pages:
         abort(404, f"page {page} does not exist (the activity has {pages})")
     statuses = frames_service.frame_statuses([f.id for f in frames])
-    return render_template("frames/activity.html", activity=act, frames=frames, statuses=statuses, page=page, pages=pages)
+    return render_template(
+        "frames/activity.html",
+        activity=act,
+        summary=frames_service.activity_summary(act),
+        frames=frames,
+        statuses=statuses,
+        page=page,
+        pages=pages,
+    )
 
 
 @bp.get("/frames/<int:frame_id>")

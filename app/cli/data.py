@@ -57,22 +57,42 @@ def import_command(path, activity, sequence, stride, depth_dir, dhg_dir, masks_d
 
 @bp.cli.command("demo")
 @click.option("--frames-per-activity", type=click.IntRange(min=1), default=40, show_default=True)
+@click.option(
+    "--unlabelled-fraction",
+    type=float,
+    default=0.25,
+    show_default=True,
+    help="Share of each activity's frames (the last ones) left without an annotation, for you to label; 0 labels every frame.",
+)
 @click.option("--seed", type=int, default=0, show_default=True)
 @click.option("--width", type=click.IntRange(min=32, max=4096), default=320, show_default=True)
 @click.option("--height", type=click.IntRange(min=32, max=4096), default=240, show_default=True)
-def demo_command(frames_per_activity, seed, width, height):
-    """Create the demo dataset: synthetic RGB-D frames for the seven activities."""
+def demo_command(frames_per_activity, unlabelled_fraction, seed, width, height):
+    """Create the demo dataset: synthetic RGB-D frames for the seven activities.
+
+    Every frame gets its ground truth as a reviewed annotation, except the
+    last --unlabelled-fraction of each activity (a quarter by default),
+    which are left for you to label.
+    """
     from app.services.demo import create_demo
-    from egonet.synth import ACTIVITIES
 
     with progress_bar("Rendering demo") as (on_start, on_progress):
-        on_start(frames_per_activity * len(ACTIVITIES))
         reports = create_demo(
-            frames_per_activity=frames_per_activity, seed=seed, width=width, height=height, on_progress=on_progress
+            frames_per_activity=frames_per_activity,
+            unlabelled_fraction=unlabelled_fraction,
+            seed=seed,
+            width=width,
+            height=height,
+            on_start=on_start,
+            on_progress=on_progress,
         )
     added = sum(r.added for r in reports)
     skipped = sum(r.skipped for r in reports)
-    click.echo(f"demo: {added} frames added, {skipped} already present, in {len(reports)} activities")
+    left = sum(r.added - r.annotations for r in reports)
+    click.echo(
+        f"demo: {added} frames added, {skipped} already present, in {len(reports)} activities; "
+        f"{left} of the new frames are left to label"
+    )
 
 
 @bp.cli.command("create-user")

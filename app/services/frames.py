@@ -24,6 +24,16 @@ class ActivitySummary:
     by_status: dict[str, int]
     cover: Frame | None
 
+    @property
+    def labelled(self) -> int:
+        """Frames with a finished (done or reviewed) annotation: the ones with ground truth."""
+        return self.by_status[Status.DONE.value] + self.by_status[Status.REVIEWED.value]
+
+    @property
+    def left(self) -> int:
+        """Frames left to label: no finished annotation yet (in progress and rejected included)."""
+        return self.frames - self.labelled
+
 
 def frame_statuses(frame_ids: list[int]) -> dict[int, Status]:
     """The labelling status of each frame (TODO when it has no annotation)."""
@@ -37,21 +47,23 @@ def frame_statuses(frame_ids: list[int]) -> dict[int, Status]:
     return statuses
 
 
+def activity_summary(activity: Activity) -> ActivitySummary:
+    """How many frames the activity has, by status, and its first frame as a cover."""
+    ids = list(
+        db.session.execute(
+            db.select(Frame.id).join(Sequence).where(Sequence.activity_id == activity.id).order_by(Frame.id)
+        ).scalars()
+    )
+    counts = {s.value: 0 for s in STATUS_ORDER}
+    for status in frame_statuses(ids).values():
+        counts[status.value] += 1
+    cover = db.session.get(Frame, ids[0]) if ids else None
+    return ActivitySummary(activity, len(ids), counts, cover)
+
+
 def activity_summaries() -> list[ActivitySummary]:
     activities = db.session.execute(db.select(Activity).order_by(Activity.name)).scalars().all()
-    summaries = []
-    for act in activities:
-        ids = list(
-            db.session.execute(
-                db.select(Frame.id).join(Sequence).where(Sequence.activity_id == act.id).order_by(Frame.id)
-            ).scalars()
-        )
-        counts = {s.value: 0 for s in STATUS_ORDER}
-        for status in frame_statuses(ids).values():
-            counts[status.value] += 1
-        cover = db.session.get(Frame, ids[0]) if ids else None
-        summaries.append(ActivitySummary(act, len(ids), counts, cover))
-    return summaries
+    return [activity_summary(act) for act in activities]
 
 
 def frame_page(activity: Activity, page: int, per_page: int) -> tuple[list[Frame], int]:

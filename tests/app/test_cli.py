@@ -59,27 +59,49 @@ def test_create_user_errors(ctx, runner):
     assert result.exit_code == 1 and "at least 10" in result.output
 
 
-def test_demo_command_creates_reviewed_ground_truth(ctx, runner):
+def test_demo_command_creates_reviewed_ground_truth_and_leaves_the_last_frames_to_label(ctx, runner):
     args = ["egonet", "demo", "--frames-per-activity", "2", "--width", "96", "--height", "72", "--seed", "3"]
     result = runner.invoke(args=args)
     assert result.exit_code == 0, result.output
-    assert "demo: 14 frames added" in result.output
+    assert "demo: 14 frames added, 0 already present, in 7 activities; 7 of the new frames are left to label" in result.output
     from app.models import Annotation, Status
     from app.services import media
     from egonet import io
 
     anns = db.session.execute(db.select(Annotation)).scalars().all()
-    assert len(anns) == 14
+    assert len(anns) == 7
     assert {a.status for a in anns} == {Status.REVIEWED}
     assert {a.author.username for a in anns} == {"demo"}
+    # A quarter of 2 rounds to 1 left unlabelled per activity: the last one.
+    assert {a.frame.index for a in anns} == {0}
+    assert len({a.frame.sequence.activity_id for a in anns}) == 7
+    unlabelled = db.session.execute(db.select(Frame).where(~Frame.annotations.any())).scalars().all()
+    assert [f.index for f in unlabelled] == [1] * 7
     for a in anns:
         mask = io.read_mask(media.absolute_path(a.mask_path))
         depth = io.read_depth(media.absolute_path(a.frame.depth_path))
         assert mask.any() and (depth[mask] > 0).all()
         assert a.frame.dhg_path is not None and a.frame.fx is not None
+    for f in unlabelled:
+        assert f.depth_path is not None and f.dhg_path is not None and f.fx is not None
     # Same seed again: nothing new.
     result = runner.invoke(args=args)
-    assert "demo: 0 frames added, 14 already present" in result.output
+    assert "demo: 0 frames added, 14 already present, in 7 activities; 0 of the new frames are left to label" in result.output
+
+
+def test_demo_command_unlabelled_fraction_0_labels_every_frame_and_bad_values_name_the_option(ctx, runner):
+    from app.models import Annotation
+
+    base = ["egonet", "demo", "--frames-per-activity", "2", "--width", "64", "--height", "48"]
+    for bad in ("1.5", "-0.25", "nan"):
+        result = runner.invoke(args=[*base, "--unlabelled-fraction", bad])
+        assert result.exit_code == 1, (bad, result.output)
+        assert "Error: --unlabelled-fraction must be between 0 and 1" in result.output
+    assert db.session.execute(db.select(Frame)).first() is None  # refused before anything was added
+    result = runner.invoke(args=[*base, "--unlabelled-fraction", "0"])
+    assert result.exit_code == 0, result.output
+    assert "14 frames added" in result.output and "0 of the new frames are left to label" in result.output
+    assert len(db.session.execute(db.select(Annotation)).all()) == 14
 
 
 def test_demo_frames_match_the_renderer(ctx, runner):

@@ -307,7 +307,7 @@ def test_a_small_trained_run_scores_as_a_direct_computation_on_its_held_out_maps
 
     app.config["CHECKPOINT_ROOT"] = str(tmp_path / "checkpoints")
     with app.app_context():
-        create_demo(frames_per_activity=5, width=64, height=48)
+        create_demo(frames_per_activity=5, unlabelled_fraction=0, width=64, height=48)
     threads = torch.get_num_threads()
     torch.set_num_threads(1)  # a tiny model trains faster so on a shared machine
     try:

@@ -38,7 +38,7 @@ def app(app, tmp_path):
 def demo(app):
     """Two demo frames of each activity at 64x48, with reviewed ground truth; returns activity ids by name."""
     with app.app_context():
-        create_demo(frames_per_activity=2, width=64, height=48)
+        create_demo(frames_per_activity=2, unlabelled_fraction=0, width=64, height=48)
         return dict(db.session.execute(db.select(Activity.name, Activity.id)).all())
 
 

@@ -21,7 +21,7 @@ ROOT = Path(__file__).resolve().parents[2]
 def test_a_run_started_from_the_page_completes_through_the_worker(app, database_url, tmp_path, admin_client):
     app.config["CHECKPOINT_ROOT"] = str(tmp_path / "checkpoints")
     with app.app_context():
-        create_demo(frames_per_activity=2, width=64, height=48)
+        create_demo(frames_per_activity=2, unlabelled_fraction=0, width=64, height=48)
         ids = list(db.session.execute(db.select(Activity.id).where(Activity.name.in_(["cooking", "dining"]))).scalars())
     form = {"model": "egonet-lite", "folds": "loao", "epochs": "1", "device": "cpu", "width": "32", "height": "24",
             "batch_size": "2", "seed": "0", "name": "queued from the page", "activities": [str(i) for i in ids]}

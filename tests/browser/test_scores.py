@@ -36,7 +36,7 @@ def answer_at_the_object(participant) -> None:
 def test_scores_page_shows_the_table_and_the_plots(live_app, live_server, page, tmp_path):
     live_app.config["CHECKPOINT_ROOT"] = str(tmp_path / "checkpoints")
     with live_app.app_context():
-        create_demo(frames_per_activity=3, seed=1, width=160, height=120)
+        create_demo(frames_per_activity=3, unlabelled_fraction=0, seed=1, width=160, height=120)
         chosen = db.session.execute(db.select(Activity.id).where(Activity.name.in_(["cooking", "hotel"]))).scalars().all()
         study = studies.create_study(name="browser study", activity_ids=chosen, frames_per_activity=2, seed=3, sigma_px=15.0)
         for person in studies.add_participants(study, count=2):

@@ -27,7 +27,7 @@ def click_frame(page, u: float, v: float) -> None:
 
 def test_participant_session_with_reload_and_admin_results(live_app, live_server, page, browser):
     with live_app.app_context():
-        create_demo(frames_per_activity=3, seed=1, width=320, height=240)
+        create_demo(frames_per_activity=3, unlabelled_fraction=0, seed=1, width=320, height=240)
         activity_ids = {a.name: a.id for a in db.session.execute(db.select(Activity)).scalars()}
 
     # The admin builds a study: 2 frames from each of 2 activities, a short time limit, links.
@@ -160,7 +160,7 @@ def test_participant_session_with_reload_and_admin_results(live_app, live_server
 
 def test_time_runs_out_on_screen(live_app, live_server, page):
     with live_app.app_context():
-        create_demo(frames_per_activity=2, seed=2, width=320, height=240)
+        create_demo(frames_per_activity=2, unlabelled_fraction=0, seed=2, width=320, height=240)
         cooking = db.session.execute(db.select(Activity).filter_by(name="cooking")).scalar_one()
         study = studies.create_study(name="short", activity_ids=[cooking.id], frames_per_activity=2, time_limit_s=4)
         code = studies.format_code(studies.add_participants(study, count=1)[0].code)

@@ -19,7 +19,7 @@ def test_queue_a_run_watch_it_and_see_a_heatmap(live_app, live_server, page, mon
     monkeypatch.setattr("app.tasks.train_run", lambda run_id: None)  # no worker here: the test plays it
     live_app.config["CHECKPOINT_ROOT"] = str(media.Path(live_app.config["MEDIA_ROOT"]).parent / "checkpoints")
     with live_app.app_context():
-        create_demo(frames_per_activity=2, seed=1, width=160, height=120)
+        create_demo(frames_per_activity=2, unlabelled_fraction=0, seed=1, width=160, height=120)
     sign_in(page, live_app, live_server)
 
     page.goto(live_server + "/training/")

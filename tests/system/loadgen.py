@@ -291,7 +291,9 @@ def run_load(
     try:
         with app.app_context():
             upgrade()
-            create_demo(frames_per_activity=5, seed=11, width=width, height=height)
+            # Every frame labelled: the study draws all 5 frames of each activity, and
+            # annotators box each frame's stored ground truth (ground_truths below).
+            create_demo(frames_per_activity=5, unlabelled_fraction=0, seed=11, width=width, height=height)
             for i in range(n_annotators):
                 create_user(f"load{i}", "annotator", PASSWORD)
             activities = list(db.session.execute(db.select(Activity.id)).scalars())
