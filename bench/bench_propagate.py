@@ -280,7 +280,7 @@ def chair_sequence() -> Sequence:
         wall = pts[20:100, 300:600].reshape(-1, 3)
         wall = wall[wall[:, 2] > 0]
         centre = wall.mean(0)
-        normal = np.linalg.svd(wall - centre)[2][2]
+        normal = np.linalg.svd(wall - centre, full_matrices=False)[2][2]
         normal = -normal if normal[2] > 0 else normal  # towards the camera
         chair = (depth > 0) & ((pts - centre) @ normal > 0.04) & (np.nan_to_num(height) > 0.01)
         box = np.zeros_like(chair)

@@ -22,11 +22,14 @@ How, all inside one region of interest (ROI) at a reduced work size:
    with its exact mask (hard labels, not the warp's guess), then the cut runs
    on the next frame with those models held for the first pass and re-fitted
    once, so colours the object shows only in the new frame can come in.
-4. Depth (optional): where ``next_depth`` is given, band pixels whose depth
-   lies well outside the object's depth range (from ``prev_depth`` under the
-   mask when given, else from ``next_depth`` under the warped core) are sure
-   background, so the flow's smear onto a wall or table behind the object is
-   cut away even when it has the object's colour.
+4. Depth (optional): where ``next_depth`` is given, depth overrules the flow.
+   A pixel whose depth now differs from the depth at the point it came from
+   (needs ``prev_depth``) no longer shows the object: probable background,
+   colour decides. A pixel whose depth lies well outside the object's depth
+   range (from ``prev_depth`` under the mask when given, else from
+   ``next_depth`` under the warped core) is sure background, so the flow's
+   smear onto a wall or table behind the object is cut away even where it
+   has the object's colour. Missing readings (0 or NaN) change nothing.
 5. Back to full resolution: the cut is smoothed and upsampled bilinearly
    (sub-pixel boundary), then specks smaller than 2 % of the largest part are
    dropped (one stray blob would ruin the mask's box).
@@ -58,6 +61,7 @@ import cv2
 import numpy as np
 
 from egonet.errors import EgonetError
+from egonet.grabcut.colour import _fit_model
 
 _WORK_SIZE = 320  # long side of the ROI for flow and cut, pixels
 _MARGIN = 0.5  # ROI margin around the object's box, fraction of its long side
@@ -281,11 +285,17 @@ def _trimap(warp: _Warp) -> tuple[np.ndarray, np.ndarray]:
 
 
 def _depth_range(depth: np.ndarray, where: np.ndarray) -> tuple[float, float] | None:
-    """The object's depth range (5th-95th percentile) plus slack, or None without enough readings."""
+    """The object's depth range plus slack, or None without enough readings.
+
+    Nearly the whole range (0.5th-99.5th percentile): a handle or a rim is a
+    small share of an object's pixels but reaches far in depth, and must not
+    fall outside. ``where`` should hold pixels well inside the object, so
+    edge pixels that mix in the background's depth do not widen the range.
+    """
     values = depth[where & (depth > 0)]
     if values.size < _MIN_SAMPLES:
         return None
-    lo, mid, hi = np.percentile(values, (5, 50, 95))
+    lo, mid, hi = np.percentile(values, (0.5, 50, 99.5))
     slack = _DEPTH_TOL_M + _DEPTH_TOL_REL * float(mid)
     return float(lo) - slack, float(hi) + slack
 
@@ -294,55 +304,57 @@ def _apply_depth(gc: np.ndarray, core: np.ndarray, warp: _Warp, prev_depth: np.n
                  next_depth: np.ndarray) -> None:
     """Let depth overrule the flow and hand pixels to background (``gc`` updated in place).
 
-    * Inside the warped mask (outside its core), a pixel whose depth now
-      differs from the depth at the point it came from (by more than the
-      slack) shows something else than the object did: probable background,
-      so colour decides. Needs ``prev_depth``.
-    * A pixel the cut would decide whose depth lies outside the object's
-      depth range is sure background: the flow's smear onto the wall or
-      table behind, even where it has the object's colour.
+    * Inside the warped mask, a pixel whose depth now differs from the depth
+      at the point it came from (by more than the slack) shows something else
+      than the object did: probable background, so colour decides. Needs
+      ``prev_depth``.
+    * Any pixel whose depth lies outside the object's depth range (with the
+      slack) is sure background: the flow's smear onto the wall or table
+      behind, even where it has the object's colour. The range comes from
+      ``prev_depth`` under the previous mask, else from ``next_depth`` under
+      the warped mask's ``core``.
 
-    Missing readings (0) change nothing. The core is never touched: a few bad
-    readings must not punch a sure hole in it.
+    Missing readings (0) change nothing. The slack (``_DEPTH_TOL_M`` plus
+    ``_DEPTH_TOL_REL`` of the depth) covers an object moving towards the
+    camera at 30 fps and the sensor's noise, so a sound reading does not
+    punch a hole in the object.
     """
     roi = warp.roi
     # Nearest neighbour: averaging depth across an edge makes depths no surface has.
     now = roi.crop(next_depth, cv2.INTER_NEAREST)
     if prev_depth is not None:
         before = roi.crop(prev_depth, cv2.INTER_NEAREST)
-        span = _depth_range(before, warp.prev_mask_low >= 0.5)
+        # Work-size pixels wholly inside the mask: no edge pixel mixes in the background's depth.
+        span = _depth_range(before, warp.prev_mask_low >= 0.999)
         came = _pull(before, warp.back, cv2.INTER_NEAREST)
-        inside = (warp.warped_low >= 0.5) & ~core & (now > 0) & (came > 0)
+        inside = (warp.warped_low >= 0.5) & (now > 0) & (came > 0)
         moved_off = inside & (np.abs(now - came) > _DEPTH_TOL_M + _DEPTH_TOL_REL * came)
         gc[moved_off] = cv2.GC_PR_BGD
     else:
         span = _depth_range(now, core)
     if span is not None:
-        away = (now > 0) & ((now < span[0]) | (now > span[1])) & (gc >= cv2.GC_PR_BGD) & ~core
+        away = (now > 0) & ((now < span[0]) | (now > span[1]))
         gc[away] = cv2.GC_BGD
 
 
-def _prev_models(prev_low: np.ndarray, prev_mask_low: np.ndarray) -> tuple[np.ndarray, np.ndarray] | None:
-    """Colour models fitted on the previous frame's ROI with its exact mask, or None if a side is too small."""
-    fg = prev_mask_low >= 0.5
+def _models(image: np.ndarray, fg: np.ndarray) -> tuple[np.ndarray, np.ndarray] | None:
+    """Background and foreground colour models of ``image`` split by ``fg``, or None if a side is too small.
+
+    Fitted with the package's fixed-seed k-means, so ``propagate`` gives the
+    same mask for the same input (``cv2.grabCut``'s own initialisation draws
+    from OpenCV's global random state).
+    """
     if min(np.count_nonzero(fg), np.count_nonzero(~fg)) < _MIN_SAMPLES:
         return None
-    gc = np.where(fg, cv2.GC_FGD, cv2.GC_BGD).astype(np.uint8)
-    bgd, fgd = np.zeros((1, 65), np.float64), np.zeros((1, 65), np.float64)
-    # Zero iterations: only the models' initialisation (k-means per side), no cut.
-    cv2.grabCut(prev_low, gc, None, bgd, fgd, 0, cv2.GC_INIT_WITH_MASK)
-    return bgd, fgd
+    rng = np.random.default_rng(0)
+    return _fit_model(image[~fg], rng), _fit_model(image[fg], rng)
 
 
-def _cut(next_low: np.ndarray, gc: np.ndarray, models: tuple[np.ndarray, np.ndarray] | None) -> np.ndarray:
+def _cut(next_low: np.ndarray, gc: np.ndarray, models: tuple[np.ndarray, np.ndarray]) -> np.ndarray:
     """The graph cut on the next ROI; returns the bool label (``gc`` is updated in place)."""
-    if models is None:
-        bgd, fgd = np.zeros((1, 65), np.float64), np.zeros((1, 65), np.float64)
-        cv2.grabCut(next_low, gc, None, bgd, fgd, _ITERATIONS, cv2.GC_INIT_WITH_MASK)
-        return (gc & 1).astype(bool)
     bgd, fgd = models[0].copy(), models[1].copy()
-    # First pass with the previous frame's models (fitted on exact labels, so
-    # the warp's mistakes in the band cannot leak into them) ...
+    # First pass with the models as given (the previous frame's, fitted on
+    # exact labels, so the warp's mistakes cannot leak into them) ...
     cv2.grabCut(next_low, gc, None, bgd, fgd, 1, cv2.GC_EVAL_FREEZE_MODEL)
     for _ in range(_ITERATIONS - 1):
         fg = (gc & 1).astype(bool)
@@ -396,8 +408,8 @@ def propagate(prev_rgb: np.ndarray, prev_mask: np.ndarray, next_rgb: np.ndarray,
 
     Example:
         >>> frame = np.zeros((64, 64, 3), np.uint8)
-        >>> propagate(frame, np.zeros((64, 64), bool), frame).any()
-        np.False_
+        >>> bool(propagate(frame, np.zeros((64, 64), bool), frame).any())
+        False
     """
     prev_rgb = _check_rgb(prev_rgb, "prev_rgb")
     next_rgb = _check_rgb(next_rgb, "next_rgb")
@@ -420,9 +432,10 @@ def propagate(prev_rgb: np.ndarray, prev_mask: np.ndarray, next_rgb: np.ndarray,
         _apply_depth(gc, core, warp, prev_depth, next_depth)
     if min(np.count_nonzero(gc & 1), np.count_nonzero(~gc & 1)) < _MIN_SAMPLES:
         return fallback
-    if not (gc >= cv2.GC_PR_BGD).any():
-        return fallback  # the flow is sure everywhere: nothing left to cut
-    label = _cut(warp.next_low, gc, _prev_models(warp.prev_low, warp.prev_mask_low))
+    models = _models(warp.prev_low, warp.prev_mask_low >= 0.5) or _models(warp.next_low, (gc & 1).astype(bool))
+    if models is None:
+        return fallback
+    label = _cut(warp.next_low, gc, models)
     area, warped_area = np.count_nonzero(label), np.count_nonzero(warped)
     if _iou(label, warped) < 0.5 or not 0.5 * warped_area <= area <= 2 * warped_area:
         return fallback  # a failed cut (colours too alike): trust the flow
