@@ -6,7 +6,7 @@ the next frame's truth:
 
 * ``copy``: the previous mask unchanged (what an annotator gets without help);
 * ``flow``: the previous mask moved by the same DIS optical flow ``propagate``
-  uses (``egonet.grabcut.propagate.warp_mask``), no cut;
+  uses (``egonet.grabcut.propagation.warp_mask``), no cut;
 * ``ours``: ``propagate`` (flow, then GrabCut seeded from the warped mask);
   ``ours+depth`` also gets both frames' depth where the data set has it.
 
@@ -72,7 +72,7 @@ for path in (ROOT, ROOT / "bench"):
 from bench_grabcut import _blob, _composite, _textured  # noqa: E402
 
 from egonet.grabcut import propagate  # noqa: E402
-from egonet.grabcut.propagate import warp_mask  # noqa: E402
+from egonet.grabcut.propagation import warp_mask  # noqa: E402
 
 SHARED = ROOT.parent / "shared" / "data"
 REAL_FRAMES = SHARED / "egonet-samples" / "rgb"

@@ -33,8 +33,10 @@ undo, and the loop that composes the rest), :mod:`~egonet.grabcut.geometry`
 colour models), :mod:`~egonet.grabcut.cut` (the graph cut at the work size:
 a box's first cut, its rescue, re-cuts with strokes),
 :mod:`~egonet.grabcut.refine` (the guided filter back to full resolution),
-:mod:`~egonet.grabcut.strokes` (checks and footprints) and
-:mod:`~egonet.grabcut.state` (undo levels and ``state()``'s format).
+:mod:`~egonet.grabcut.strokes` (checks and footprints),
+:mod:`~egonet.grabcut.state` (undo levels and ``state()``'s format) and
+:mod:`~egonet.grabcut.propagation` (``propagate``: a mask carried to the
+adjacent frame by optical flow, then refined).
 
 Example:
     >>> import numpy as np
@@ -52,7 +54,7 @@ Example:
     True
 """
 
-from egonet.grabcut.propagate import propagate
+from egonet.grabcut.propagation import propagate
 from egonet.grabcut.session import GrabCutSession
 from egonet.grabcut.state import STATE_FORMAT
 from egonet.grabcut.strokes import LABELS, stroke_footprint

@@ -9,7 +9,7 @@ import pytest
 
 from egonet.errors import EgonetError
 from egonet.grabcut import propagate
-from egonet.grabcut.propagate import warp_mask
+from egonet.grabcut.propagation import warp_mask
 
 SHARED = Path(__file__).resolve().parents[2].parent / "shared" / "data"
 PRIMESENSE = SHARED / "rgbd-primesense"
