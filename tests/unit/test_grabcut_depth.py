@@ -155,6 +155,7 @@ def test_state_and_depth_must_agree():
     (np.full((120, 160), np.inf), ">= 0"),
     (np.full((120, 160), 1500.0), "millimetres"),
     (np.ones((120, 160), bool), "H, W"),
+    (np.full((120, 160), 2000, np.uint16), "millimetres"),
 ])
 def test_bad_depth(depth, match):
     image, _, _ = _white_on_white()
