@@ -50,7 +50,8 @@ def _check_depth(depth: object, shape: tuple[int, int]) -> np.ndarray | None:
     if not isinstance(depth, np.ndarray):
         raise EgonetError(f"depth: expected a numpy array of metres, got {type(depth).__name__}", field="depth")
     if depth.ndim != 2 or depth.shape != tuple(shape) or not np.issubdtype(depth.dtype, np.floating):
-        hint = " (integer depth is usually millimetres: divide by 1000)" if np.issubdtype(depth.dtype, np.integer) else ""
+        integer = np.issubdtype(depth.dtype, np.integer)
+        hint = " (integer depth is usually millimetres: divide by 1000)" if integer else ""
         raise EgonetError(f"depth: expected a float (H, W) = {tuple(shape)} array in metres (0 or NaN where "
                           f"missing), got {depth.dtype} {depth.shape}{hint}", field="depth")
     z = depth.astype(np.float32)  # always a copy
@@ -125,7 +126,7 @@ def _links(colour: np.ndarray, z: np.ndarray) -> tuple[np.ndarray, np.ndarray, n
     ``exp(-(dz / (_JUMP * z))^2)`` where both pixels have depth.
     """
     h, w = colour.shape[:2]
-    index = np.arange(h * w).reshape(h, w)
+    index = np.arange(h * w, dtype=np.int32).reshape(h, w)
     shifts = (((slice(None), slice(0, w - 1)), (slice(None), slice(1, w)), 1.0),  # right
               ((slice(0, h - 1), slice(None)), (slice(1, h), slice(None)), 1.0),  # below
               ((slice(0, h - 1), slice(0, w - 1)), (slice(1, h), slice(1, w)), math.sqrt(2)),  # below right
