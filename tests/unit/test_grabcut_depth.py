@@ -140,6 +140,9 @@ def test_state_and_depth_must_agree():
     with pytest.raises(EgonetError, match="made with depth") as err:
         GrabCutSession.from_state(image, s.state())
     assert err.value.field == "depth"
+    with pytest.raises(EgonetError, match="H, W") as err:
+        GrabCutSession.from_state(image, s.state(), depth[:, :-1])
+    assert err.value.field == "depth"
     plain = GrabCutSession(image)
     plain.box(40, 30, 130, 100)
     with pytest.raises(EgonetError, match="without depth") as err:
