@@ -5,6 +5,12 @@ The cut runs on the ROI at low resolution (``_Guide.image``) with
 between calls, so a stroke costs one re-estimation and one cut. Results are
 bool labels on the ROI's low-resolution grid; ``refine`` brings them back to
 full resolution.
+
+With depth (``_depth_box_cut``, ``_depth_recut``) the same steps run on the
+colour-plus-depth models of ``depth`` with the session's own minimum cut
+(PyMaxflow), which is also faster where it can be: only undecided pixels are
+nodes, a box's first iterations run on a grid of half the size, and a stroke
+re-cuts only the side of the label it can change.
 """
 
 from __future__ import annotations

@@ -3,7 +3,8 @@
 ``GrabCutSession`` keeps the undo levels (``state._Snapshot``) and the
 current full-resolution mask, and composes the parts: the geometry of the
 box's ROI (``geometry``), the graph cut at the work size (``cut``, with the
-colour models of ``colour``), the refinement back to full resolution
+colour models of ``colour``, or with a depth map the colour-plus-depth models
+of ``depth``), the refinement back to full resolution
 (``refine``) and the strokes as hard constraints (``strokes``).
 """
 
