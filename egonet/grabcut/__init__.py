@@ -52,8 +52,9 @@ Example:
     True
 """
 
+from egonet.grabcut.propagate import propagate
 from egonet.grabcut.session import GrabCutSession
 from egonet.grabcut.state import STATE_FORMAT
 from egonet.grabcut.strokes import LABELS, stroke_footprint
 
-__all__ = ["GrabCutSession", "stroke_footprint", "LABELS", "STATE_FORMAT"]
+__all__ = ["GrabCutSession", "stroke_footprint", "LABELS", "STATE_FORMAT", "propagate"]

@@ -1,0 +1,446 @@
+"""Carry one object's mask to an adjacent frame of the same sequence.
+
+``propagate(prev_rgb, prev_mask, next_rgb)`` returns the object's mask on
+``next_rgb``. "Adjacent" means the next or the previous frame of a video (the
+function is symmetric: it does not know which way time runs), so the object
+moved a little: at 30 fps a hand-held object moves up to a few tens of pixels
+and turns by a few degrees.
+
+How, all inside one region of interest (ROI) at a reduced work size:
+
+1. The ROI is the object's box in ``prev_rgb`` plus a margin of half its size
+   (at least 5 % of the frame), the same rectangle in both frames: the object
+   cannot move further than that between adjacent frames.
+2. Motion: OpenCV's DIS optical flow on the grey ROIs, scaled so the long side
+   is ``_WORK_SIZE`` pixels, from ``next_rgb`` to ``prev_rgb``, so every pixel
+   of the next frame knows where it came from and the previous mask is pulled
+   over (``cv2.remap``): the warped mask.
+3. Refinement: ``cv2.grabCut`` seeded from the warped mask. Its eroded core is
+   sure foreground, pixels beyond its dilated border are sure background, the
+   band in between is probable foreground inside the warped mask and probable
+   background outside it. The colour models are fitted on the previous frame
+   with its exact mask (hard labels, not the warp's guess), then the cut runs
+   on the next frame with those models held for the first pass and re-fitted
+   once, so colours the object shows only in the new frame can come in.
+4. Depth (optional): where ``next_depth`` is given, depth overrules the flow.
+   A pixel whose depth now differs from the depth at the point it came from
+   (needs ``prev_depth``) no longer shows the object: probable background,
+   colour decides. A pixel whose depth lies well outside the object's depth
+   range (from ``prev_depth`` under the mask when given, else from
+   ``next_depth`` under the warped core) is sure background, so the flow's
+   smear onto a wall or table behind the object is cut away even where it
+   has the object's colour. Missing readings (0 or NaN) change nothing.
+5. Back to full resolution: the cut is smoothed and upsampled bilinearly
+   (sub-pixel boundary), then specks smaller than 2 % of the largest part are
+   dropped (one stray blob would ruin the mask's box).
+
+A cut that disagrees grossly with the warped mask (overlap below 0.5, or less
+than half or more than twice its area) is a cut that failed (colours of the
+object and its surroundings too alike), and the warped mask is returned
+instead. An empty ``prev_mask`` has nothing to carry: the result is an empty
+mask (no error), so a caller can propagate every instance of a frame blindly.
+
+Example:
+    >>> import numpy as np
+    >>> rng = np.random.default_rng(0)
+    >>> frame = rng.integers(0, 255, (120, 160, 3)).astype(np.uint8)
+    >>> frame[40:80, 50:100] = (220, 40, 40)
+    >>> mask = np.zeros((120, 160), bool)
+    >>> mask[40:80, 50:100] = True
+    >>> moved = np.roll(frame, 6, axis=1)
+    >>> out = propagate(frame, mask, moved)
+    >>> bool(out[60, 104]), bool(out[60, 52])
+    (True, False)
+"""
+
+from __future__ import annotations
+
+import dataclasses
+
+import cv2
+import numpy as np
+
+from egonet.errors import EgonetError
+from egonet.grabcut.colour import _fit_model
+
+_WORK_SIZE = 320  # long side of the ROI for flow and cut, pixels
+_MARGIN = 0.5  # ROI margin around the object's box, fraction of its long side
+_MIN_MARGIN = 0.05  # ... and at least this fraction of the frame's long side
+_SEED_RADIUS = 0.08  # trimap half-band (how far the cut may move the edge): this fraction of the object's size at the work size
+_MIN_SEED_RADIUS = 2  # ... and at least this many work-size pixels
+_EDGE = 1  # the warped edge's strip the cut always decides, work-size pixels each side
+_DOUBT = 1.0  # forward-backward flow miss (work-size pixels) above which the flow is in doubt
+_ITERATIONS = 2  # graph cuts: one with the previous frame's models, one re-fitted
+_SPECK = 0.02  # parts smaller than this fraction of the largest are dropped
+_MIN_SAMPLES = 40  # fewest pixels per side to fit a colour model on (5 components)
+_DEPTH_TOL_M = 0.08  # depth slack around the object's range (motion, sensor noise), metres
+_DEPTH_TOL_REL = 0.04  # ... plus this fraction of the object's depth (noise grows with distance)
+
+
+@dataclasses.dataclass(frozen=True)
+class _Roi:
+    """The ROI in both frames and its work-size grid.
+
+    Attributes:
+        x0, y0, x1, y1: Full-resolution rectangle (slice convention).
+        w, h: Size of the work-size grid.
+    """
+
+    x0: int
+    y0: int
+    x1: int
+    y1: int
+    w: int
+    h: int
+
+    def crop(self, image: np.ndarray, interpolation: int = cv2.INTER_AREA) -> np.ndarray:
+        """``image``'s ROI at the work size."""
+        part = image[self.y0 : self.y1, self.x0 : self.x1]
+        if part.shape[1] == self.w and part.shape[0] == self.h:
+            return np.ascontiguousarray(part)
+        return cv2.resize(part, (self.w, self.h), interpolation=interpolation)
+
+    def paste(self, low: np.ndarray, shape: tuple[int, int]) -> np.ndarray:
+        """A float work-size map in [0, 1] upsampled into a bool full-frame mask (threshold 0.5)."""
+        full = np.zeros(shape, bool)
+        w, h = self.x1 - self.x0, self.y1 - self.y0
+        up = low if (w, h) == (self.w, self.h) else cv2.resize(low, (w, h), interpolation=cv2.INTER_LINEAR)
+        full[self.y0 : self.y1, self.x0 : self.x1] = up >= 0.5
+        return full
+
+
+def _check_rgb(value: object, name: str) -> np.ndarray:
+    if not isinstance(value, np.ndarray):
+        raise EgonetError(f"{name}: expected a numpy array, got {type(value).__name__}", field=name)
+    if value.dtype != np.uint8 or value.ndim != 3 or value.shape[2] != 3:
+        raise EgonetError(f"{name}: expected RGB uint8 of shape (H, W, 3), got {value.dtype} {value.shape}",
+                          field=name)
+    if value.shape[0] < 8 or value.shape[1] < 8:
+        raise EgonetError(f"{name}: needs at least 8x8 pixels, got {value.shape[1]}x{value.shape[0]}", field=name)
+    return value
+
+
+def _check_mask(value: object, shape: tuple[int, int]) -> np.ndarray:
+    if not isinstance(value, np.ndarray):
+        raise EgonetError(f"prev_mask: expected a numpy array, got {type(value).__name__}", field="prev_mask")
+    if value.dtype != bool and not np.issubdtype(value.dtype, np.integer):
+        raise EgonetError(f"prev_mask: expected bool or 0/1 integers, got {value.dtype}", field="prev_mask")
+    if value.shape != shape:
+        raise EgonetError(f"prev_mask: expected shape {shape} (prev_rgb's height and width), got {value.shape}",
+                          field="prev_mask")
+    if value.dtype != bool:
+        if ((value != 0) & (value != 1)).any():
+            raise EgonetError("prev_mask: integer masks must hold only 0 and 1", field="prev_mask")
+        value = value.astype(bool)
+    return value
+
+
+def _check_depth(value: object, name: str, shape: tuple[int, int]) -> np.ndarray | None:
+    if value is None:
+        return None
+    if not isinstance(value, np.ndarray):
+        raise EgonetError(f"{name}: expected a numpy array, got {type(value).__name__}", field=name)
+    if not np.issubdtype(value.dtype, np.floating):
+        raise EgonetError(f"{name}: expected float depth in metres, got {value.dtype} "
+                          "(divide millimetre images by 1000)", field=name)
+    if value.shape != shape:
+        raise EgonetError(f"{name}: expected shape {shape} (the frames' height and width), got {value.shape}",
+                          field=name)
+    depth = value.astype(np.float32)
+    # 0 and NaN both mean "no reading"; negative or infinite depth is garbage, treated the same.
+    return np.where(np.isfinite(depth) & (depth > 0), depth, 0).astype(np.float32)
+
+
+def _roi(box: tuple[int, int, int, int], shape: tuple[int, int]) -> _Roi:
+    """The object's box plus the motion margin, clipped, with its work-size grid."""
+    x0, y0, x1, y1 = box
+    h, w = shape
+    m = int(np.ceil(max(_MARGIN * max(x1 - x0, y1 - y0), _MIN_MARGIN * max(h, w))))
+    rx0, ry0, rx1, ry1 = max(0, x0 - m), max(0, y0 - m), min(w, x1 + m), min(h, y1 + m)
+    scale = min(1.0, _WORK_SIZE / max(rx1 - rx0, ry1 - ry0))
+    return _Roi(rx0, ry0, rx1, ry1, max(8, round((rx1 - rx0) * scale)), max(8, round((ry1 - ry0) * scale)))
+
+
+def _box(mask: np.ndarray) -> tuple[int, int, int, int]:
+    rows, cols = np.flatnonzero(mask.any(axis=1)), np.flatnonzero(mask.any(axis=0))
+    return int(cols[0]), int(rows[0]), int(cols[-1]) + 1, int(rows[-1]) + 1
+
+
+def _flows(prev_low: np.ndarray, next_low: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Dense flow both ways between the ROIs.
+
+    Args:
+        prev_low, next_low: uint8 ``(h, w, 3)`` ROIs at the work size.
+
+    Returns:
+        ``(back, forth)``, float32 ``(h, w, 2)`` displacements ``(dx, dy)`` in
+        work-size pixels: ``next(p) ~ prev(p + back(p))`` and
+        ``prev(q) ~ next(q + forth(q))``.
+    """
+    dis = cv2.DISOpticalFlow_create(cv2.DISOPTICAL_FLOW_PRESET_MEDIUM)
+    prev_grey = cv2.cvtColor(prev_low, cv2.COLOR_RGB2GRAY)
+    next_grey = cv2.cvtColor(next_low, cv2.COLOR_RGB2GRAY)
+    return dis.calc(next_grey, prev_grey, None), dis.calc(prev_grey, next_grey, None)
+
+
+def _pull(values: np.ndarray, back: np.ndarray, interpolation: int = cv2.INTER_LINEAR) -> np.ndarray:
+    """``values`` of the previous ROI brought to the next ROI's pixels along ``back`` (0 off the ROI)."""
+    h, w = back.shape[:2]
+    gx, gy = np.meshgrid(np.arange(w, dtype=np.float32), np.arange(h, dtype=np.float32))
+    return cv2.remap(values, gx + back[..., 0], gy + back[..., 1], interpolation,
+                     borderMode=cv2.BORDER_CONSTANT, borderValue=0.0)
+
+
+@dataclasses.dataclass(frozen=True)
+class _Warp:
+    """What the flow step leaves for the cut.
+
+    Attributes:
+        roi: The ROI and its work-size grid.
+        prev_low, next_low: uint8 ``(h, w, 3)`` ROIs at the work size.
+        prev_mask_low: float32 ``(h, w)``, the previous mask's share of each pixel.
+        warped_low: float32 ``(h, w)`` in [0, 1], the previous mask pulled along the flow.
+        back: float32 ``(h, w, 2)``, the flow from the next ROI to the previous one.
+        mismatch: float32 ``(h, w)``, forward-backward disagreement of the
+            flow at each next pixel, work-size pixels: large where the flow
+            is unreliable (occlusion, no texture, non-rigid motion).
+    """
+
+    roi: _Roi
+    prev_low: np.ndarray
+    next_low: np.ndarray
+    prev_mask_low: np.ndarray
+    warped_low: np.ndarray
+    back: np.ndarray
+    mismatch: np.ndarray
+
+
+def _warp(prev_rgb: np.ndarray, prev_mask: np.ndarray, next_rgb: np.ndarray) -> _Warp:
+    """The flow step: ROI, work-size crops, flows, and the warped mask (``prev_mask`` not empty)."""
+    roi = _roi(_box(prev_mask), prev_mask.shape)
+    prev_low, next_low = roi.crop(prev_rgb), roi.crop(next_rgb)
+    # Area averaging keeps the fraction of object in each work-size pixel: a soft edge to warp.
+    mask_low = roi.crop(prev_mask.astype(np.float32))
+    back, forth = _flows(prev_low, next_low)
+    # Going back then forth should return to the start: the miss measures the flow's doubt.
+    mismatch = np.linalg.norm(back + _pull(forth, back), axis=2)
+    return _Warp(roi, prev_low, next_low, mask_low, _pull(mask_low, back), back, mismatch)
+
+
+def warp_mask(prev_rgb: np.ndarray, prev_mask: np.ndarray, next_rgb: np.ndarray) -> np.ndarray:
+    """The flow step of :func:`propagate` alone: ``prev_mask`` moved by optical flow, no cut.
+
+    A baseline for benchmarks and a fallback; same arguments and checks as
+    :func:`propagate` (without depth).
+
+    Returns:
+        Bool ``(H, W)`` warped mask.
+    """
+    prev_rgb = _check_rgb(prev_rgb, "prev_rgb")
+    next_rgb = _check_rgb(next_rgb, "next_rgb")
+    _check_same_size(prev_rgb, next_rgb)
+    prev_mask = _check_mask(prev_mask, prev_rgb.shape[:2])
+    if not prev_mask.any():
+        return np.zeros(prev_mask.shape, bool)
+    warp = _warp(prev_rgb, prev_mask, next_rgb)
+    return warp.roi.paste(warp.warped_low, prev_mask.shape)
+
+
+def _check_same_size(prev_rgb: np.ndarray, next_rgb: np.ndarray) -> None:
+    if next_rgb.shape != prev_rgb.shape:
+        raise EgonetError(f"next_rgb: expected the size of prev_rgb {prev_rgb.shape}, got {next_rgb.shape}",
+                          field="next_rgb")
+
+
+def _disk(radius: int) -> np.ndarray:
+    return cv2.getStructuringElement(cv2.MORPH_ELLIPSE, (2 * radius + 1, 2 * radius + 1))
+
+
+def _trimap(warp: _Warp) -> tuple[np.ndarray, np.ndarray]:
+    """GC_* seeds from the warped mask: uint8 ``(h, w)`` labels and the bool core.
+
+    The eroded core is sure foreground and pixels beyond the dilated border
+    sure background (both by ``_SEED_RADIUS`` of the object's size). In the
+    band between, the flow's answer stands where the flow is sure of itself
+    (the forward-backward miss is at most ``_DOUBT``), since a good flow is
+    better than a colour model where object and background look alike;
+    pixels the flow doubts, and a thin strip along the warped edge, are
+    probable foreground inside the warped mask and probable background
+    outside: the cut decides those.
+    """
+    warped = warp.warped_low >= 0.5
+    ys, xs = np.nonzero(warped)
+    size = max(xs.max() - xs.min() + 1, ys.max() - ys.min() + 1)
+    radius = max(_MIN_SEED_RADIUS, round(_SEED_RADIUS * size))
+    as_u8 = warped.view(np.uint8)
+    reach = cv2.dilate(as_u8, _disk(radius)).astype(bool)
+    core = cv2.erode(as_u8, _disk(radius)).astype(bool)
+    edge = cv2.morphologyEx(as_u8, cv2.MORPH_GRADIENT, _disk(_EDGE)).astype(bool)
+    doubt = cv2.dilate((warp.mismatch > _DOUBT).view(np.uint8), _disk(1)).astype(bool)
+    gc = np.full(warped.shape, cv2.GC_BGD, np.uint8)
+    gc[warped] = cv2.GC_FGD
+    unsure = reach & ~core & (edge | doubt)
+    gc[unsure] = np.where(warped[unsure], cv2.GC_PR_FGD, cv2.GC_PR_BGD)
+    return gc, core
+
+
+def _depth_range(depth: np.ndarray, where: np.ndarray) -> tuple[float, float] | None:
+    """The object's depth range plus slack, or None without enough readings.
+
+    Nearly the whole range (0.5th-99.5th percentile): a handle or a rim is a
+    small share of an object's pixels but reaches far in depth, and must not
+    fall outside. ``where`` should hold pixels well inside the object, so
+    edge pixels that mix in the background's depth do not widen the range.
+    """
+    values = depth[where & (depth > 0)]
+    if values.size < _MIN_SAMPLES:
+        return None
+    lo, mid, hi = np.percentile(values, (0.5, 50, 99.5))
+    slack = _DEPTH_TOL_M + _DEPTH_TOL_REL * float(mid)
+    return float(lo) - slack, float(hi) + slack
+
+
+def _apply_depth(gc: np.ndarray, core: np.ndarray, warp: _Warp, prev_depth: np.ndarray | None,
+                 next_depth: np.ndarray) -> None:
+    """Let depth overrule the flow and hand pixels to background (``gc`` updated in place).
+
+    * Inside the warped mask, a pixel whose depth now differs from the depth
+      at the point it came from (by more than the slack) shows something else
+      than the object did: probable background, so colour decides. Needs
+      ``prev_depth``.
+    * Any pixel whose depth lies outside the object's depth range (with the
+      slack) is sure background: the flow's smear onto the wall or table
+      behind, even where it has the object's colour. The range comes from
+      ``prev_depth`` under the previous mask, else from ``next_depth`` under
+      the warped mask's ``core``.
+
+    Missing readings (0) change nothing. The slack (``_DEPTH_TOL_M`` plus
+    ``_DEPTH_TOL_REL`` of the depth) covers an object moving towards the
+    camera at 30 fps and the sensor's noise, so a sound reading does not
+    punch a hole in the object.
+    """
+    roi = warp.roi
+    # Nearest neighbour: averaging depth across an edge makes depths no surface has.
+    now = roi.crop(next_depth, cv2.INTER_NEAREST)
+    if prev_depth is not None:
+        before = roi.crop(prev_depth, cv2.INTER_NEAREST)
+        # Work-size pixels wholly inside the mask: no edge pixel mixes in the background's depth.
+        span = _depth_range(before, warp.prev_mask_low >= 0.999)
+        came = _pull(before, warp.back, cv2.INTER_NEAREST)
+        inside = (warp.warped_low >= 0.5) & (now > 0) & (came > 0)
+        moved_off = inside & (np.abs(now - came) > _DEPTH_TOL_M + _DEPTH_TOL_REL * came)
+        gc[moved_off] = cv2.GC_PR_BGD
+    else:
+        span = _depth_range(now, core)
+    if span is not None:
+        away = (now > 0) & ((now < span[0]) | (now > span[1]))
+        gc[away] = cv2.GC_BGD
+
+
+def _models(image: np.ndarray, fg: np.ndarray) -> tuple[np.ndarray, np.ndarray] | None:
+    """Background and foreground colour models of ``image`` split by ``fg``, or None if a side is too small.
+
+    Fitted with the package's fixed-seed k-means, so ``propagate`` gives the
+    same mask for the same input (``cv2.grabCut``'s own initialisation draws
+    from OpenCV's global random state).
+    """
+    if min(np.count_nonzero(fg), np.count_nonzero(~fg)) < _MIN_SAMPLES:
+        return None
+    rng = np.random.default_rng(0)
+    return _fit_model(image[~fg], rng), _fit_model(image[fg], rng)
+
+
+def _cut(next_low: np.ndarray, gc: np.ndarray, models: tuple[np.ndarray, np.ndarray]) -> np.ndarray:
+    """The graph cut on the next ROI; returns the bool label (``gc`` is updated in place)."""
+    bgd, fgd = models[0].copy(), models[1].copy()
+    # First pass with the models as given (the previous frame's, fitted on
+    # exact labels, so the warp's mistakes cannot leak into them) ...
+    cv2.grabCut(next_low, gc, None, bgd, fgd, 1, cv2.GC_EVAL_FREEZE_MODEL)
+    for _ in range(_ITERATIONS - 1):
+        fg = (gc & 1).astype(bool)
+        if fg.all() or not fg.any():
+            break
+        # ... then re-fitted on this frame's cut, for colours that changed (light, turning object).
+        cv2.grabCut(next_low, gc, None, bgd, fgd, 1, cv2.GC_EVAL)
+    return (gc & 1).astype(bool)
+
+
+def _drop_specks(mask: np.ndarray) -> np.ndarray:
+    """``mask`` without connected parts smaller than ``_SPECK`` of its largest part."""
+    n, labels, stats, _ = cv2.connectedComponentsWithStats(mask.view(np.uint8), connectivity=8)
+    if n <= 2:
+        return mask
+    areas = stats[1:, cv2.CC_STAT_AREA]
+    keep = np.concatenate([[False], areas >= _SPECK * areas.max()])
+    return keep[labels]
+
+
+def _iou(a: np.ndarray, b: np.ndarray) -> float:
+    return np.count_nonzero(a & b) / max(1, np.count_nonzero(a | b))
+
+
+def propagate(prev_rgb: np.ndarray, prev_mask: np.ndarray, next_rgb: np.ndarray, *,
+              prev_depth: np.ndarray | None = None, next_depth: np.ndarray | None = None) -> np.ndarray:
+    """Carry one object's mask from a frame to an adjacent frame (either direction).
+
+    Optical flow moves the mask, then GrabCut, seeded from the moved mask,
+    snaps it to the object in the new frame (see the module's docstring).
+
+    Args:
+        prev_rgb: RGB uint8 ``(H, W, 3)``, the frame the mask belongs to.
+        prev_mask: Bool (or 0/1 integer) ``(H, W)``, the object in ``prev_rgb``.
+        next_rgb: RGB uint8 ``(H, W, 3)``, the adjacent frame (next or previous).
+        prev_depth: Optional float ``(H, W)`` depth of ``prev_rgb`` in metres
+            (0 or NaN where missing), registered to the colour image.
+        next_depth: Optional float ``(H, W)`` depth of ``next_rgb``, the same way.
+            Depth is used only when ``next_depth`` is given (``prev_depth``
+            then gives the object's depth range; without it the range comes
+            from ``next_depth`` under the moved mask's core).
+
+    Returns:
+        Bool ``(H, W)`` mask of the object in ``next_rgb``; all False when
+        ``prev_mask`` is empty.
+
+    Raises:
+        EgonetError: Naming the argument, if a frame is not RGB uint8, the
+            frames differ in size, the mask is not ``(H, W)`` bool/0-1, or a
+            depth map is not float ``(H, W)``.
+
+    Example:
+        >>> frame = np.zeros((64, 64, 3), np.uint8)
+        >>> bool(propagate(frame, np.zeros((64, 64), bool), frame).any())
+        False
+    """
+    prev_rgb = _check_rgb(prev_rgb, "prev_rgb")
+    next_rgb = _check_rgb(next_rgb, "next_rgb")
+    _check_same_size(prev_rgb, next_rgb)
+    shape = prev_rgb.shape[:2]
+    prev_mask = _check_mask(prev_mask, shape)
+    prev_depth = _check_depth(prev_depth, "prev_depth", shape)
+    next_depth = _check_depth(next_depth, "next_depth", shape)
+    if not prev_mask.any():
+        return np.zeros(shape, bool)
+
+    warp = _warp(prev_rgb, prev_mask, next_rgb)
+    roi = warp.roi
+    warped = warp.warped_low >= 0.5
+    fallback = roi.paste(warp.warped_low, shape)
+    if np.count_nonzero(warped) < _MIN_SAMPLES:
+        return fallback  # too small at the work size to cut: the flow's answer stands
+    gc, core = _trimap(warp)
+    if next_depth is not None:
+        _apply_depth(gc, core, warp, prev_depth, next_depth)
+    if min(np.count_nonzero(gc & 1), np.count_nonzero(~gc & 1)) < _MIN_SAMPLES:
+        return fallback
+    models = _models(warp.prev_low, warp.prev_mask_low >= 0.5) or _models(warp.next_low, (gc & 1).astype(bool))
+    if models is None:
+        return fallback
+    label = _cut(warp.next_low, gc, models)
+    area, warped_area = np.count_nonzero(label), np.count_nonzero(warped)
+    if _iou(label, warped) < 0.5 or not 0.5 * warped_area <= area <= 2 * warped_area:
+        return fallback  # a failed cut (colours too alike): trust the flow
+    # Where the cut agrees with the warp, the warp's soft values place the edge
+    # to a fraction of a work-size pixel; elsewhere the cut, smoothed so the
+    # bilinear upsample gives a clean edge instead of work-size stairs.
+    soft = np.where(label == warped, warp.warped_low, cv2.GaussianBlur(label.astype(np.float32), (0, 0), 0.7))
+    return _drop_specks(roi.paste(soft, shape))
