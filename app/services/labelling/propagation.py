@@ -81,7 +81,7 @@ def propagate_to_next(frame: Frame, user: User, *, replace: bool = False, versio
     """
     target = adjacent_frame(frame, step=1)
     if target is None:
-        raise Problem(f"frame {frame.id} is the last of its sequence: there is no next frame", status=404,
+        raise Problem(f"frame #{frame.index} is the last of its sequence: there is no next frame", status=404,
                       fields={"next": "no next frame in this sequence"})
     return carry(frame, target, user, replace=replace, version=version, source_field="frame_id")
 
@@ -95,7 +95,7 @@ def copy_from_previous(frame: Frame, user: User, *, replace: bool = False, versi
     """
     source = adjacent_frame(frame, step=-1)
     if source is None:
-        raise Problem(f"frame {frame.id} is the first of its sequence: there is no previous frame", status=404,
+        raise Problem(f"frame #{frame.index} is the first of its sequence: there is no previous frame", status=404,
                       fields={"previous": "no previous frame in this sequence"})
     return carry(source, frame, user, replace=replace, version=version, source_field="previous")
 
@@ -105,7 +105,7 @@ def carry(source: Frame, target: Frame, user: User, *, replace: bool, version: i
     """Save the user's instances of ``source``, each propagated, as their in-progress annotation of ``target``."""
     existing = user_annotation(source, user)
     if existing is None or not existing.instances:
-        raise Problem(f"{source_field}: you have drawn no action-object on frame {source.id} to carry over",
+        raise Problem(f"{source_field}: you have drawn no action-object on frame #{source.index} to carry over",
                       status=404, fields={source_field: "no action-object drawn on that frame"})
     current = _check_target(target, user, replace=replace, version=version)
     if (source.width, source.height) != (target.width, target.height):
@@ -138,15 +138,15 @@ def _check_target(target: Frame, user: User, *, replace: bool, version: int | No
     if annotation is None:
         return 0
     if annotation.status in FINISHED:
-        raise Problem(f"your annotation of frame {target.id} is {annotation.status.value.replace('_', ' ')}; "
+        raise Problem(f"your annotation of frame #{target.index} is {annotation.status.value.replace('_', ' ')}; "
                       "reopen it before carrying another one over it", status=409,
                       fields={"status": f"is {annotation.status.value}"}, frame_id=target.id,
                       current_version=annotation.version)
     has_work = bool(annotation.instances) or annotation.no_action_object
     if has_work and not replace:
-        what = (f"{len(annotation.instances)} action-object(s)" if annotation.instances
-                else '"no action-object"')
-        raise Problem(f"frame {target.id} already has your annotation ({what}); replace it explicitly",
+        n = len(annotation.instances)
+        what = f"{n} action-object{'s' if n != 1 else ''}" if n else '"no action-object"'
+        raise Problem(f"frame #{target.index} already has your annotation ({what})",
                       status=409, fields={"replace": "the frame has your work: send replace=true with its version"},
                       frame_id=target.id, current_version=annotation.version)
     if has_work and version != annotation.version:
