@@ -1,13 +1,18 @@
 """Propagate to the next frame, copy from the previous one, the filmstrip:
 through the API, on small RGB-D sequences of a moving object."""
 
+from pathlib import Path
+
+import cv2
 import numpy as np
 import pytest
 
 from app.extensions import db
 from app.models import Activity, Frame, Sequence
-from app.services.importing import FrameItem, add_frames
+from app.services import media
+from app.services.importing import FrameItem, add_frames, import_path
 from app.services.labelling import propagation
+from egonet import io
 from tests.app.test_labelling import get_png, rle
 
 H, W = 120, 160
@@ -216,3 +221,40 @@ def test_the_filmstrip_is_a_window_of_the_sequence_with_statuses(app, annotator)
     assert missing.status_code == 404 and "at" in missing.get_json()["fields"]
     too_many = annotator.get(f"/api/label/frames/{ids[1]}/filmstrip?count=5000")
     assert too_many.status_code == 400 and "count" in too_many.get_json()["fields"]
+
+
+SHARED = Path(__file__).resolve().parents[2].parent / "shared" / "data"
+PRIMESENSE = SHARED / "rgbd-primesense"
+
+
+def chair_from_depth(depth: np.ndarray) -> np.ndarray:
+    """The chair of the PrimeSense room frames from depth alone: what stands
+    4 cm or more in front of the wall's plane, inside a fixed box (so the
+    reference shares none of propagation's colour cues)."""
+    fx = fy = 525.0
+    cx, cy = 319.5, 239.5
+    v, u = np.mgrid[0:480, 0:640]
+    pts = np.stack([(u - cx) / fx * depth, (v - cy) / fy * depth, depth], -1)
+    wall = pts[20:100, 300:600].reshape(-1, 3)
+    centre = wall.mean(0)
+    normal = np.linalg.svd(wall - centre, full_matrices=False)[2][2]
+    normal = -normal if normal[2] > 0 else normal
+    chair = (depth > 0) & ((pts - centre) @ normal > 0.04)
+    chair[:90], chair[300:], chair[:, :320], chair[:, 615:] = False, False, False, False
+    n, labels, stats, _ = cv2.connectedComponentsWithStats(chair.view(np.uint8))
+    return labels == 1 + int(np.argmax(stats[1:, cv2.CC_STAT_AREA]))
+
+
+@pytest.mark.skipif(not PRIMESENSE.exists(), reason="shared data not present")
+def test_real_rgbd_frames_propagate_the_chair_with_their_stored_depth(app, annotator):
+    with app.app_context():
+        import_path(PRIMESENSE, activity="room")
+        frames = list(db.session.execute(db.select(Frame).order_by(Frame.index)).scalars())
+        assert all(f.depth_path for f in frames)
+        chairs = [chair_from_depth(io.read_depth(media.absolute_path(f.depth_path))) for f in frames[:2]]
+        f0, f1 = frames[0].id, frames[1].id
+    annotate(annotator, f0, chairs[0])
+    response = annotator.post(f"/api/label/frames/{f0}/propagate", json={})
+    assert response.status_code == 200, response.data
+    carried = get_png(annotator, response.get_json()["instances"][0]["mask_url"])
+    assert iou(carried, chairs[1]) > 0.9 and iou(carried, chairs[1]) > iou(chairs[0], chairs[1])
