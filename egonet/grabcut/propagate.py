@@ -16,12 +16,16 @@ How, all inside one region of interest (ROI) at a reduced work size:
    of the next frame knows where it came from and the previous mask is pulled
    over (``cv2.remap``): the warped mask.
 3. Refinement: ``cv2.grabCut`` seeded from the warped mask. Its eroded core is
-   sure foreground, pixels beyond its dilated border are sure background, the
-   band in between is probable foreground inside the warped mask and probable
-   background outside it. The colour models are fitted on the previous frame
-   with its exact mask (hard labels, not the warp's guess), then the cut runs
-   on the next frame with those models held for the first pass and re-fitted
-   once, so colours the object shows only in the new frame can come in.
+   sure foreground, pixels beyond its dilated border are sure background. In
+   the band between, the flow's answer stands where the flow is sure of
+   itself (forward and backward flow agree), because where object and
+   background look alike a good flow beats a colour model; where the flow is
+   in doubt (occlusion, no texture, non-rigid motion), and on a one-pixel
+   strip along the warped edge, the band is probable foreground inside the
+   warped mask and probable background outside it, and the cut decides. The
+   colour models are fitted on the previous frame with its exact mask (not
+   the warp's guess), held for the first cut and re-fitted once, so colours
+   the object shows only in the new frame can come in.
 4. Depth (optional): where ``next_depth`` is given, depth overrules the flow.
    A pixel whose depth now differs from the depth at the point it came from
    (needs ``prev_depth``) no longer shows the object: probable background,
@@ -30,9 +34,10 @@ How, all inside one region of interest (ROI) at a reduced work size:
    ``next_depth`` under the warped core) is sure background, so the flow's
    smear onto a wall or table behind the object is cut away even where it
    has the object's colour. Missing readings (0 or NaN) change nothing.
-5. Back to full resolution: the cut is smoothed and upsampled bilinearly
-   (sub-pixel boundary), then specks smaller than 2 % of the largest part are
-   dropped (one stray blob would ruin the mask's box).
+5. Back to full resolution: where the cut agrees with the warp, the warp's
+   soft values (sub-pixel); elsewhere the cut, smoothed; upsampled
+   bilinearly, then parts smaller than 2 % of the largest are dropped (one
+   stray speck would ruin the mask's box).
 
 A cut that disagrees grossly with the warped mask (overlap below 0.5, or less
 than half or more than twice its area) is a cut that failed (colours of the
@@ -66,7 +71,7 @@ from egonet.grabcut.colour import _fit_model
 _WORK_SIZE = 320  # long side of the ROI for flow and cut, pixels
 _MARGIN = 0.5  # ROI margin around the object's box, fraction of its long side
 _MIN_MARGIN = 0.05  # ... and at least this fraction of the frame's long side
-_SEED_RADIUS = 0.08  # trimap half-band (how far the cut may move the edge): this fraction of the object's size at the work size
+_SEED_RADIUS = 0.08  # how far the cut may move the edge: this fraction of the object's size
 _MIN_SEED_RADIUS = 2  # ... and at least this many work-size pixels
 _EDGE = 1  # the warped edge's strip the cut always decides, work-size pixels each side
 _DOUBT = 1.0  # forward-backward flow miss (work-size pixels) above which the flow is in doubt
