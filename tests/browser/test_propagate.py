@@ -130,3 +130,30 @@ def test_carrying_onto_existing_work_asks_before_replacing(live_app, live_server
     page.locator("#carry-cancel").click()
     assert banner.is_hidden()
     screenshot(page, "propagate-4-replaced")
+
+
+def test_the_filmstrip_of_a_long_sequence_loads_a_window_and_more_as_it_scrolls(live_app, live_server, page_1280):
+    page = page_1280
+    rng = np.random.default_rng(1)
+    items = [FrameItem(f"f{i:04d}", i, "long", rgb=rng.integers(0, 255, (24, 32, 3)).astype(np.uint8)) for i in range(300)]
+    with live_app.app_context():
+        add_frames(activity="walk", sequence="long", items=items)
+        ids = list(db.session.execute(db.select(Frame.id).order_by(Frame.index)).scalars())
+    sign_in(page, live_app, live_server, username="ann", role="annotator")
+    open_frame(page, live_server, ids[150])
+    page.wait_for_selector("#filmstrip-frames[data-ready='1']")
+    tiles = page.locator(".film-frame")
+    assert tiles.count() == 41  # a window, not the whole sequence
+    assert page.locator("#filmstrip-where").inner_text() == "151 of 300 in long"
+    assert page.locator(".film-frame.current").get_attribute("data-id") == str(ids[150])
+    # The current frame is scrolled into view.
+    box, strip = page.locator(".film-frame.current").bounding_box(), page.locator("#filmstrip-frames").bounding_box()
+    assert strip["x"] <= box["x"] and box["x"] + box["width"] <= strip["x"] + strip["width"]
+
+    page.evaluate("() => { const s = document.querySelector('#filmstrip-frames'); s.scrollLeft = s.scrollWidth; }")
+    page.wait_for_function("() => document.querySelectorAll('.film-frame').length === 82")
+    page.evaluate("() => { document.querySelector('#filmstrip-frames').scrollLeft = 0; }")
+    page.wait_for_function("() => document.querySelectorAll('.film-frame').length === 123")
+    numbers = [int(n) for n in page.locator(".film-frame span").all_inner_texts()]
+    assert numbers == list(range(89, 212))  # in order, no gaps, no repeats
+    screenshot(page, "propagate-5-long-filmstrip")
