@@ -49,6 +49,7 @@ SAVE = {
 POINT = List(Float(), min_len=2, max_len=2)
 TARGET = {"frame_id": Int(min=1), "instance": Str(min_len=1, max_len=40)}
 BOX = {**TARGET, "box": List(Float(), min_len=4, max_len=4)}
+CARRY = {"replace": Bool(default=False), "version": Int(min=0, nullable=True, default=None)}
 REVIEW = {
     "version": Int(min=1),
     "decision": Str(choices=["accept", "reject"]),
@@ -121,6 +122,9 @@ def page_config(frame: Frame, *, mode: str, annotation: Annotation | None = None
             previous=url_for("label.frame", frame_id=previous) if previous else None,
             next=url_for("label.frame", frame_id=following) if following else None,
             next_unlabelled=url_for("label.next_unlabelled", after=frame.id),
+            propagate=url_for("label.propagate_next", frame_id=frame.id),
+            copy_previous=url_for("label.copy_previous", frame_id=frame.id),
+            filmstrip=url_for("label.filmstrip", frame_id=frame.id),
         )
     else:
         config["urls"].update(
@@ -267,6 +271,61 @@ def add_time(frame_id: int):
     if not labelling.add_time(fr, me(), data["seconds"]):
         raise Problem("you have no annotation of this frame yet", status=404, fields={"frame_id": "no annotation"})
     return "", 204
+
+
+# --------------------------------------------------------------------------
+# API: carrying an annotation between adjacent frames, the sequence's filmstrip
+
+
+@bp.post("/api/label/frames/<int:frame_id>/propagate")
+@roles(*LABELLERS)
+def propagate_next(frame_id: int):
+    """``{replace, version}`` -> the next frame's new annotation, with ``url`` to label it.
+
+    409 when the next frame has the user's work (``replace`` with its
+    ``version`` replaces unfinished work), 404 ``next`` on the last frame.
+    """
+    data = json_body(CARRY)
+    fr = labelling.get_frame(frame_id)
+    annotation = labelling.propagate_to_next(fr, me(), replace=data["replace"], version=data["version"])
+    return {**annotation_json(annotation, annotation.frame), "url": url_for("label.frame", frame_id=annotation.frame_id)}
+
+
+@bp.post("/api/label/frames/<int:frame_id>/copy-previous")
+@roles(*LABELLERS)
+def copy_previous(frame_id: int):
+    """``{replace, version}`` -> this frame's annotation, carried over from the previous frame."""
+    data = json_body(CARRY)
+    fr = labelling.get_frame(frame_id)
+    annotation = labelling.copy_from_previous(fr, me(), replace=data["replace"], version=data["version"])
+    return annotation_json(annotation, fr)
+
+
+@bp.get("/api/label/frames/<int:frame_id>/filmstrip")
+@roles(*LABELLERS)
+def filmstrip(frame_id: int):
+    """A window of the frame's sequence: ``?start=`` (position) or ``?at=`` (a frame's index), ``?count=``."""
+    fr = labelling.get_frame(frame_id)
+    count = query_int("count", min=1, max=labelling.FILMSTRIP_MAX)
+    strip = labelling.filmstrip(fr, at_index=query_int("at", min=0), start=query_int("start", min=0),
+                                count=count or 41)
+    return {
+        "sequence": fr.sequence.name,
+        "total": strip.total,
+        "start": strip.start,
+        "focus": {"id": strip.focus.id, "index": strip.focus.index, "position": strip.focus_position,
+                  "url": url_for("label.frame", frame_id=strip.focus.id)},
+        "frames": [
+            {
+                "id": f.id,
+                "index": f.index,
+                "status": strip.statuses[f.id].value,
+                "thumb_url": url_for("frames.thumbnail", frame_id=f.id),
+                "url": url_for("label.frame", frame_id=f.id),
+            }
+            for f in strip.frames
+        ],
+    }
 
 
 # --------------------------------------------------------------------------

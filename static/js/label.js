@@ -12,11 +12,15 @@
 //   label_server.js     every call to the server (through api.js)
 //   label_panel.js      status badge, time, messages, the busy spinner
 //   label_keys.js       keyboard shortcuts
+//   label_propagate.js  propagate to the next frame, copy from the previous one
+//   label_filmstrip.js  the sequence's frames under the canvas, "go to frame N"
 
 import { redo, undo } from "./label_grabcut.js";
+import { wireFilmstrip } from "./label_filmstrip.js";
 import { refresh, wireInstances } from "./label_instances.js";
 import { wireKeys } from "./label_keys.js";
 import { errorText, showMessage } from "./label_panel.js";
+import { wirePropagate } from "./label_propagate.js";
 import { autosaver, leave, loadAnnotation, wireSaving } from "./label_save.js";
 import { $, $$, H, W, doc, editable, meta, ui } from "./label_state.js";
 import { newObject, setBrush, setTool, wireTools } from "./label_tools.js";
@@ -49,6 +53,8 @@ function wire() {
   }
   wireInstances();
   wireSaving({ refresh });
+  wirePropagate();
+  wireFilmstrip();
 }
 
 // For tests and the console: what the page holds, without reaching into it.

@@ -4,6 +4,7 @@
 
 import { redo, undo } from "./label_grabcut.js";
 import { deleteInstance, select } from "./label_instances.js";
+import { copyPrevious, propagateNext } from "./label_propagate.js";
 import { autosaver, leave, review, setStatus } from "./label_save.js";
 import { $, clock, config, doc, editable, ui } from "./label_state.js";
 import { TOOLS, holdSpace, newObject, setBrush, setTool } from "./label_tools.js";
@@ -56,6 +57,8 @@ function onKeyDown(event) {
   if (key === "n" && editable) return newObject();
   if (/^[1-9]$/.test(key)) return select(doc.instances[Number(key) - 1]?.key);
   if ((key === "delete" || key === "backspace") && editable && ui.selectedKey) return deleteInstance(ui.selectedKey);
+  if (event.shiftKey && editable && key === "arrowright") return propagateNext();
+  if (event.shiftKey && editable && key === "arrowleft") return copyPrevious();
   if (key === "arrowleft" && config.urls.previous) return leave(config.urls.previous);
   if (key === "arrowright" && config.urls.next) return leave(config.urls.next);
   if (key === "u" && config.urls.next_unlabelled) return leave(config.urls.next_unlabelled);

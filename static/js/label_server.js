@@ -28,6 +28,18 @@ export function fetchEngineMask(key) {
   return fetchMask(`${config.urls.grabcut.mask}?frame_id=${config.frame.id}&instance=${encodeURIComponent(key)}`);
 }
 
+// Carry the user's annotation to the next frame ("propagate") or from the
+// previous one ("copy_previous"); body: {replace, version} -> the annotation.
+export function carry(kind, body) {
+  return api("POST", config.urls[kind], body);
+}
+
+// A window of the sequence's frames: {start} (a position), {at} (a frame's number), {count}.
+export function getFilmstrip(params = {}) {
+  const query = new URLSearchParams(Object.entries(params).filter(([, v]) => v !== undefined && v !== null));
+  return api("GET", `${config.urls.filmstrip}?${query}`);
+}
+
 // kind: "box", "stroke" or "undo"; the answer is the object's new mask.
 export async function grabcut(kind, body) {
   const response = await request("POST", config.urls.grabcut[kind], { frame_id: config.frame.id, ...body }, { headers: { Accept: "image/png" } });

@@ -6,7 +6,9 @@ the server-side GrabCut sessions that help draw it; import it from here.
     * ``grabcut``: the GrabCut sessions (their saved state, this worker's
       caches, locks, box / stroke / undo and what each may cost);
     * ``review``: accept / reject, the annotators' and reviewers' queues;
-    * ``masks``: masks as COCO RLE and PNG, checked before they are decoded.
+    * ``masks``: masks as COCO RLE and PNG, checked before they are decoded;
+    * ``propagation``: carrying an annotation to the next / from the previous
+      frame of its sequence, and the sequence's filmstrip.
 """
 
 from app.services.labelling.annotations import (
@@ -34,6 +36,14 @@ from app.services.labelling.grabcut import (
     stroke_pixels,
 )
 from app.services.labelling.masks import Rle, coco_decode, decode_rle, max_rle_chars
+from app.services.labelling.propagation import (
+    FILMSTRIP_MAX,
+    Filmstrip,
+    adjacent_frame,
+    copy_from_previous,
+    filmstrip,
+    propagate_to_next,
+)
 from app.services.labelling.review import (
     annotator_queue,
     next_to_review,
@@ -44,17 +54,22 @@ from app.services.labelling.review import (
 
 __all__ = [
     "AUTHOR_STATUSES",
+    "FILMSTRIP_MAX",
     "MAX_INSTANCES",
     "MAX_TIME_DELTA_S",
+    "Filmstrip",
     "Rle",
     "add_time",
+    "adjacent_frame",
     "annotator_queue",
     "check_box",
     "check_key",
     "check_stroke",
     "coco_decode",
+    "copy_from_previous",
     "decode_rle",
     "empty_mask",
+    "filmstrip",
     "get_annotation",
     "get_frame",
     "grabcut_box",
@@ -66,6 +81,7 @@ __all__ = [
     "max_rle_chars",
     "next_to_review",
     "next_unlabelled",
+    "propagate_to_next",
     "review_annotation",
     "review_queue",
     "save_annotation",

@@ -37,6 +37,9 @@ RULES = {
     "label.grabcut_stroke": (LABELLERS, 400),
     "label.grabcut_undo": (LABELLERS, 400),
     "label.grabcut_mask": (LABELLERS, 400),
+    "label.propagate_next": (LABELLERS, 404),
+    "label.copy_previous": (LABELLERS, 404),
+    "label.filmstrip": (LABELLERS, 200),
 }
 
 

@@ -1,0 +1,79 @@
+// "Propagate to next frame" (Shift+→) and "Copy from previous frame"
+// (Shift+←): the server carries every object of the user's annotation to the
+// adjacent frame of the sequence, each mask refined there, and saves it as
+// the user's in-progress annotation of that frame. The page saves first (the
+// server carries what is saved), then opens the frame that received it.
+//
+// Existing work is never replaced silently: when the target frame already
+// has the user's objects the server answers 409 and the page shows a banner
+// that offers "Replace", which sends replace=true with the version the
+// server reported (a newer one is refused again); a finished target is
+// refused outright.
+
+import { autosaver, leave } from "./label_save.js";
+import { errorText, setBusy, showMessage } from "./label_panel.js";
+import { carry } from "./label_server.js";
+import { $, config, editable } from "./label_state.js";
+
+const WHAT = {
+  propagate: { busy: "Propagating to the next frame…", target: "the next frame" },
+  copy_previous: { busy: "Copying from the previous frame…", target: "this frame" },
+};
+
+let running = false;
+
+// kind: "propagate" or "copy_previous".
+async function run(kind, { replace = false, version = null } = {}) {
+  if (!editable || running || !config.urls[kind]) return;
+  running = true;
+  hideBanner();
+  try {
+    await autosaver.flush();
+    if (autosaver.dirty) {
+      showMessage("Your changes could not be saved yet; propagation works on the saved annotation. Try again.", "error");
+      return;
+    }
+    showMessage(WHAT[kind].busy, "info");
+    setBusy(1);
+    let result;
+    try {
+      result = await carry(kind, { replace, version });
+    } finally {
+      setBusy(-1);
+    }
+    await leave(kind === "propagate" ? result.url : window.location.href);
+  } catch (err) {
+    if (err.status === 409 && err.body?.fields?.replace) offerReplace(kind, err);
+    else showMessage(errorText(err), "error");
+  } finally {
+    running = false;
+  }
+}
+
+function offerReplace(kind, err) {
+  const banner = $("#carry-conflict");
+  const reason = err.message.charAt(0).toUpperCase() + err.message.slice(1);
+  $("#carry-conflict-text").textContent = `${reason}. Replace your work on ${WHAT[kind].target} with the carried objects?`;
+  $("#message").hidden = true; // the "Propagating…" note: the banner says what happened
+  banner.dataset.kind = kind;
+  banner.dataset.version = err.body.current_version;
+  banner.hidden = false;
+}
+
+function hideBanner() {
+  $("#carry-conflict").hidden = true;
+}
+
+export const propagateNext = () => run("propagate");
+export const copyPrevious = () => run("copy_previous");
+
+export function wirePropagate() {
+  if (!editable) return;
+  $("#propagate-next")?.addEventListener("click", propagateNext);
+  $("#copy-previous")?.addEventListener("click", copyPrevious);
+  $("#carry-replace").addEventListener("click", () => {
+    const banner = $("#carry-conflict");
+    run(banner.dataset.kind, { replace: true, version: Number(banner.dataset.version) });
+  });
+  $("#carry-cancel").addEventListener("click", hideBanner);
+}
