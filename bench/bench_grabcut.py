@@ -35,6 +35,13 @@ Frames with a known true object:
   renderer does);
 * one 1920x1440 synthetic frame ("and larger").
 
+Then the speed targets on real frames (``real_cases``): the real RGB-D frame
+``shared/data/rgbd-primesense`` 00001 (a white chair before a white wall;
+truth drawn by hand) with and without its depth, and the first-person frames
+with a pasted object, at 640x480 and 1408x1408, each with a loose box, a
+tight box (2 px each side) and a box through the object, then up to 5
+strokes; plain ``cv2.grabCut`` on the same boxes.
+
 Latency runs with ``cv2.setNumThreads(1)`` (the target is per core) and is
 reported twice: wall clock, and this process's CPU time, which other load on a
 shared machine inflates far less.
@@ -45,6 +52,7 @@ Run from the repository root::
     .venv/bin/python bench/bench_grabcut.py --cross    # + plain on the session's strokes
     .venv/bin/python bench/bench_grabcut.py --quick    # 2 synthetic frames
     .venv/bin/python bench/bench_grabcut.py --no-plain # session only (seconds)
+    .venv/bin/python bench/bench_grabcut.py --real-only --no-plain  # real frames, depth, speed targets
 """
 
 from __future__ import annotations
@@ -68,6 +76,8 @@ from egonet.grabcut import GrabCutSession, stroke_footprint  # noqa: E402
 
 SHARED = Path(__file__).resolve().parents[1].parent / "shared"
 REAL_FRAMES = SHARED / "data" / "egonet-samples" / "rgb"
+RGBD_FRAMES = SHARED / "data" / "rgbd-primesense"
+BIG = (1408, 1408)  # the large real-frame case (w, h)
 
 
 @dataclasses.dataclass
@@ -77,6 +87,7 @@ class Frame:
     name: str
     rgb: np.ndarray  # (H, W, 3) uint8
     truth: np.ndarray  # (H, W) bool
+    depth: np.ndarray | None = None  # (H, W) float metres, NaN where missing
 
 
 @dataclasses.dataclass
@@ -228,12 +239,12 @@ def synthetic_frame(seed: int, width: int = 1280, height: int = 960) -> Frame:
     return Frame(f"synthetic-{seed}" + ("" if w == 1280 else f"-{w}x{h}"), _finish(img, rng, 0.6), truth)
 
 
-def real_frame(path: Path, seed: int) -> Frame:
-    """A real frame upscaled to 1280x960 with a synthetic object pasted in."""
+def real_frame(path: Path, seed: int, size: tuple[int, int] = (1280, 960)) -> Frame:
+    """A real frame scaled to ``size`` (w, h) with a synthetic object pasted in."""
     rng = np.random.default_rng(seed)
     bgr = cv2.imread(str(path), cv2.IMREAD_COLOR)
     rgb = cv2.cvtColor(bgr, cv2.COLOR_BGR2RGB)
-    h, w = 960, 1280
+    w, h = size
     img = cv2.resize(rgb, (w, h), interpolation=cv2.INTER_CUBIC).astype(np.float32)
     # Object colours borrowed from the frame itself so they are plausible.
     small = rgb.reshape(-1, 3).astype(np.float32)
@@ -242,7 +253,8 @@ def real_frame(path: Path, seed: int) -> Frame:
     radius = rng.uniform(0.12, 0.18) * min(w, h) * 1.3
     # The upscaled frame is soft (2.5x), so the pasted object gets a softer edge.
     img, truth = _paint_object(rng, img, picks, cx, cy, radius, soft=1.2)
-    return Frame(f"real-{path.stem}", _finish(img, rng, 0.5), truth)
+    suffix = "" if size == (1280, 960) else f"@{w}x{h}"
+    return Frame(f"real-{path.stem}{suffix}", _finish(img, rng, 0.5), truth)
 
 
 def demo_frames() -> list[Frame]:
@@ -348,11 +360,12 @@ class Method:
 class SessionMethod(Method):
     name = "session"
 
-    def __init__(self, work_size: int = 320):
+    def __init__(self, work_size: int = 320, depth: np.ndarray | None = None):
         self.work_size = work_size
+        self.depth = depth
 
     def box(self, rgb, box):
-        self.session = GrabCutSession(rgb, work_size=self.work_size)
+        self.session = GrabCutSession(rgb, self.depth, work_size=self.work_size)
         return self.session.box(*box)
 
     def stroke(self, s):
@@ -404,14 +417,19 @@ def replay(method: Method, frame: Frame, box: tuple[int, int, int, int], strokes
 
 def run_method(method: Method, frame: Frame, n_strokes: int, seed: int) -> Run:
     rng = np.random.default_rng(seed)
-    box = annotator_box(frame.truth, rng)
+    return run_on_box(method, frame.rgb, frame.truth, annotator_box(frame.truth, rng), n_strokes)
+
+
+def run_on_box(method: Method, rgb: np.ndarray, truth: np.ndarray, box: tuple[int, int, int, int],
+               n_strokes: int) -> Run:
+    """Time ``method`` on one box and up to ``n_strokes`` annotator strokes, scored against ``truth``."""
     t, c = time.perf_counter(), time.process_time()
-    mask = method.box(frame.rgb, box)
+    mask = method.box(rgb, box)
     box_ms, box_cpu = 1e3 * (time.perf_counter() - t), 1e3 * (time.process_time() - c)
-    ious = [iou(mask, frame.truth)]
+    ious = [iou(mask, truth)]
     stroke_ms, stroke_cpu, strokes = [], [], []
     for _ in range(n_strokes):
-        s = annotator_stroke(mask, frame.truth)
+        s = annotator_stroke(mask, truth)
         if s is None:
             break
         strokes.append(s)
@@ -419,8 +437,136 @@ def run_method(method: Method, frame: Frame, n_strokes: int, seed: int) -> Run:
         mask = method.stroke(s)
         stroke_ms.append(1e3 * (time.perf_counter() - t))
         stroke_cpu.append(1e3 * (time.process_time() - c))
-        ious.append(iou(mask, frame.truth))
+        ious.append(iou(mask, truth))
     return Run(box_ms, stroke_ms, box_cpu, stroke_cpu, ious[0], ious[-1], ious, box, strokes, mask)
+
+
+# --------------------------------------------------------------------------
+# Real frames, with and without depth: the speed targets
+
+
+def chair_truth() -> np.ndarray:
+    """The chair of rgbd-primesense 00001 (640x480), drawn by hand from the image.
+
+    The same polygons as ``tests/unit/test_grabcut_depth.py``: backrest with
+    the left armrest's band and leg, the seat, the right armrest's loop, the
+    left foot; the wall seen through the loop and under the seat is not the
+    chair.
+    """
+    m = np.zeros((480, 640), np.uint8)
+    back_left = [(350, 110), (483, 112), (484, 198), (495, 210), (495, 242), (402, 242), (402, 357), (398, 372),
+                 (386, 380), (382, 340), (382, 288), (365, 262), (354, 225), (340, 208), (340, 198), (350, 190)]
+    seat = [(402, 242), (600, 244), (606, 256), (604, 270), (585, 282), (540, 292), (480, 297), (402, 297)]
+    cv2.fillPoly(m, [np.array(back_left, np.int32), np.array(seat, np.int32)], 1)
+    arm = [(487, 203), (505, 195), (535, 196), (565, 208), (585, 225), (597, 245), (592, 285), (597, 320),
+           (590, 350), (570, 366), (540, 370), (510, 362), (485, 345)]
+    cv2.polylines(m, [np.array(arm, np.int32)], False, 1, 12)
+    cv2.polylines(m, [np.array([(342, 350), (360, 366), (378, 378)], np.int32)], False, 1, 9)
+    return m.astype(bool)
+
+
+def chair_frame(size: tuple[int, int] | None = None) -> Frame:
+    """rgbd-primesense 00001 with its depth (metres) and hand-drawn chair, optionally scaled to ``size`` (w, h)."""
+    rgb = cv2.cvtColor(cv2.imread(str(RGBD_FRAMES / "color" / "00001.jpg"), cv2.IMREAD_COLOR), cv2.COLOR_BGR2RGB)
+    raw = cv2.imread(str(RGBD_FRAMES / "depth" / "00001.png"), cv2.IMREAD_UNCHANGED)
+    depth = np.where(raw > 0, raw.astype(np.float32) / 1000, np.nan).astype(np.float32)
+    truth = chair_truth()
+    name = "rgbd-chair"
+    if size is not None:
+        rgb = cv2.resize(rgb, size, interpolation=cv2.INTER_CUBIC)
+        depth = cv2.resize(depth, size, interpolation=cv2.INTER_NEAREST)  # no depths mixed across edges
+        truth = cv2.resize(truth.view(np.uint8), size, interpolation=cv2.INTER_NEAREST).view(bool)
+        name += f"@{size[0]}x{size[1]}"
+    return Frame(name, rgb, truth, depth)
+
+
+def tight_box(truth: np.ndarray, pad: int = 2) -> tuple[int, int, int, int]:
+    """The object's bounds plus ``pad`` pixels each side (edges within a few pixels of it)."""
+    ys, xs = np.nonzero(truth)
+    h, w = truth.shape
+    return (max(0, int(xs.min()) - pad), max(0, int(ys.min()) - pad), min(w, int(xs.max()) + 1 + pad),
+            min(h, int(ys.max()) + 1 + pad))
+
+
+def real_cases(work_size: int, n_strokes: int, plain: bool, large: bool) -> None:
+    """Box and stroke latency on real frames, 640x480 to 1408x1408, with and without depth.
+
+    Frames: the real RGB-D frame (the chair, with its depth) at 640x480 and
+    scaled to 1408x1408, and the first-person frames (no depth) at 640x480 and
+    1408x1408 with an object pasted in. Boxes: loose (3-8 % each side),
+    tight (2 px each side) and through the object (the left 60 % of the loose
+    box, scored against the object's part inside it). The session runs
+    without depth and, where the frame has depth, with it; plain
+    ``cv2.grabCut`` on the same box and its own strokes.
+    """
+    frames: list[Callable[[], Frame]] = []
+    if RGBD_FRAMES.is_dir():
+        frames.append(chair_frame)
+        if large:
+            frames.append(lambda: chair_frame(BIG))
+    else:
+        print(f"(no RGB-D frames at {RGBD_FRAMES}: skipped)")
+    if REAL_FRAMES.is_dir():
+        for i, p in enumerate(sorted(REAL_FRAMES.glob("*.jpg"))):
+            frames.append(lambda p=p, i=i: real_frame(p, 200 + i, (640, 480)))
+            if large:
+                frames.append(lambda p=p, i=i: real_frame(p, 200 + i, BIG))
+    if not frames:
+        return
+    print()
+    print("Real frames: box -> mask and stroke -> mask, one core (targets: box <= 300 ms, stroke p95 <= 60 ms)")
+    print(f"{'frame':28s} {'box':8s} {'method':14s} {'box ms':>7s} {'cpu':>5s} {'stroke ms (each, wall)':>36s}  "
+          "IoU box -> strokes")
+    runs: dict[str, list[tuple[str, str, Run]]] = {}
+    for make in frames:
+        frame = make()
+        loose = annotator_box(frame.truth, np.random.default_rng(0))
+        for kind, box in (("loose", loose), ("tight", tight_box(frame.truth)), ("through", through_box(loose))):
+            x0, y0, x1, y1 = box
+            truth = np.zeros_like(frame.truth)
+            truth[y0:y1, x0:x1] = frame.truth[y0:y1, x0:x1]
+            methods: list[tuple[str, Method]] = [("session", SessionMethod(work_size))]
+            if frame.depth is not None:
+                methods.append(("session+depth", SessionMethod(work_size, frame.depth)))
+            if plain:
+                methods.append(("plain", PlainMethod()))
+            for label, m in methods:
+                r = run_on_box(m, frame.rgb, truth, box, n_strokes)
+                runs.setdefault(label, []).append((frame.name, kind, r))
+                strokes = " ".join(f"{v:6.0f}" for v in r.stroke_ms)
+                steps = " ".join(f"{v:.3f}" for v in r.iou_steps)
+                print(f"{frame.name:28s} {kind:8s} {label:14s} {r.box_ms:7.0f} {r.box_cpu_ms:5.0f} {strokes:>36s}  "
+                      f"{steps}", flush=True)
+    print()
+    for clock, box_key, stroke_key in (("wall", "box_ms", "stroke_ms"), ("cpu", "box_cpu_ms", "stroke_cpu_ms")):
+        for label, rows in runs.items():
+            box = [getattr(r, box_key) for _, _, r in rows]
+            strokes = [v for _, _, r in rows for v in getattr(r, stroke_key)]
+            met = _pct(box, 50) <= 300 and _pct(box, 95) <= 300 and _pct(strokes, 95) <= 60
+            by_kind = "  ".join(f"{k} {_pct([getattr(r, box_key) for _, kk, r in rows if kk == k], 50):.0f}"
+                                for k in ("loose", "tight", "through"))
+            print(f"real {clock:4s} {label:14s} box p50 {_pct(box, 50):6.0f} ms  p95 {_pct(box, 95):6.0f} ms | "
+                  f"stroke p50 {_pct(strokes, 50):6.1f} ms  p95 {_pct(strokes, 95):6.1f} ms (n={len(strokes)}) | "
+                  f"box p50 by kind: {by_kind} | targets {'met' if met else 'NOT met'}")
+        if "plain" in runs:
+            pb = [getattr(r, box_key) for _, _, r in runs["plain"]]
+            ps = [v for _, _, r in runs["plain"] for v in getattr(r, stroke_key)]
+            for label in (k for k in runs if k != "plain"):
+                sb = [getattr(r, box_key) for _, _, r in runs[label]]
+                ss = [v for _, _, r in runs[label] for v in getattr(r, stroke_key)]
+                print(f"real {clock:4s} ratio plain/{label}: box p50 {_pct(pb, 50) / _pct(sb, 50):.1f}x  "
+                      f"p95 {_pct(pb, 95) / _pct(sb, 95):.1f}x | stroke p50 {_pct(ps, 50) / _pct(ss, 50):.1f}x  "
+                      f"p95 {_pct(ps, 95) / _pct(ss, 95):.1f}x  (plain on the same boxes, its own strokes)")
+    for label, rows in runs.items():
+        print(f"real IoU {label:14s} after box {np.mean([r.iou_box for _, _, r in rows]):.4f}  "
+              f"final {np.mean([r.iou_final for _, _, r in rows]):.4f}  (mean of {len(rows)} runs)")
+    if "session+depth" in runs:
+        # Colour alone against colour and depth on the frames with depth, box by box.
+        plain_rows = {(f, k): r for f, k, r in runs["session"]}
+        for f, k, r in runs["session+depth"]:
+            c = plain_rows[(f, k)]
+            print(f"real depth on {f} {k:8s}: IoU after box {c.iou_box:.3f} -> {r.iou_box:.3f}, "
+                  f"final {c.iou_final:.3f} -> {r.iou_final:.3f}")
 
 
 def _pct(values: list[float], q: float) -> float:
@@ -438,8 +584,14 @@ def main(argv: list[str] | None = None) -> int:
                         help="also replay the session's strokes into plain grabCut (slow)")
     parser.add_argument("--work-size", type=int, default=272, help="session work_size")
     parser.add_argument("--dump", type=Path, help="write image/truth/mask PNGs for inspection here")
+    parser.add_argument("--real-only", action="store_true",
+                        help="only the real-frame cases (RGB-D chair, first-person frames; speed targets)")
+    parser.add_argument("--no-real", action="store_true", help="skip the real-frame cases")
     args = parser.parse_args(argv)
     cv2.setNumThreads(1)
+    if args.real_only:
+        real_cases(args.work_size, args.strokes, not args.no_plain, not args.no_large)
+        return 0
 
     seeds = args.seeds[:2] if args.quick else args.seeds
     makers: list[Callable[[], Frame]] = [lambda s=s: synthetic_frame(s) for s in seeds]
@@ -520,6 +672,8 @@ def main(argv: list[str] | None = None) -> int:
         box_diffs = [a.iou_box - b.iou_box for a, b in zip(results["session"], results["plain"])]
         print(f"IoU after the box alone (same box), session - plain: mean {np.mean(box_diffs):+.4f}, "
               f"worst {min(box_diffs):+.4f}")
+    if not (args.quick or args.no_real):
+        real_cases(args.work_size, args.strokes, not args.no_plain, not args.no_large)
     return 0
 
 

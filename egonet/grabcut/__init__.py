@@ -21,6 +21,16 @@ it, ``undo`` steps back. The session is fast enough to feel interactive on
   stroke changes the mask only its own way (a foreground stroke only adds
   pixels, a background stroke only removes them).
 
+With depth (``GrabCutSession(image, depth)``, metres, 0 or NaN where
+missing) the cut models colour and depth together and prefers to cut where
+depth jumps, so an object of the background's colour in front of it (a white
+chair before a white wall) separates; ``cv2.grabCut`` takes colour only, so
+that cut is the session's own (PyMaxflow), over the undecided pixels only.
+Pixels without depth are judged by colour alone. Without depth the session
+is exactly the colour-only one. The depth is the frame's, like the image:
+``state()`` does not hold it, and ``from_state(image, state, depth)`` takes
+it again for a session that was made with it.
+
 Pixel conventions: points are ``(x, y)`` with ``x`` the column and ``y`` the
 row, in full-resolution pixel units, and pixel ``(x, y)`` sits at integer
 coordinates. A box ``(x0, y0, x1, y1)`` covers columns ``x0 <= x < x1`` and
@@ -30,8 +40,10 @@ distance to its polyline is at most ``radius`` (see ``stroke_footprint``).
 Modules: :mod:`~egonet.grabcut.session` (``GrabCutSession``: box, stroke,
 undo, and the loop that composes the rest), :mod:`~egonet.grabcut.geometry`
 (box -> ROI -> low-resolution grid), :mod:`~egonet.grabcut.colour` (the
-colour models), :mod:`~egonet.grabcut.cut` (the graph cut at the work size:
-a box's first cut, its rescue, re-cuts with strokes),
+colour models), :mod:`~egonet.grabcut.depth` (the depth checked, on the
+grid, the colour-plus-depth models and depth-aware pairwise links),
+:mod:`~egonet.grabcut.cut` (the graph cut at the work size: a box's first
+cut, its rescue, re-cuts with strokes; with depth too),
 :mod:`~egonet.grabcut.refine` (the guided filter back to full resolution),
 :mod:`~egonet.grabcut.strokes` (checks and footprints) and
 :mod:`~egonet.grabcut.state` (undo levels and ``state()``'s format).
@@ -50,6 +62,15 @@ Example:
     False
     >>> bool(session.undo()[60, 80])
     True
+
+    A panel of the wall's colour, 0.5 m in front of it, found by its depth:
+
+    >>> image = np.full((120, 160, 3), 220, np.uint8)
+    >>> depth = np.full((120, 160), 2.0)
+    >>> depth[40:80, 50:110] = 1.5
+    >>> mask = GrabCutSession(image, depth).box(40, 30, 120, 90)
+    >>> bool(mask[60, 80]), bool(mask[35, 45])
+    (True, False)
 """
 
 from egonet.grabcut.session import GrabCutSession

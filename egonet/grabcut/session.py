@@ -3,7 +3,8 @@
 ``GrabCutSession`` keeps the undo levels (``state._Snapshot``) and the
 current full-resolution mask, and composes the parts: the geometry of the
 box's ROI (``geometry``), the graph cut at the work size (``cut``, with the
-colour models of ``colour``), the refinement back to full resolution
+colour models of ``colour``, or with a depth map the colour-plus-depth models
+of ``depth``), the refinement back to full resolution
 (``refine``) and the strokes as hard constraints (``strokes``).
 """
 
@@ -18,7 +19,8 @@ import cv2
 import numpy as np
 
 from egonet.errors import EgonetError
-from egonet.grabcut.cut import _box_cut, _box_labels, _recut
+from egonet.grabcut.cut import _box_cut, _box_labels, _depth_box_cut, _depth_recut, _recut
+from egonet.grabcut.depth import _check_depth, _DepthGuide
 from egonet.grabcut.geometry import _clip_to_box, _downsample, _Geometry, _grow_box
 from egonet.grabcut.refine import _BAND, _GF_RADIUS, _Guide, _upsample_mask
 from egonet.grabcut.state import STATE_FORMAT, _decode_levels, _encode_state, _Snapshot, _unpack
@@ -44,17 +46,23 @@ def _as_int(value: object, name: str) -> int:
 
 
 class GrabCutSession:
-    """Interactive GrabCut segmentation of one object in one RGB frame.
+    """Interactive GrabCut segmentation of one object in one RGB(-D) frame.
 
     Args:
         image: RGB uint8 ``(H, W, 3)`` frame at full resolution (copied).
+        depth: Optional float ``(H, W)`` depth of the same frame in metres,
+            0 or NaN where missing (copied). With depth the cut models colour
+            and depth together and prefers to cut where depth jumps (see
+            :mod:`~egonet.grabcut.depth`); pixels without depth are judged by
+            colour alone. Without it the session is plain colour GrabCut.
         work_size: Long side, in pixels, of the region of interest when the
             graph cut runs (smaller is faster, coarser before refinement).
         max_undo: Undo levels kept (and serialised by ``state``).
 
     Raises:
-        ValueError: If ``image`` is not RGB uint8 ``(H, W, 3)`` or a setting
-            is out of range.
+        ValueError: (``EgonetError``) If ``image`` is not RGB uint8
+            ``(H, W, 3)``, ``depth`` is not metres of the image's size, or a
+            setting is out of range.
 
     Example:
         >>> import numpy as np
@@ -65,8 +73,10 @@ class GrabCutSession:
         1200
     """
 
-    def __init__(self, image: np.ndarray, *, work_size: int = 272, max_undo: int = 20) -> None:
+    def __init__(self, image: np.ndarray, depth: np.ndarray | None = None, *, work_size: int = 272,
+                 max_undo: int = 20) -> None:
         self._image = _check_image(image)
+        self._depth = _check_depth(depth, self._image.shape[:2])
         if isinstance(work_size, bool) or not isinstance(work_size, (int, np.integer)) or work_size < 32:
             raise EgonetError(f"work_size: expected an integer >= 32, got {work_size!r}", field="work_size")
         if isinstance(max_undo, bool) or not isinstance(max_undo, (int, np.integer)) or max_undo < 0:
@@ -77,6 +87,7 @@ class GrabCutSession:
         self._now = _Snapshot()
         self._mask = np.zeros(self._image.shape[:2], bool)
         self._guide: _Guide | None = None
+        self._depth_guide: _DepthGuide | None = None  # the current ROI's, with depth
         # Full-resolution stroke footprints: (crop, origin), per stroke.
         self._footprints: weakref.WeakKeyDictionary[_Stroke, tuple[np.ndarray, tuple[int, int]] | None] = (
             weakref.WeakKeyDictionary())
@@ -99,6 +110,11 @@ class GrabCutSession:
         return self._now.box
 
     @property
+    def uses_depth(self) -> bool:
+        """Whether the session was given a depth map (and cuts with it)."""
+        return self._depth is not None
+
+    @property
     def can_undo(self) -> bool:
         """Whether ``undo`` has a previous state to restore."""
         return bool(self._history)
@@ -112,7 +128,10 @@ class GrabCutSession:
     def nbytes(self) -> int:
         """Bytes held in the session's arrays: the frame's copy, the mask, the
         ROI's guide, the undo levels and the cached stroke footprints."""
-        arrays = [self._image, self._mask]
+        arrays = [self._image, self._mask, self._depth]
+        if self._depth_guide is not None:
+            d = self._depth_guide
+            arrays += [d.features, d.valid, *d.links]
         if self._guide is not None:
             g = self._guide
             arrays += [g.image, g.colour, g.mean, g.inverse]
@@ -155,7 +174,10 @@ class GrabCutSession:
         gc = _box_labels(guide.geom)
         if not (gc == cv2.GC_BGD).any():
             raise EgonetError("box: leaves no background in the frame around it; draw a tighter box", field="box")
-        low, models = _box_cut(self._image, guide, gc, self._work_size)
+        if self._depth is None:
+            low, models = _box_cut(self._image, guide, gc, self._work_size)
+        else:
+            low, models = _depth_box_cut(self._image, self._depth, self._depth_guide_for(guide), gc)
         snap = _Snapshot(box=box, strokes=(), models=models, low=low)
         self._commit(guide, snap, self._full_mask(guide, snap))
         return self.mask
@@ -205,7 +227,10 @@ class GrabCutSession:
         new_roi = box != prev.box
         # In a new ROI the cut starts from the current mask (the models carry over either way).
         prior = _downsample(self._mask, guide.geom) if new_roi else prev.low
-        low, models = _recut(guide, prev.models, strokes, prior)
+        if self._depth is None:
+            low, models = _recut(guide, prev.models, strokes, prior)
+        else:
+            low, models = _depth_recut(self._depth_guide_for(guide), prev.models, strokes, prior, guide)
         snap = _Snapshot(box=box, strokes=strokes, models=models, low=low)
         if new_roi:
             # Both masks honour every stroke, so their union does too.
@@ -237,29 +262,40 @@ class GrabCutSession:
         Returns:
             Dict with ``format``, the frame size, the settings, and per undo
             level (oldest first, the current one last) the box, the strokes,
-            the two colour models (OpenCV grabCut's bgdModel/fgdModel layout),
+            the two colour models (OpenCV grabCut's bgdModel/fgdModel layout,
+            ``(2, 65)``; with depth the ``(2, 105)`` colour-plus-depth models
+            of :mod:`~egonet.grabcut.depth` and ``uses_depth`` = 1),
             the low-resolution cut (packed bits) and the mask inside the box
             (run lengths, row-major, starting with a background run).
         """
         return _encode_state(self._history + [self._now], height=int(self.shape[0]), width=int(self.shape[1]),
-                             work_size=self._work_size, max_undo=self._max_undo)
+                             work_size=self._work_size, max_undo=self._max_undo, uses_depth=self.uses_depth)
 
     @classmethod
-    def from_state(cls, image: np.ndarray, state: Mapping[str, object]) -> GrabCutSession:
-        """Resume a session from ``state()`` and the same image.
+    def from_state(cls, image: np.ndarray, state: Mapping[str, object],
+                   depth: np.ndarray | None = None) -> GrabCutSession:
+        """Resume a session from ``state()`` and the same image (and depth).
+
+        The state holds neither the image nor the depth: they are the frame's,
+        so the caller passes them again. A session made with depth resumes
+        only with depth, one made without only without.
 
         Args:
             image: The RGB uint8 ``(H, W, 3)`` frame the state was made on.
             state: A dict from ``state()``, possibly after ``np.savez`` and
                 ``np.load`` (0-d arrays are accepted for the scalars).
+            depth: The frame's depth in metres ``(H, W)`` if the session was
+                made with depth (``state["uses_depth"]``), else None.
 
         Returns:
             A session that continues exactly where the saved one stopped,
             undo levels included.
 
         Raises:
-            ValueError: If ``image`` is invalid, or ``state`` is malformed or
-                was made on a frame of another size.
+            ValueError: (``EgonetError``) If ``image`` or ``depth`` is
+                invalid, ``depth`` is missing for a state made with depth (or
+                given for one made without), or ``state`` is malformed or was
+                made on a frame of another size.
 
         Example:
             >>> import numpy as np
@@ -271,28 +307,35 @@ class GrabCutSession:
             >>> bool((t.stroke([(50, 40)], "bg", 4) == s.stroke([(50, 40)], "bg", 4)).all())
             True
         """
-        _check_image(image)
+        checked = _check_image(image)
+        _check_depth(depth, checked.shape[:2])
         if not isinstance(state, Mapping):
             raise EgonetError(f"state: expected the dict from GrabCutSession.state(), got {type(state).__name__}", field="state")
         try:
-            return cls._from_state(image, state)
+            return cls._from_state(image, state, depth)
         except (KeyError, IndexError, TypeError, ValueError) as exc:
-            if str(exc).startswith("state:"):
+            if isinstance(exc, EgonetError) and exc.field in ("state", "depth"):
                 raise
             raise EgonetError(f"state: malformed GrabCut session state ({type(exc).__name__}: {exc})", field="state") from exc
 
     @classmethod
-    def _from_state(cls, image: np.ndarray, state: Mapping[str, object]) -> GrabCutSession:
+    def _from_state(cls, image: np.ndarray, state: Mapping[str, object],
+                    depth: np.ndarray | None) -> GrabCutSession:
         def scalar(key: str) -> object:
             return np.asarray(state[key]).item()
 
         if scalar("format") != STATE_FORMAT:
             raise EgonetError(f"state: format {scalar('format')!r} is not {STATE_FORMAT!r}", field="state")
-        session = cls(image, work_size=int(scalar("work_size")), max_undo=int(scalar("max_undo")))
+        uses_depth = bool(np.asarray(state.get("uses_depth", 0)).item())
+        if uses_depth != (depth is not None):
+            raise EgonetError("depth: this state was made " + (
+                "with depth; pass the frame's depth (H, W) in metres" if uses_depth else
+                "without depth; resume it without depth (or start a new session with depth)"), field="depth")
+        session = cls(image, depth, work_size=int(scalar("work_size")), max_undo=int(scalar("max_undo")))
         h, w = session.shape
         if (int(scalar("height")), int(scalar("width"))) != (h, w):
             raise EgonetError(f"state: made on a {scalar('width')}x{scalar('height')} frame, the image is {w}x{h}", field="state")
-        levels = _decode_levels(state, h, w)
+        levels = _decode_levels(state, h, w, uses_depth=uses_depth)
         session._history = levels[:-1]
         session._restore(levels[-1])
         return session
@@ -305,6 +348,12 @@ class GrabCutSession:
         if self._guide is not None and self._guide.geom == geom:
             return self._guide
         return _Guide.build(geom, self._image)
+
+    def _depth_guide_for(self, guide: _Guide) -> _DepthGuide:
+        """The depth guide of ``guide``'s ROI (cached for the current one)."""
+        if self._depth_guide is None or self._depth_guide.geom != guide.geom:
+            self._depth_guide = _DepthGuide.build(guide.geom, guide.image, self._depth)
+        return self._depth_guide
 
     def _full_mask(self, guide: _Guide, snap: _Snapshot) -> np.ndarray:
         """The full-resolution mask of ``snap``, computed over the whole ROI."""

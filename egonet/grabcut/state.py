@@ -16,6 +16,7 @@ import numpy as np
 
 from egonet.errors import EgonetError
 from egonet.grabcut.colour import _MODEL_SIZE
+from egonet.grabcut.depth import _DEPTH_MODEL_SIZE
 from egonet.grabcut.strokes import _Stroke
 
 #: The ``format`` entry of ``GrabCutSession.state()``.
@@ -28,7 +29,7 @@ class _Snapshot:
 
     box: tuple[int, int, int, int] | None = None
     strokes: tuple[_Stroke, ...] = ()
-    models: np.ndarray | None = None  # (2, 65) float64: background, foreground
+    models: np.ndarray | None = None  # (2, 65) float64: background, foreground; (2, 105) with depth
     low: np.ndarray | None = None  # (low_h, low_w) bool, the low-resolution cut
     mask_bits: np.ndarray | None = None  # packed bits of the mask inside the box (outside is False)
 
@@ -41,11 +42,15 @@ def _unpack(snap: _Snapshot) -> np.ndarray:
 
 
 def _encode_state(levels: Sequence[_Snapshot], *, height: int, width: int, work_size: int,
-                  max_undo: int) -> dict[str, np.ndarray | int | float | str]:
-    """The ``state()`` dict of a session's undo levels (oldest first, the current one last)."""
+                  max_undo: int, uses_depth: bool = False) -> dict[str, np.ndarray | int | float | str]:
+    """The ``state()`` dict of a session's undo levels (oldest first, the current one last).
+
+    Without depth the dict is exactly the colour-only format; with depth the
+    models are ``(n, 2, 105)`` and ``uses_depth`` = 1 is added.
+    """
     n = len(levels)
     boxes = np.full((n, 4), -1, np.int64)
-    models = np.zeros((n, 2, _MODEL_SIZE), np.float64)
+    models = np.zeros((n, 2, _DEPTH_MODEL_SIZE if uses_depth else _MODEL_SIZE), np.float64)
     low_shape = np.zeros((n, 2), np.int64)
     low_bits: list[np.ndarray] = []
     runs: list[np.ndarray] = []
@@ -65,6 +70,7 @@ def _encode_state(levels: Sequence[_Snapshot], *, height: int, width: int, work_
         level_strokes.extend(index.setdefault(s, len(index)) for s in snap.strokes)
         level_offsets.append(len(level_strokes))
     table = list(index)
+    extra = {"uses_depth": 1} if uses_depth else {}
     return {
         "format": STATE_FORMAT,
         "height": height,
@@ -84,10 +90,12 @@ def _encode_state(levels: Sequence[_Snapshot], *, height: int, width: int, work_
         "stroke_radius": np.asarray([s.radius for s in table], np.float64),
         "level_strokes": np.asarray(level_strokes, np.int64),
         "level_stroke_offsets": np.asarray(level_offsets, np.int64),
+        **extra,
     }
 
 
-def _decode_levels(state: Mapping[str, object], height: int, width: int) -> list[_Snapshot]:
+def _decode_levels(state: Mapping[str, object], height: int, width: int, *,
+                   uses_depth: bool = False) -> list[_Snapshot]:
     """The undo levels of a ``state()`` dict made on a ``width`` x ``height`` frame.
 
     Raises:
@@ -100,7 +108,8 @@ def _decode_levels(state: Mapping[str, object], height: int, width: int) -> list
         "stroke_points", "stroke_point_offsets", "stroke_fg", "stroke_radius",
         "level_strokes", "level_stroke_offsets")}
     n = len(a["box"])
-    if n < 1 or a["models"].shape != (n, 2, _MODEL_SIZE) or a["low_shape"].shape != (n, 2):
+    model_size = _DEPTH_MODEL_SIZE if uses_depth else _MODEL_SIZE
+    if n < 1 or a["models"].shape != (n, 2, model_size) or a["low_shape"].shape != (n, 2):
         raise EgonetError("state: its arrays disagree on the number of undo levels", field="state")
     points, p_off = a["stroke_points"].astype(np.float64), a["stroke_point_offsets"]
     strokes = [_Stroke(points[p_off[i] : p_off[i + 1]].copy(), bool(a["stroke_fg"][i]),
