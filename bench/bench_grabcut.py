@@ -549,9 +549,12 @@ def real_cases(work_size: int, n_strokes: int, plain: bool, large: bool) -> None
                   f"stroke p50 {_pct(strokes, 50):6.1f} ms  p95 {_pct(strokes, 95):6.1f} ms (n={len(strokes)}) | "
                   f"box p50 by kind: {by_kind} | targets {'met' if met else 'NOT met'}")
         if "plain" in runs:
-            pb = [getattr(r, box_key) for _, _, r in runs["plain"]]
-            ps = [v for _, _, r in runs["plain"] for v in getattr(r, stroke_key)]
             for label in (k for k in runs if k != "plain"):
+                # Plain on the same frames and boxes only (depth runs exist only where the frame has depth).
+                cases = {(f, k) for f, k, _ in runs[label]}
+                plain_rows = [r for f, k, r in runs["plain"] if (f, k) in cases]
+                pb = [getattr(r, box_key) for r in plain_rows]
+                ps = [v for r in plain_rows for v in getattr(r, stroke_key)]
                 sb = [getattr(r, box_key) for _, _, r in runs[label]]
                 ss = [v for _, _, r in runs[label] for v in getattr(r, stroke_key)]
                 print(f"real {clock:4s} ratio plain/{label}: box p50 {_pct(pb, 50) / _pct(sb, 50):.1f}x  "
@@ -563,10 +566,13 @@ def real_cases(work_size: int, n_strokes: int, plain: bool, large: bool) -> None
     if "session+depth" in runs:
         # Colour alone against colour and depth on the frames with depth, box by box.
         plain_rows = {(f, k): r for f, k, r in runs["session"]}
-        for f, k, r in runs["session+depth"]:
-            c = plain_rows[(f, k)]
+        pairs = [(plain_rows[(f, k)], r) for f, k, r in runs["session+depth"]]
+        for (f, k, _), (c, r) in zip(runs["session+depth"], pairs):
             print(f"real depth on {f} {k:8s}: IoU after box {c.iou_box:.3f} -> {r.iou_box:.3f}, "
                   f"final {c.iou_final:.3f} -> {r.iou_final:.3f}")
+        print(f"real depth, mean of {len(pairs)} runs: IoU after box {np.mean([c.iou_box for c, _ in pairs]):.3f} -> "
+              f"{np.mean([r.iou_box for _, r in pairs]):.3f}, final {np.mean([c.iou_final for c, _ in pairs]):.3f} -> "
+              f"{np.mean([r.iou_final for _, r in pairs]):.3f} (colour only -> with depth)")
 
 
 def _pct(values: list[float], q: float) -> float:

@@ -225,3 +225,28 @@ def test_real_chair_backrest_comes_in_with_depth():
         assert not final[y, x], (x, y)
     assert _iou(final, truth) > 0.8
     assert _iou(final, truth) > _iou(rgb, truth) + 0.3
+
+
+@pytest.mark.parametrize("seed", range(4))
+def test_random_frames_with_holes_in_depth(seed):
+    # Odd sizes, noise, depth missing in blobs and at random pixels, tiny and
+    # frame-wide boxes: the session keeps its promises (mask shape, box
+    # clipping, strokes as hard constraints, exact resume).
+    rng = np.random.default_rng(seed)
+    h, w = int(rng.integers(20, 90)), int(rng.integers(20, 90))
+    image = rng.integers(0, 256, (h, w, 3), dtype=np.uint8)
+    depth = rng.uniform(0.5, 4.0, (h, w))
+    depth[rng.random((h, w)) < 0.3] = 0
+    depth[: h // 3, : w // 3] = np.nan
+    x0, y0 = int(rng.integers(0, w // 2)), int(rng.integers(0, h // 2))
+    x1, y1 = int(rng.integers(x0 + 1, w)), int(rng.integers(y0 + 1, h))
+    s = GrabCutSession(image, depth)
+    mask = s.box(x0, y0, x1, y1)
+    assert mask.shape == (h, w) and not mask[:y0].any() and not mask[:, x1:].any()
+    point = (float(rng.uniform(x0, x1)), float(rng.uniform(y0, y1)))
+    mask = s.stroke([point], "fg", 2)
+    assert mask[int(round(point[1])), int(round(point[0]))]
+    state = s.state()
+    t = GrabCutSession.from_state(image, state, depth)
+    np.testing.assert_array_equal(t.stroke([(x0, y0)], "bg", 1.5), s.stroke([(x0, y0)], "bg", 1.5))
+    assert not s.mask[y0, x0]
