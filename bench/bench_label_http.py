@@ -41,6 +41,7 @@ The latency is the client's wall clock per request; the server's own time
 from __future__ import annotations
 
 import argparse
+import contextlib
 import os
 import sys
 import tempfile
@@ -217,6 +218,83 @@ def warm_up(client: httpx.Client, case: Case, workers: int) -> None:
                              "use_depth": case.depth_choices[0]})
 
 
+def breakdown(app, cases: list[Case], n_strokes: int) -> None:
+    """Where a request's server time goes, in-process on the same database:
+    the tight box and its strokes on each kind of frame, every session
+    restored from the database (the HTTP run's slow path), timed by phase
+    in this process's CPU time.
+    ``engine`` is GrabCutSession.box / stroke (after a restore it also
+    rebuilds the ROI's guides, which a cached session keeps); ``restore`` is
+    decoding the state (and the frame, unless this worker has it cached);
+    ``other``: the lock file, checks, the request's own Python."""
+    from unittest import mock
+
+    from app.services.labelling import grabcut as service
+    from app.services.users import find_user
+    from egonet.grabcut import GrabCutSession
+
+    spent: dict[str, float] = {}
+
+    def timed(name, fn):
+        def wrapper(*args, **kwargs):
+            t = time.process_time()
+            try:
+                return fn(*args, **kwargs)
+            finally:
+                spent[name] = spent.get(name, 0.0) + 1e3 * (time.process_time() - t)
+        return wrapper
+
+    patches = [
+        mock.patch.object(GrabCutSession, "box", timed("engine", GrabCutSession.box)),
+        mock.patch.object(GrabCutSession, "stroke", timed("engine", GrabCutSession.stroke)),
+        mock.patch.object(service, "_load_session", timed("restore", service._load_session)),
+        mock.patch.object(service, "_dump_state", timed("save state", service._dump_state)),
+        mock.patch.object(service, "_state_row", timed("database", service._state_row)),
+        mock.patch.object(service.db.session, "commit", timed("database", service.db.session.commit)),
+    ]
+    app.config["GRABCUT_CACHE_BYTES"] = 0
+    print("\nwhere the server's time goes (in-process, sessions restored from the database; CPU ms, "
+          "which other load on the machine inflates far less than wall time):")
+    print(f"{'frame':26s} {'depth':5s} {'op':7s} {'total':>6s} {'engine':>7s} {'restore':>8s} {'save':>5s} "
+          f"{'db':>5s} {'PNG':>5s} {'other':>6s}")
+    picked = {}
+    for case in cases:  # one frame of each size, with and without depth
+        picked.setdefault((case.rgb.shape, case.depth_choices), case)
+    with app.app_context(), contextlib.ExitStack() as stack:
+        for p in patches:
+            stack.enter_context(p)
+        user = find_user("bench")  # (and the database connection opened outside the timings)
+        for case in picked.values():
+            frame = db.session.get(Frame, case.frame_id)
+            box = tight_box(case.truth)
+            truth = part_in(case.truth, box)
+            for use_depth in case.depth_choices:
+                ops = [("box", lambda: service.grabcut_box(frame, user, f"prof{int(use_depth)}", box,
+                                                           use_depth=use_depth))]
+                mask = None
+                for i in range(n_strokes + 1):
+                    spent.clear()
+                    t = time.process_time()
+                    if i == 0:
+                        result = ops[0][1]()
+                    else:
+                        s = annotator_stroke(mask, truth)
+                        if s is None:
+                            break
+                        result = service.grabcut_stroke(frame, user, f"prof{int(use_depth)}", points=s.points,
+                                                        label=s.label, radius=s.radius)
+                    t_png = time.process_time()
+                    io.encode_png(result.mask)
+                    png = 1e3 * (time.process_time() - t_png)
+                    total = 1e3 * (time.process_time() - t)
+                    mask = result.mask
+                    parts = [spent.get(k, 0.0) for k in ("engine", "restore", "save state", "database")]
+                    other = total - sum(parts) - png
+                    print(f"{case.name:26s} {'on' if use_depth else 'off':5s} {'box' if i == 0 else 'stroke':7s} "
+                          f"{total:6.0f} {parts[0]:7.0f} {parts[1]:8.1f} {parts[2]:5.1f} {parts[3]:5.1f} {png:5.1f} "
+                          f"{other:6.1f}", flush=True)
+
+
 def load() -> str:
     return "load average " + ", ".join(f"{v:.2f}" for v in os.getloadavg()) + f" on {os.cpu_count()} CPUs"
 
@@ -230,6 +308,8 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument("--no-large", action="store_true", help="skip the 1408x1408 frames")
     parser.add_argument("--keep-sessions", action="store_true",
                         help="keep-alive and the workers' session cache on (the usual path, not the restore)")
+    parser.add_argument("--breakdown", action="store_true",
+                        help="then time one box and two strokes per kind of frame in-process, by phase")
     args = parser.parse_args(argv)
     postgres_url = os.environ.get("EGONET_TEST_POSTGRES_URL", "postgresql://postgres@127.0.0.1:5432/test")
     if not (RGBD_FRAMES.is_dir() or REAL_FRAMES.is_dir()):
@@ -261,6 +341,8 @@ def main(argv: list[str] | None = None) -> int:
                     client.close()
             finally:
                 server.stop()
+            if args.breakdown:
+                breakdown(app, cases, min(args.strokes, 2))
     finally:
         drop_schema(postgres_url, schema)
     if not args.no_plain:
