@@ -225,7 +225,8 @@ def breakdown(app, cases: list[Case], n_strokes: int) -> None:
     in this process's CPU time.
     ``engine`` is GrabCutSession.box / stroke (after a restore it also
     rebuilds the ROI's guides, which a cached session keeps); ``restore`` is
-    decoding the state (and the frame, unless this worker has it cached);
+    decoding the state, or for a box making the new session (with the frame
+    and depth from this worker's cache after their first use);
     ``other``: the lock file, checks, the request's own Python."""
     from unittest import mock
 
@@ -248,6 +249,7 @@ def breakdown(app, cases: list[Case], n_strokes: int) -> None:
         mock.patch.object(GrabCutSession, "box", timed("engine", GrabCutSession.box)),
         mock.patch.object(GrabCutSession, "stroke", timed("engine", GrabCutSession.stroke)),
         mock.patch.object(service, "_load_session", timed("restore", service._load_session)),
+        mock.patch.object(service, "_new_session", timed("restore", service._new_session)),
         mock.patch.object(service, "_dump_state", timed("save state", service._dump_state)),
         mock.patch.object(service, "_state_row", timed("database", service._state_row)),
         mock.patch.object(service.db.session, "commit", timed("database", service.db.session.commit)),
@@ -269,19 +271,18 @@ def breakdown(app, cases: list[Case], n_strokes: int) -> None:
             box = tight_box(case.truth)
             truth = part_in(case.truth, box)
             for use_depth in case.depth_choices:
-                ops = [("box", lambda: service.grabcut_box(frame, user, f"prof{int(use_depth)}", box,
-                                                           use_depth=use_depth))]
+                key = f"prof{int(use_depth)}"
                 mask = None
                 for i in range(n_strokes + 1):
+                    s = annotator_stroke(mask, truth) if i else None
+                    if i and s is None:
+                        break
                     spent.clear()
                     t = time.process_time()
                     if i == 0:
-                        result = ops[0][1]()
+                        result = service.grabcut_box(frame, user, key, box, use_depth=use_depth)
                     else:
-                        s = annotator_stroke(mask, truth)
-                        if s is None:
-                            break
-                        result = service.grabcut_stroke(frame, user, f"prof{int(use_depth)}", points=s.points,
+                        result = service.grabcut_stroke(frame, user, key, points=s.points,
                                                         label=s.label, radius=s.radius)
                     t_png = time.process_time()
                     io.encode_png(result.mask)
