@@ -48,7 +48,8 @@ SAVE = {
 }
 POINT = List(Float(), min_len=2, max_len=2)
 TARGET = {"frame_id": Int(min=1), "instance": Str(min_len=1, max_len=40)}
-BOX = {**TARGET, "box": List(Float(), min_len=4, max_len=4)}
+# use_depth: null or absent = the frame's depth when it has one (see labelling.grabcut_box).
+BOX = {**TARGET, "box": List(Float(), min_len=4, max_len=4), "use_depth": Bool(nullable=True, default=None)}
 CARRY = {"replace": Bool(default=False), "version": Int(min=0, nullable=True, default=None)}
 REVIEW = {
     "version": Int(min=1),
@@ -406,12 +407,12 @@ def _target(data: dict) -> tuple[Frame, str]:
 @bp.post("/api/label/grabcut/box")
 @roles(*LABELLERS)
 def grabcut_box():
-    """``{frame_id, instance, box: [x0, y0, x1, y1]}`` -> the object's first mask (PNG)."""
+    """``{frame_id, instance, box: [x0, y0, x1, y1], use_depth?}`` -> the object's first mask (PNG)."""
     started = time.perf_counter()
     data = json_body(BOX)
     fr, key = _target(data)
     box = labelling.check_box(fr, data["box"])
-    result = labelling.grabcut_box(fr, me(), key, box)
+    result = labelling.grabcut_box(fr, me(), key, box, use_depth=data["use_depth"])
     return png_response(result.mask, can_undo=result.can_undo, started=started)
 
 

@@ -88,6 +88,16 @@ def neighbours(frame: Frame) -> tuple[int | None, int | None]:
     return (ids[i - 1] if i > 0 else None), (ids[i + 1] if i + 1 < len(ids) else None)
 
 
+def frame_depth(frame: Frame) -> np.ndarray | None:
+    """The frame's depth as float32 metres ``(H, W)``, 0 where missing, or None when it has none.
+
+    Imported and demo depth alike are stored as 16-bit PNGs in millimetres.
+    """
+    if frame.depth_path is None:
+        return None
+    return io.read_depth(media.absolute_path(frame.depth_path))
+
+
 def depth_preview(frame: Frame) -> Path:
     """A colour-mapped PNG of the frame's depth (near = warm), cached on disk."""
     return _cached(f"depth-{Path(frame.depth_path).stem}.png", lambda: _colour_depth(io.read_depth(media.absolute_path(frame.depth_path))))

@@ -3,6 +3,7 @@
 // and the wheel's zoom.
 
 import { dragBox, pan, toImage, toPixel, wheelFactor, zoomAt } from "./geometry.js";
+import { depthChoice } from "./label_depth.js";
 import { runGrabcut } from "./label_grabcut.js";
 import { addInstance, commit } from "./label_instances.js";
 import { showMessage } from "./label_panel.js";
@@ -122,7 +123,7 @@ function onPointerUp() {
   if (!done) return;
   if (done.type === "box") {
     const box = dragBox(done.start, done.end, W, H);
-    if (box) runGrabcut("box", { box });
+    if (box) runGrabcut("box", { box, ...depthChoice() });
   } else if (done.type === "stroke") {
     const inst = selected();
     if (!inst || !inst.engine) {

@@ -13,6 +13,12 @@ sees the next operation. What one operation may cost is bounded: frames up to
 MAX_FRAME_SIDE pixels a side, strokes of up to GRABCUT_MAX_STROKE_POINTS
 points and GRABCUT_MAX_RADIUS, and the pixels all of an object's strokes
 sweep (a restored session paints them again) up to GRABCUT_MAX_STROKE_PIXELS.
+
+Depth: a box on a frame with stored depth (imported or the demo's) starts a
+session that cuts with it, unless the request says ``use_depth: false``. The
+session keeps the choice it was made with (its state records it, and a
+restored session is given the frame's depth again), so strokes and undo
+follow the box; a different choice takes effect from the next box.
 """
 
 import contextlib
@@ -34,6 +40,7 @@ from app.errors import Problem
 from app.extensions import db
 from app.models import Frame, User
 from app.models.annotations import GrabCutState
+from app.services import frames as frames_service
 from app.services import media
 from egonet import io as egonet_io
 from egonet.errors import EgonetError
@@ -97,9 +104,9 @@ class _Recent:
 # within GRABCUT_CACHE_BYTES, counted by their arrays (8-10 MB each at
 # 1280x960: the frame's copy, the mask, the ROI's guide, the footprints).
 _sessions = _Recent()
-# Decoded frames by their (content-addressed, so never stale) media path,
-# within GRABCUT_IMAGE_CACHE_BYTES: a session restored in another worker then
-# only needs its state decoded.
+# Decoded frames and depth maps by their (content-addressed, so never stale)
+# media path, within GRABCUT_IMAGE_CACHE_BYTES: a session restored in another
+# worker then only needs its state decoded.
 _images = _Recent()
 
 
@@ -119,17 +126,38 @@ def _frame_image(frame: Frame) -> np.ndarray:
     return image
 
 
+def _frame_depth(frame: Frame) -> np.ndarray | None:
+    """The frame's depth (float32 metres, ``(H, W)``, 0 where missing), or None without one."""
+    if frame.depth_path is None:
+        return None
+    depth = _images.get(frame.depth_path)
+    if depth is None:
+        depth = frames_service.frame_depth(frame)
+        _images.put(frame.depth_path, depth, nbytes=depth.nbytes, budget=current_app.config["GRABCUT_IMAGE_CACHE_BYTES"])
+    return depth
+
+
 def _keep(revision: str, session: GrabCutSession) -> None:
     _sessions.put(revision, session, nbytes=session.nbytes, budget=current_app.config["GRABCUT_CACHE_BYTES"])
 
 
 def _load_session(frame: Frame, blob: bytes) -> GrabCutSession:
     with np.load(io.BytesIO(zlib.decompress(blob)), allow_pickle=False) as arrays:
-        return GrabCutSession.from_state(_frame_image(frame), dict(arrays))
+        state = dict(arrays)
+    # A session made with depth resumes with the frame's depth, one made without without it.
+    uses_depth = bool(np.asarray(state.get("uses_depth", 0)).item())
+    depth = _frame_depth(frame) if uses_depth else None
+    if uses_depth and depth is None:
+        raise Problem("box: this object's GrabCut session used the frame's depth, which is gone; draw its box again",
+                      status=409, fields={"box": "draw the box again"})
+    try:
+        return GrabCutSession.from_state(_frame_image(frame), state, depth)
+    except EgonetError as exc:
+        raise Problem.from_egonet(exc) from None
 
 
-def _new_session(frame: Frame) -> GrabCutSession:
-    return GrabCutSession(_frame_image(frame))
+def _new_session(frame: Frame, *, use_depth: bool) -> GrabCutSession:
+    return GrabCutSession(_frame_image(frame), _frame_depth(frame) if use_depth else None)
 
 
 # --------------------------------------------------------------------------
@@ -219,9 +247,22 @@ def _check_sweep(session: GrabCutSession, points: list, radius: float) -> None:
 # Operations
 
 
-def grabcut_box(frame: Frame, user: User, key: str, box: tuple[int, int, int, int]) -> GrabCutResult:
-    """Start (or restart) the object ``key`` from a box; see ``check_box``."""
-    return _operate(frame, user, key, lambda s: s.box(*box), create=True)
+def grabcut_box(frame: Frame, user: User, key: str, box: tuple[int, int, int, int], *,
+                use_depth: bool | None = None) -> GrabCutResult:
+    """Start (or restart) the object ``key`` from a box; see ``check_box``.
+
+    Args:
+        use_depth: Cut with the frame's depth (True; a 400 naming ``use_depth``
+            when the frame has none), without it (False), or with it when
+            the frame has depth (None). A box always starts a new session, so
+            the choice holds for this object's strokes until its next box.
+    """
+    has_depth = frame.depth_path is not None
+    if use_depth and not has_depth:
+        raise Problem(f"use_depth: frame {frame.id} has no depth; send use_depth false (or leave it out)",
+                      fields={"use_depth": "this frame has no depth"})
+    return _operate(frame, user, key, lambda s: s.box(*box), create=True,
+                    use_depth=has_depth if use_depth is None else use_depth)
 
 
 def grabcut_stroke(frame: Frame, user: User, key: str, *, points: list, label: str, radius: float) -> GrabCutResult:
@@ -258,25 +299,32 @@ def grabcut_mask(frame: Frame, user: User, key: str) -> GrabCutResult:
     return GrabCutResult(session.mask, session.can_undo)
 
 
-def _operate(frame: Frame, user: User, key: str, apply: Callable[[GrabCutSession], np.ndarray], *, create: bool) -> GrabCutResult:
+def _operate(frame: Frame, user: User, key: str, apply: Callable[[GrabCutSession], np.ndarray], *, create: bool,
+             use_depth: bool = False) -> GrabCutResult:
     _check_frame_size(frame)
     # The lock file serialises the workers of one machine; the revision check
     # below still catches a writer that it cannot see (another machine).
     with _session_lock(frame, user, key):
-        return _operate_locked(frame, user, key, apply, create=create)
+        return _operate_locked(frame, user, key, apply, create=create, use_depth=use_depth)
 
 
-def _operate_locked(frame: Frame, user: User, key: str, apply: Callable[[GrabCutSession], np.ndarray], *, create: bool) -> GrabCutResult:
+def _operate_locked(frame: Frame, user: User, key: str, apply: Callable[[GrabCutSession], np.ndarray], *,
+                    create: bool, use_depth: bool) -> GrabCutResult:
+    """``create``: the operation is a box, which may start a session (with
+    depth when ``use_depth``); otherwise it continues the saved one."""
     for _ in range(3):
         row = _state_row(frame, user, key, lock=True)
-        if row is None:
-            if not create:
-                db.session.rollback()
-                raise Problem("box: draw a box around the object first", fields={"box": "no box yet for this object"})
-            session = _new_session(frame)
-        else:
-            session = _sessions.take(row.revision) or _load_session(frame, row.state)
         try:
+            if row is None:
+                if not create:
+                    raise Problem("box: draw a box around the object first", fields={"box": "no box yet for this object"})
+                session = _new_session(frame, use_depth=use_depth)
+            else:
+                session = _sessions.take(row.revision) or _load_session(frame, row.state)
+                if create and session.uses_depth != use_depth:
+                    # A box with the other depth choice: a session cannot change
+                    # its models' kind, so the object starts afresh (no undo past it).
+                    session = _new_session(frame, use_depth=use_depth)
             mask = apply(session)
         except Problem:
             db.session.rollback()  # let go of the row's lock before answering
