@@ -12,12 +12,14 @@
 //   label_server.js     every call to the server (through api.js)
 //   label_panel.js      status badge, time, messages, the busy spinner
 //   label_keys.js       keyboard shortcuts
+//   label_suggest.js    a trained model's proposals: Suggest, accept, reject
 
 import { redo, undo } from "./label_grabcut.js";
 import { refresh, wireInstances } from "./label_instances.js";
 import { wireKeys } from "./label_keys.js";
 import { errorText, showMessage } from "./label_panel.js";
 import { autosaver, leave, loadAnnotation, wireSaving } from "./label_save.js";
+import { wireSuggest } from "./label_suggest.js";
 import { $, $$, H, W, doc, editable, meta, ui } from "./label_state.js";
 import { newObject, setBrush, setTool, wireTools } from "./label_tools.js";
 import { clientPoint, fitView, resize, setBaseView, setOpacity, setShowMask, stage, zoomBy } from "./label_view.js";
@@ -49,6 +51,7 @@ function wire() {
   }
   wireInstances();
   wireSaving({ refresh });
+  if (editable) wireSuggest({ refresh });
 }
 
 // For tests and the console: what the page holds, without reaching into it.

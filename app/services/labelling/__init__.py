@@ -6,7 +6,8 @@ the server-side GrabCut sessions that help draw it; import it from here.
     * ``grabcut``: the GrabCut sessions (their saved state, this worker's
       caches, locks, box / stroke / undo and what each may cost);
     * ``review``: accept / reject, the annotators' and reviewers' queues;
-    * ``masks``: masks as COCO RLE and PNG, checked before they are decoded.
+    * ``masks``: masks as COCO RLE and PNG, checked before they are decoded;
+    * ``suggest``: a trained run's proposals ("Suggest"), accepting them, batches.
 """
 
 from app.services.labelling.annotations import (
@@ -34,6 +35,20 @@ from app.services.labelling.grabcut import (
     stroke_pixels,
 )
 from app.services.labelling.masks import Rle, coco_decode, decode_rle, max_rle_chars
+from app.services.labelling.suggest import (
+    BatchReport,
+    Queued,
+    Suggestion,
+    SuggestProblem,
+    accept_proposal,
+    proposal_regions,
+    queue_suggestions,
+    resolve_run,
+    suggest_frame,
+    suggest_frames,
+    suggest_from_page,
+    suggestion_runs,
+)
 from app.services.labelling.review import (
     annotator_queue,
     next_to_review,
@@ -44,9 +59,14 @@ from app.services.labelling.review import (
 
 __all__ = [
     "AUTHOR_STATUSES",
+    "BatchReport",
     "MAX_INSTANCES",
     "MAX_TIME_DELTA_S",
+    "Queued",
     "Rle",
+    "SuggestProblem",
+    "Suggestion",
+    "accept_proposal",
     "add_time",
     "annotator_queue",
     "check_box",
@@ -66,10 +86,17 @@ __all__ = [
     "max_rle_chars",
     "next_to_review",
     "next_unlabelled",
+    "proposal_regions",
+    "queue_suggestions",
+    "resolve_run",
     "review_annotation",
     "review_queue",
     "save_annotation",
     "stroke_pixels",
+    "suggest_frame",
+    "suggest_frames",
+    "suggest_from_page",
+    "suggestion_runs",
     "upload_instance_mask",
     "user_annotation",
 ]
