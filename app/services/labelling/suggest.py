@@ -443,10 +443,14 @@ def suggest_frame(
     if not specs and not replaced:
         result.annotation = existing  # nothing to write: no new version, no empty annotation
     else:
-        result.annotation = _write(
-            frame, user, version=current, specs=kept + specs, no_action_object=False, status=None,
-            time_delta_s=0.0, proposed_by=(run.id, checkpoint.id) if specs else None,
-        )
+        try:
+            result.annotation = _write(
+                frame, user, version=current, specs=kept + specs, no_action_object=False, status=None,
+                time_delta_s=0.0, proposed_by=(run.id, checkpoint.id) if specs else None,
+            )
+        except Problem:  # a save won the race meanwhile: its version stands, these sessions are no one's
+            _forget(frame, user, [s.key for s in specs])
+            raise
         _forget(frame, user, replaced)
     result.proposals = [s.key for s in specs]
     result.replaced = len(replaced)

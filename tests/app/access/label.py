@@ -37,6 +37,8 @@ RULES = {
     "label.grabcut_stroke": (LABELLERS, 400),
     "label.grabcut_undo": (LABELLERS, 400),
     "label.grabcut_mask": (LABELLERS, 400),
+    "label.suggest": (LABELLERS, 400),
+    "label.accept_proposal": (LABELLERS, 400),
 }
 
 
