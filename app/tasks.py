@@ -6,8 +6,10 @@ calling a job here queues it too. Importing this module creates no queue.
 """
 
 from app.extensions import db
-from app.models.training import Checkpoint
+from app.models import User
+from app.models.training import Checkpoint, TrainingRun
 from app.queue import job
+from app.services import labelling
 from app.services.training import TrainingProblem, execute_run, frames_for_prediction, predict
 
 
@@ -30,3 +32,12 @@ def predict_frames(checkpoint_id: int, frame_ids: list[int], device: str = "auto
     if checkpoint is None:
         raise TrainingProblem(f"no checkpoint with id {checkpoint_id}")
     return len(predict(checkpoint, frames_for_prediction(frame_ids=frame_ids), device=device))
+
+
+@job
+def suggest_frames(run_id: int, frame_ids: list[int], user_id: int, device: str = "auto") -> int:
+    """A run proposes action-objects on frames, into the user's annotations; returns how many proposals."""
+    run, user = db.session.get(TrainingRun, run_id), db.session.get(User, user_id)
+    if run is None or user is None:
+        raise labelling.SuggestProblem(f"no training run {run_id}" if run is None else f"no user {user_id}")
+    return labelling.suggest_frames(run, frames_for_prediction(frame_ids=frame_ids), user, device=device).proposals

@@ -51,6 +51,8 @@ TARGET = {"frame_id": Int(min=1), "instance": Str(min_len=1, max_len=40)}
 # use_depth: null or absent = the frame's depth when it has one (see labelling.grabcut_box).
 BOX = {**TARGET, "box": List(Float(), min_len=4, max_len=4), "use_depth": Bool(nullable=True, default=None)}
 CARRY = {"replace": Bool(default=False), "version": Int(min=0, nullable=True, default=None)}
+SUGGEST = {"version": Int(min=0), "run_id": Int(min=1, nullable=True, default=None)}
+ACCEPT = {"version": Int(min=1), "key": Str(min_len=1, max_len=40)}
 REVIEW = {
     "version": Int(min=1),
     "decision": Str(choices=["accept", "reject"]),
@@ -126,7 +128,12 @@ def page_config(frame: Frame, *, mode: str, annotation: Annotation | None = None
             propagate=url_for("label.propagate_next", frame_id=frame.id),
             copy_previous=url_for("label.copy_previous", frame_id=frame.id),
             filmstrip=url_for("label.filmstrip", frame_id=frame.id),
+            suggest=url_for("label.suggest", frame_id=frame.id),
+            accept_proposal=url_for("label.accept_proposal", frame_id=frame.id),
         )
+        config["suggest_runs"] = [
+            {"id": run.id, "label": f"Run {run.id}: {run.name}"} for run in labelling.suggestion_runs()
+        ]
     else:
         config["urls"].update(
             annotation=url_for("label.annotation", annotation_id=annotation.id),
@@ -214,6 +221,8 @@ def annotation_json(annotation: Annotation | None, frame: Frame) -> dict:
         "reviewed_at": None,
         "updated_at": None,
         "mask_url": None,
+        "proposed_by_run_id": None,
+        "proposed_by_checkpoint_id": None,
         "instances": [],
     }
     if annotation is None:
@@ -230,6 +239,8 @@ def annotation_json(annotation: Annotation | None, frame: Frame) -> dict:
         reviewed_at=annotation.reviewed_at.isoformat() if annotation.reviewed_at else None,
         updated_at=annotation.updated_at.isoformat(),
         mask_url=url_for("label.annotation_mask", annotation_id=annotation.id) if annotation.mask_path else None,
+        proposed_by_run_id=annotation.proposed_by_run_id,
+        proposed_by_checkpoint_id=annotation.proposed_by_checkpoint_id,
         instances=[
             {
                 "position": i.position,
@@ -237,6 +248,9 @@ def annotation_json(annotation: Annotation | None, frame: Frame) -> dict:
                 "kind": i.kind.value if i.kind else None,
                 "label": i.label,
                 "mask_url": url_for("label.instance_mask", annotation_id=annotation.id, position=i.position),
+                # Set while the instance is a model's proposal, not accepted or edited yet.
+                "proposed_by_run_id": i.proposed_by_run_id,
+                "proposed_by_checkpoint_id": i.proposed_by_checkpoint_id,
             }
             for i in annotation.instances
         ],
@@ -272,6 +286,36 @@ def add_time(frame_id: int):
     if not labelling.add_time(fr, me(), data["seconds"]):
         raise Problem("you have no annotation of this frame yet", status=404, fields={"frame_id": "no annotation"})
     return "", 204
+
+
+@bp.post("/api/label/frames/<int:frame_id>/suggest")
+@roles(*LABELLERS)
+def suggest(frame_id: int):
+    """``{version, run_id?}``: a trained run proposes the frame's action-objects into the user's annotation.
+
+    200 with ``{annotation, suggestion}`` when it ran here; 202 with
+    ``{queued: true, message}`` when the model is slow here and the worker
+    has it. 409 for a stale version, a done annotation, or no trained run.
+    """
+    data = json_body(SUGGEST)
+    fr = labelling.get_frame(frame_id)
+    result = labelling.suggest_from_page(fr, me(), run_id=data["run_id"], version=data["version"])
+    if isinstance(result, labelling.Queued):
+        return {"queued": True, "message": result.summary(), "run_id": result.run.id}, 202
+    return {
+        "annotation": annotation_json(result.annotation, fr),
+        "suggestion": result.to_dict() | {"message": result.summary()},
+    }
+
+
+@bp.post("/api/label/frames/<int:frame_id>/annotation/proposals/accept")
+@roles(*LABELLERS)
+def accept_proposal(frame_id: int):
+    """``{version, key}``: accept the model's proposal ``key``; it becomes an ordinary instance (new version)."""
+    data = json_body(ACCEPT)
+    fr = labelling.get_frame(frame_id)
+    annotation = labelling.accept_proposal(fr, me(), key=data["key"], version=data["version"])
+    return annotation_json(annotation, fr)
 
 
 # --------------------------------------------------------------------------

@@ -43,6 +43,11 @@ class Annotation(Base):
     ``version`` is the optimistic-locking counter: SQLAlchemy adds it to
     every UPDATE, so a stale writer gets StaleDataError instead of silently
     overwriting someone else's work.
+
+    ``proposed_by_run_id`` / ``proposed_by_checkpoint_id`` record the
+    training run (and its fold's checkpoint) whose "Suggest" last added
+    proposals to the annotation; they stay after the proposals are accepted,
+    as the annotation's provenance (``app.services.labelling.suggest``).
     """
 
     __tablename__ = "annotation"
@@ -62,6 +67,11 @@ class Annotation(Base):
     reviewed_at: Mapped[datetime | None] = mapped_column(UTCDateTime())
     created_at: Mapped[datetime] = mapped_column(UTCDateTime(), default=utcnow)
     updated_at: Mapped[datetime] = mapped_column(UTCDateTime(), default=utcnow, onupdate=utcnow)
+    # Ids, not relationships: a deleted run or checkpoint leaves the annotation as it is.
+    proposed_by_run_id: Mapped[int | None] = mapped_column(ForeignKey("training_run.id", ondelete="SET NULL"))
+    proposed_by_checkpoint_id: Mapped[int | None] = mapped_column(
+        ForeignKey("training_checkpoint.id", ondelete="SET NULL")
+    )
 
     frame: Mapped[Frame] = relationship(back_populates="annotations")
     author: Mapped[User] = relationship(foreign_keys=[author_id])
@@ -74,7 +84,12 @@ class Annotation(Base):
 
 
 class Instance(Base):
-    """One action-object within an annotation; the frame's mask is their union."""
+    """One action-object within an annotation; the frame's mask is their union.
+
+    A model's proposal (``app.services.labelling.suggest``) carries the run
+    and checkpoint that proposed it until the annotator accepts it or edits
+    its mask; ``proposed`` says whether it is still one.
+    """
 
     __tablename__ = "instance"
     __table_args__ = (UniqueConstraint("annotation_id", "position"),)
@@ -88,8 +103,17 @@ class Instance(Base):
     # A stable name the labelling page gives the instance: positions shift
     # when an instance is deleted, keys do not (GrabCut sessions use them).
     key: Mapped[str | None] = mapped_column(String(40))
+    proposed_by_run_id: Mapped[int | None] = mapped_column(ForeignKey("training_run.id", ondelete="SET NULL"))
+    proposed_by_checkpoint_id: Mapped[int | None] = mapped_column(
+        ForeignKey("training_checkpoint.id", ondelete="SET NULL")
+    )
 
     annotation: Mapped[Annotation] = relationship(back_populates="instances")
+
+    @property
+    def proposed(self) -> bool:
+        """Whether this is a model's proposal the annotator has not accepted or edited yet."""
+        return self.proposed_by_run_id is not None
 
 
 class GrabCutState(Base):

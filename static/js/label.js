@@ -14,6 +14,7 @@
 //   label_keys.js       keyboard shortcuts
 //   label_propagate.js  propagate to the next frame, copy from the previous one
 //   label_filmstrip.js  the sequence's frames under the canvas, "go to frame N"
+//   label_suggest.js    a trained model's proposals: Suggest, accept, reject
 
 import { redo, undo } from "./label_grabcut.js";
 import { wireFilmstrip } from "./label_filmstrip.js";
@@ -22,6 +23,7 @@ import { wireKeys } from "./label_keys.js";
 import { errorText, showMessage } from "./label_panel.js";
 import { wirePropagate } from "./label_propagate.js";
 import { autosaver, leave, loadAnnotation, wireSaving } from "./label_save.js";
+import { wireSuggest } from "./label_suggest.js";
 import { $, $$, H, W, doc, editable, meta, ui } from "./label_state.js";
 import { newObject, setBrush, setTool, wireTools } from "./label_tools.js";
 import { clientPoint, fitView, resize, setBaseView, setOpacity, setShowMask, stage, zoomBy } from "./label_view.js";
@@ -55,6 +57,7 @@ function wire() {
   wireSaving({ refresh });
   wirePropagate();
   wireFilmstrip();
+  if (editable) wireSuggest({ refresh });
 }
 
 // For tests and the console: what the page holds, without reaching into it.

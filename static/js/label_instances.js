@@ -108,4 +108,5 @@ export function renderInstances() {
     list.append(li);
   });
   $("#instances-empty").hidden = doc.instances.length > 0;
+  document.dispatchEvent(new CustomEvent("label:instances-rendered")); // others add to the items (proposals)
 }

@@ -54,7 +54,9 @@ function showSaveState() {
   el.textContent = saveText(autosaver);
 }
 
-function applyMeta(data) {
+// What the server said about the annotation (a save's answer, a load): its
+// version and status here, and an event for the modules that show more of it.
+export function applyMeta(data) {
   meta.version = data.version;
   meta.status = data.status;
   meta.timeSpent = data.time_spent_s;
@@ -63,6 +65,7 @@ function applyMeta(data) {
   meta.author = data.author;
   meta.id = data.id;
   updateControls();
+  document.dispatchEvent(new CustomEvent("label:annotation", { detail: data }));
 }
 
 // The saved annotation, its masks and GrabCut's sessions, in place of the document.

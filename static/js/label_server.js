@@ -1,6 +1,6 @@
 // The labelling page's calls to the server, all through api.js: the
-// annotation (read, save, time, review), its masks and the GrabCut steps,
-// whose answers are masks sent as PNG.
+// annotation (read, save, time, review), its masks, the GrabCut steps,
+// whose answers are masks sent as PNG, and a model's proposals.
 
 import { api, request } from "./api.js";
 import { H, N, W, config } from "./label_state.js";
@@ -60,4 +60,13 @@ export function postTime(seconds) {
 
 export function postReview(body) {
   return api("POST", config.urls.review, body);
+}
+
+// A trained run's proposals for this frame: {annotation, suggestion} (200), or {queued, message} (202).
+export function postSuggest(body) {
+  return api("POST", config.urls.suggest, body);
+}
+
+export function postAcceptProposal(body) {
+  return api("POST", config.urls.accept_proposal, body);
 }

@@ -12,6 +12,8 @@ export const canvas = $("#canvas");
 export const stage = $("#stage");
 export let view = { scale: 1, tx: 0, ty: 0 };
 export let showMask = true;
+// Extra layers other modules draw over the masks, in screen pixels: painter(ctx, view).
+export const painters = [];
 
 const ctx = canvas.getContext("2d");
 const fillCanvas = document.createElement("canvas");
@@ -114,6 +116,7 @@ function paint() {
   ctx.strokeStyle = "rgba(255,255,255,0.25)";
   ctx.lineWidth = 1;
   ctx.strokeRect(corner.x - 0.5, corner.y - 0.5, W * view.scale + 1, H * view.scale + 1);
+  if (showMask) painters.forEach((painter) => painter(ctx, view));
   paintPreview();
 }
 

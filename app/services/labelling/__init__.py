@@ -8,7 +8,8 @@ the server-side GrabCut sessions that help draw it; import it from here.
     * ``review``: accept / reject, the annotators' and reviewers' queues;
     * ``masks``: masks as COCO RLE and PNG, checked before they are decoded;
     * ``propagation``: carrying an annotation to the next / from the previous
-      frame of its sequence, and the sequence's filmstrip.
+      frame of its sequence, and the sequence's filmstrip;
+    * ``suggest``: a trained run's proposals ("Suggest"), accepting them, batches.
 """
 
 from app.services.labelling.annotations import (
@@ -44,6 +45,20 @@ from app.services.labelling.propagation import (
     filmstrip,
     propagate_to_next,
 )
+from app.services.labelling.suggest import (
+    BatchReport,
+    Queued,
+    Suggestion,
+    SuggestProblem,
+    accept_proposal,
+    proposal_regions,
+    queue_suggestions,
+    resolve_run,
+    suggest_frame,
+    suggest_frames,
+    suggest_from_page,
+    suggestion_runs,
+)
 from app.services.labelling.review import (
     annotator_queue,
     next_to_review,
@@ -57,8 +72,13 @@ __all__ = [
     "FILMSTRIP_MAX",
     "MAX_INSTANCES",
     "MAX_TIME_DELTA_S",
+    "BatchReport",
     "Filmstrip",
+    "Queued",
     "Rle",
+    "SuggestProblem",
+    "Suggestion",
+    "accept_proposal",
     "add_time",
     "adjacent_frame",
     "annotator_queue",
@@ -82,10 +102,17 @@ __all__ = [
     "next_to_review",
     "next_unlabelled",
     "propagate_to_next",
+    "proposal_regions",
+    "queue_suggestions",
+    "resolve_run",
     "review_annotation",
     "review_queue",
     "save_annotation",
     "stroke_pixels",
+    "suggest_frame",
+    "suggest_frames",
+    "suggest_from_page",
+    "suggestion_runs",
     "upload_instance_mask",
     "user_annotation",
 ]

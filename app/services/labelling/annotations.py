@@ -16,6 +16,13 @@ back to its author with the comment (see ``review``). Editing a rejected
 annotation puts it back in progress; editing a done or reviewed one leaves it
 done, so a changed annotation is reviewed again. Marking it done lets go of
 the GrabCut sessions of instances it no longer has.
+
+Proposals. An instance a model proposed (``suggest``) keeps its mark through
+saves that bring its key with the same mask; a save that changes its mask
+(paint, erase, a GrabCut step) clears the mark, as does accepting it. An
+annotation with proposals still marked cannot be marked done: the annotator
+accepts or rejects each first, so unreviewed model output never becomes
+ground truth.
 """
 
 import re
@@ -93,13 +100,20 @@ def check_key(key: str, *, field: str = "instance") -> str:
 
 @dataclass
 class InstanceSpec:
-    """One instance of a save, with its mask already stored."""
+    """One instance of a save, with its mask already stored (and, for a
+    model's proposal, the run and checkpoint that proposed it)."""
 
     key: str | None
     kind: InstanceKind | None
     label: str | None
     mask_path: str
     mask: np.ndarray
+    proposed_by_run_id: int | None = None
+    proposed_by_checkpoint_id: int | None = None
+
+    @property
+    def proposed(self) -> bool:
+        return self.proposed_by_run_id is not None
 
 
 def save_annotation(frame: Frame, user: User, data: dict) -> Annotation:
@@ -203,11 +217,16 @@ def _write(
     no_action_object: bool,
     status: Status | None,
     time_delta_s: float,
+    proposed_by: tuple[int, int] | None = None,
 ) -> Annotation:
+    """Write the user's annotation of the frame (see ``save_annotation``);
+    ``proposed_by`` ``(run id, checkpoint id)`` records a suggestion's source."""
     annotation = user_annotation(frame, user)
     current = annotation.version if annotation is not None else 0
     if version != current:
         raise stale(current)
+    if annotation is not None:
+        _carry_marks(annotation, specs)
     drawn = [s for s in specs if s.mask.any()]
     if no_action_object and drawn:
         raise Problem(
@@ -226,9 +245,11 @@ def _write(
         db.session.add(annotation)
         changed = True
     else:
-        old = [(i.key, i.kind, i.label, i.mask_path) for i in annotation.instances]
-        new = [(s.key, s.kind, s.label, s.mask_path) for s in specs]
+        old = [(i.key, i.kind, i.label, i.mask_path, i.proposed_by_run_id) for i in annotation.instances]
+        new = [(s.key, s.kind, s.label, s.mask_path, s.proposed_by_run_id) for s in specs]
         changed = old != new or annotation.no_action_object != no_action_object
+    if proposed_by is not None:
+        annotation.proposed_by_run_id, annotation.proposed_by_checkpoint_id = proposed_by
     annotation.no_action_object = no_action_object
     annotation.mask_path = union_path
     annotation.status = _next_status(annotation.status, requested=status, changed=changed)
@@ -236,6 +257,17 @@ def _write(
     annotation.updated_at = utcnow()  # always an UPDATE, so the version moves on
     _commit(annotation, frame, user, specs, changed=changed)
     return annotation
+
+
+def _carry_marks(annotation: Annotation, specs: list[InstanceSpec]) -> None:
+    """A proposal stays marked while a save brings it back unchanged: same key, same mask file
+    (masks are stored by content, so any change of a pixel is a new file)."""
+    marked = {i.key: i for i in annotation.instances if i.proposed and i.key is not None}
+    for spec in specs:
+        old = marked.get(spec.key)
+        if spec.proposed or old is None or old.mask_path != spec.mask_path:
+            continue
+        spec.proposed_by_run_id, spec.proposed_by_checkpoint_id = old.proposed_by_run_id, old.proposed_by_checkpoint_id
 
 
 def _commit(annotation: Annotation, frame: Frame, user: User, specs: list[InstanceSpec], *, changed: bool) -> None:
@@ -254,7 +286,15 @@ def _commit(annotation: Annotation, frame: Frame, user: User, specs: list[Instan
             db.session.flush()  # free the positions before the new rows take them
             for position, spec in enumerate(specs):
                 annotation.instances.append(
-                    Instance(position=position, key=spec.key, kind=spec.kind, label=spec.label, mask_path=spec.mask_path)
+                    Instance(
+                        position=position,
+                        key=spec.key,
+                        kind=spec.kind,
+                        label=spec.label,
+                        mask_path=spec.mask_path,
+                        proposed_by_run_id=spec.proposed_by_run_id,
+                        proposed_by_checkpoint_id=spec.proposed_by_checkpoint_id,
+                    )
                 )
         if annotation.status is Status.DONE:
             forget_sessions(frame, user, keep={s.key for s in specs})
@@ -284,6 +324,12 @@ def add_time(frame: Frame, user: User, seconds: float) -> bool:
 
 
 def _check_complete(specs: list[InstanceSpec], no_action_object: bool) -> None:
+    if pending := [i for i, spec in enumerate(specs) if spec.proposed]:
+        raise Problem(
+            f"status: {len(pending)} of the model's proposals are not accepted yet; accept or reject each "
+            "before marking the frame done",
+            fields={"status": f"proposals pending: instances {', '.join(map(str, pending))}"},
+        )
     for i, spec in enumerate(specs):
         if not spec.mask.any():
             raise Problem(f"instances[{i}].mask: empty; draw the object or delete the instance",

@@ -19,6 +19,9 @@ session that cuts with it, unless the request says ``use_depth: false``. The
 session keeps the choice it was made with (its state records it, and a
 restored session is given the frame's depth again), so strokes and undo
 follow the box; a different choice takes effect from the next box.
+
+A GrabCut step on a model's proposal is an edit: it clears the instance's
+proposal mark (``suggest``).
 """
 
 import contextlib
@@ -38,7 +41,7 @@ from sqlalchemy.orm.exc import StaleDataError
 
 from app.errors import Problem
 from app.extensions import db
-from app.models import Frame, User
+from app.models import Annotation, Frame, Instance, User
 from app.models.annotations import GrabCutState
 from app.services import frames as frames_service
 from app.services import media
@@ -344,9 +347,30 @@ def _operate_locked(frame: Frame, user: User, key: str, apply: Callable[[GrabCut
             db.session.rollback()
             continue
         _keep(row.revision, session)
+        _clear_proposal(frame, user, key)
         return GrabCutResult(mask, session.can_undo)
     raise Problem("another GrabCut operation on this object is still running; try again", status=409,
                   fields={"instance": "busy"})
+
+
+def _clear_proposal(frame: Frame, user: User, key: str) -> None:
+    """The object was edited: it is no longer a model's untouched proposal.
+
+    Its own transaction, after the session's: holding the session's row and
+    then waiting for instance rows (which a save replaces) could deadlock
+    with a save that holds those and forgets sessions. The annotation's
+    version stays: the mark is the server's, and the page's next save
+    carries the new mask anyway.
+    """
+    own = db.select(Annotation.id).where(Annotation.frame_id == frame.id, Annotation.author_id == user.id)
+    db.session.execute(
+        db.update(Instance)
+        .where(Instance.annotation_id.in_(own), Instance.key == key,
+               Instance.proposed_by_run_id.is_not(None))
+        .values(proposed_by_run_id=None, proposed_by_checkpoint_id=None)
+        .execution_options(synchronize_session=False)
+    )
+    db.session.commit()
 
 
 # --------------------------------------------------------------------------

@@ -40,6 +40,8 @@ RULES = {
     "label.propagate_next": (LABELLERS, 404),
     "label.copy_previous": (LABELLERS, 404),
     "label.filmstrip": (LABELLERS, 200),
+    "label.suggest": (LABELLERS, 400),
+    "label.accept_proposal": (LABELLERS, 400),
 }
 
 

@@ -1,0 +1,81 @@
+"""Model proposals in real Chromium: Suggest (button and S), the proposal drawn
+and listed as such, Accept and Reject, and the words when no run is trained.
+
+The run's checkpoint has a stored map of the frame (as training leaves for
+the frames it held out): a network-like blurred copy of the object, a few
+pixels off, which the suggestion reuses (tests/app/test_suggest.py trains
+a real one)."""
+
+import numpy as np
+import pytest
+
+from app.extensions import db
+from app.models import Annotation, Instance
+from tests.app.test_suggest import network_like, stored_run
+from tests.browser.conftest import screenshot, sign_in
+from tests.browser.test_label import H, OBJECT, W, object_frames, open_frame, settle
+
+pytestmark = pytest.mark.browser
+
+
+def truth() -> np.ndarray:
+    mask = np.zeros((H, W), bool)
+    mask[OBJECT] = True
+    return mask
+
+
+def instances_on_server(live_app, frame_id: int) -> list[Instance]:
+    with live_app.app_context():
+        annotation = db.session.execute(db.select(Annotation).filter_by(frame_id=frame_id)).scalar_one()
+        return [(i.key, i.proposed_by_run_id) for i in annotation.instances]
+
+
+def test_suggest_then_accept_one_and_reject_another(live_app, live_server, page):
+    first, second = object_frames(live_app)
+    with live_app.app_context():
+        run_id = stored_run({f: network_like(truth(), shift=(6, -6)) for f in (first, second)}, name="tiny demo run")
+    sign_in(page, live_app, live_server, username="ann", role="annotator")
+    open_frame(page, live_server, first)
+    assert page.locator("#suggest-run option").all_inner_texts() == ["Latest trained run", f"Run {run_id}: tiny demo run"]
+    assert "Suggest: a trained model proposes objects" in page.locator(".shortcuts").inner_text()
+
+    page.click("#suggest")
+    page.wait_for_selector("#instances .instance.proposed")
+    settle(page)
+    tag = page.locator("#instances .instance.proposed .proposal-tag")
+    assert tag.inner_text() == f"proposed by run {run_id}"
+    assert f"run {run_id} proposed 1 object" in page.locator("#suggest-result").inner_text()
+    objects = page.evaluate("window.labelPage.instances()")
+    assert len(objects) == 1 and objects[0]["hasEngine"]  # GrabCut strokes can correct it at once
+    assert abs(objects[0]["area"] - truth().sum()) < 0.1 * truth().sum()
+    screenshot(page, "suggest-proposed")
+
+    page.click("#instances .accept-proposal")
+    page.wait_for_selector("#instances .instance.proposed", state="detached")
+    settle(page)
+    assert instances_on_server(live_app, first) == [(objects[0]["key"], None)]
+    screenshot(page, "suggest-accepted")
+
+    # The shortcut on the next frame, then Reject: the object goes, and the save says so.
+    open_frame(page, live_server, second)
+    page.locator("#canvas").click(position={"x": 5, "y": 5})  # the keyboard goes to the page, not the select
+    page.keyboard.press("s")
+    page.wait_for_selector("#instances .instance.proposed")
+    settle(page)
+    page.click("#instances .reject-proposal")
+    page.wait_for_function("() => window.labelPage.instances().length === 0")
+    settle(page)
+    assert instances_on_server(live_app, second) == []
+
+
+def test_without_a_trained_run_suggest_says_to_train_first(live_app, live_server, page):
+    frame_id, _ = object_frames(live_app)
+    sign_in(page, live_app, live_server, username="ann", role="annotator")
+    open_frame(page, live_server, frame_id)
+    assert page.locator("#suggest-run option").all_inner_texts() == ["No trained run yet"]
+    page.click("#suggest")
+    message = page.locator("#message")
+    message.wait_for(state="visible")
+    assert message.inner_text().startswith("Suggest: Train a model first:")
+    assert page.evaluate("window.labelPage.instances().length") == 0
+    screenshot(page, "suggest-no-run")
