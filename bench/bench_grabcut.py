@@ -73,6 +73,7 @@ if str(ROOT) not in sys.path:
     sys.path.insert(0, str(ROOT))
 
 from egonet.grabcut import GrabCutSession, stroke_footprint  # noqa: E402
+from tests.realdata import chair_truth  # noqa: E402
 
 SHARED = Path(__file__).resolve().parents[1].parent / "shared"
 REAL_FRAMES = SHARED / "data" / "egonet-samples" / "rgb"
@@ -443,26 +444,6 @@ def run_on_box(method: Method, rgb: np.ndarray, truth: np.ndarray, box: tuple[in
 
 # --------------------------------------------------------------------------
 # Real frames, with and without depth: the speed targets
-
-
-def chair_truth() -> np.ndarray:
-    """The chair of rgbd-primesense 00001 (640x480), drawn by hand from the image.
-
-    The same polygons as ``tests/unit/test_grabcut_depth.py``: backrest with
-    the left armrest's band and leg, the seat, the right armrest's loop, the
-    left foot; the wall seen through the loop and under the seat is not the
-    chair.
-    """
-    m = np.zeros((480, 640), np.uint8)
-    back_left = [(350, 110), (483, 112), (484, 198), (495, 210), (495, 242), (402, 242), (402, 357), (398, 372),
-                 (386, 380), (382, 340), (382, 288), (365, 262), (354, 225), (340, 208), (340, 198), (350, 190)]
-    seat = [(402, 242), (600, 244), (606, 256), (604, 270), (585, 282), (540, 292), (480, 297), (402, 297)]
-    cv2.fillPoly(m, [np.array(back_left, np.int32), np.array(seat, np.int32)], 1)
-    arm = [(487, 203), (505, 195), (535, 196), (565, 208), (585, 225), (597, 245), (592, 285), (597, 320),
-           (590, 350), (570, 366), (540, 370), (510, 362), (485, 345)]
-    cv2.polylines(m, [np.array(arm, np.int32)], False, 1, 12)
-    cv2.polylines(m, [np.array([(342, 350), (360, 366), (378, 378)], np.int32)], False, 1, 9)
-    return m.astype(bool)
 
 
 def chair_frame(size: tuple[int, int] | None = None) -> Frame:

@@ -10,8 +10,8 @@ from app.services import media
 from app.services.importing import ImportProblem, import_path
 from egonet import io
 from tests.app.factories import image_folder, rgb_image, video_file
+from tests.realdata import EGONET_SAMPLES, PRIMESENSE
 
-SHARED = Path(__file__).resolve().parents[2].parent / "shared" / "data"
 
 
 def frames():
@@ -166,9 +166,9 @@ def test_bad_paths_and_options(ctx, tmp_path):
     assert_nothing_imported(ctx)
 
 
-@pytest.mark.skipif(not (SHARED / "rgbd-primesense").exists(), reason="shared data not present")
+@pytest.mark.skipif(not (PRIMESENSE).exists(), reason="shared data not present")
 def test_real_rgbd_frames(ctx):
-    report = import_path(SHARED / "rgbd-primesense", activity="room")
+    report = import_path(PRIMESENSE, activity="room")
     assert report.added == 3
     f = frames()[0]
     assert (f.width, f.height, f.fx, f.cx) == (640, 480, 525.0, 319.5)
@@ -177,9 +177,9 @@ def test_real_rgbd_frames(ctx):
     assert f.dhg_path is not None
 
 
-@pytest.mark.skipif(not (SHARED / "egonet-samples").exists(), reason="shared data not present")
+@pytest.mark.skipif(not (EGONET_SAMPLES).exists(), reason="shared data not present")
 def test_real_egonet_samples_pair_rgb_and_dhg(ctx):
-    report = import_path(SHARED / "egonet-samples", activity="samples")
+    report = import_path(EGONET_SAMPLES, activity="samples")
     assert report.added == 3
     for f in frames():
         assert f.dhg_path is not None and f.depth_path is None

@@ -18,9 +18,8 @@ from app.services.labelling import grabcut as grabcut_service
 from egonet import io
 from egonet.grabcut import GrabCutSession
 from tests.app.test_labelling_grabcut import call, forget_everything, iou
+from tests.realdata import PRIMESENSE
 
-SHARED = Path(__file__).resolve().parents[2].parent / "shared" / "data"
-PRIMESENSE = SHARED / "rgbd-primesense"
 
 H, W = 120, 160
 PANEL = (slice(40, 90), slice(50, 120))

@@ -1,7 +1,6 @@
 """Propagate to the next frame, copy from the previous one, the filmstrip:
 through the API, on small RGB-D sequences of a moving object."""
 
-from pathlib import Path
 
 import cv2
 import numpy as np
@@ -14,6 +13,7 @@ from app.services.importing import FrameItem, add_frames, import_path
 from app.services.labelling import propagation
 from egonet import io
 from tests.app.test_labelling import get_png, rle
+from tests.realdata import PRIMESENSE
 
 H, W = 120, 160
 STEP = 4  # columns the object moves per frame
@@ -223,8 +223,6 @@ def test_the_filmstrip_is_a_window_of_the_sequence_with_statuses(app, annotator)
     assert too_many.status_code == 400 and "count" in too_many.get_json()["fields"]
 
 
-SHARED = Path(__file__).resolve().parents[2].parent / "shared" / "data"
-PRIMESENSE = SHARED / "rgbd-primesense"
 
 
 def chair_from_depth(depth: np.ndarray) -> np.ndarray:

@@ -4,7 +4,6 @@ chair with depth on (its white backrest comes in) and, as a new object, off
 (it stays out)."""
 
 import json
-from pathlib import Path
 
 import numpy as np
 import pytest
@@ -15,12 +14,11 @@ from app.services.importing import import_path
 from app.services.labelling.masks import decode_rle
 from tests.browser.conftest import screenshot, sign_in
 from tests.browser.test_label import drag, open_frame
+from tests.realdata import BACKREST, PRIMESENSE
+from tests.realdata import CHAIR_BOX as BOX
 
 pytestmark = pytest.mark.browser
 
-PRIMESENSE = Path(__file__).resolve().parents[2].parent / "shared" / "data" / "rgbd-primesense"
-BOX = [(335, 105), (610, 390)]  # around the chair of frame 00001
-BACKREST = (420, 150)  # (x, y): white, 20 cm before the white wall
 
 
 def mask_of(page, k: int) -> np.ndarray:

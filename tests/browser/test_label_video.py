@@ -29,13 +29,10 @@ from tests.app.test_suggest import network_like, stored_run
 from tests.browser.conftest import screenshot, sign_in
 from tests.browser.test_label import drag, open_frame, settle
 from tests.browser.test_propagate import wait_for_frame
-from tests.unit.test_grabcut_depth import _chair_truth
+from tests.realdata import BACKREST, CHAIR_BOX, PRIMESENSE, chair_truth
 
 pytestmark = pytest.mark.browser
 
-PRIMESENSE = Path(__file__).resolve().parents[2].parent / "shared" / "data" / "rgbd-primesense"
-BOX = [(335, 105), (610, 390)]  # around the chair of frame 1
-BACKREST = (420, 150)  # (x, y): white, 20 cm before the white wall
 
 
 def iou(a: np.ndarray, b: np.ndarray) -> float:
@@ -49,7 +46,7 @@ def mask_on_page(page) -> np.ndarray:
 
 @pytest.mark.skipif(not PRIMESENSE.exists(), reason="shared data not present")
 def test_label_a_real_rgbd_video_propagate_accept_a_suggestion_and_export(live_app, live_server, browser):
-    chair = _chair_truth()
+    chair = chair_truth()
     with live_app.app_context():
         import_path(PRIMESENSE, activity="room")
         frames = list(db.session.execute(db.select(Frame.id).order_by(Frame.index)).scalars())
@@ -62,7 +59,7 @@ def test_label_a_real_rgbd_video_propagate_accept_a_suggestion_and_export(live_a
     # Frame 1: a box around the chair, with depth (the white backrest comes in).
     open_frame(page, live_server, f1)
     assert page.locator("#use-depth").is_checked()
-    drag(page, BOX)
+    drag(page, CHAIR_BOX)
     page.wait_for_function("() => window.labelPage.instances().length === 1 && window.labelPage.instances()[0].area > 0")
     settle(page)
     boxed = mask_on_page(page)

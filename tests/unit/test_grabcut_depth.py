@@ -1,7 +1,6 @@
 """Tests for GrabCut with depth: ``GrabCutSession(image, depth)``."""
 
 import io
-from pathlib import Path
 
 import cv2
 import numpy as np
@@ -10,9 +9,8 @@ import pytest
 from egonet.errors import EgonetError
 from egonet.grabcut import GrabCutSession
 from egonet.grabcut.depth import _JUMP, _links
+from tests.realdata import PRIMESENSE, chair_truth
 
-SHARED = Path(__file__).resolve().parents[2].parent / "shared" / "data"
-PRIMESENSE = SHARED / "rgbd-primesense"
 
 
 def _iou(a: np.ndarray, b: np.ndarray) -> float:
@@ -177,31 +175,12 @@ def test_depth_is_copied():
 # ------------------------------------------------------ the real RGB-D frame
 
 
-def _chair_truth() -> np.ndarray:
-    """The chair of rgbd-primesense 00001, drawn by hand from the image (640x480).
-
-    Backrest with the left armrest's band and leg, the seat, the right
-    armrest's loop, the left foot. The wall seen through the right loop and
-    under the seat is not the chair.
-    """
-    m = np.zeros((480, 640), np.uint8)
-    back_left = [(350, 110), (483, 112), (484, 198), (495, 210), (495, 242), (402, 242), (402, 357), (398, 372),
-                 (386, 380), (382, 340), (382, 288), (365, 262), (354, 225), (340, 208), (340, 198), (350, 190)]
-    seat = [(402, 242), (600, 244), (606, 256), (604, 270), (585, 282), (540, 292), (480, 297), (402, 297)]
-    cv2.fillPoly(m, [np.array(back_left, np.int32), np.array(seat, np.int32)], 1)
-    arm = [(487, 203), (505, 195), (535, 196), (565, 208), (585, 225), (597, 245), (592, 285), (597, 320),
-           (590, 350), (570, 366), (540, 370), (510, 362), (485, 345)]
-    cv2.polylines(m, [np.array(arm, np.int32)], False, 1, 12)
-    cv2.polylines(m, [np.array([(342, 350), (360, 366), (378, 378)], np.int32)], False, 1, 9)
-    return m.astype(bool)
-
-
 @pytest.mark.skipif(not PRIMESENSE.exists(), reason="shared data not present")
 def test_real_chair_backrest_comes_in_with_depth():
     bgr = cv2.imread(str(PRIMESENSE / "color" / "00001.jpg"), cv2.IMREAD_COLOR)
     image = cv2.cvtColor(bgr, cv2.COLOR_BGR2RGB)
     depth = cv2.imread(str(PRIMESENSE / "depth" / "00001.png"), cv2.IMREAD_UNCHANGED).astype(np.float32) / 1000
-    truth = _chair_truth()
+    truth = chair_truth()
     box = (335, 105, 610, 390)
     # Background strokes on the wall: under the seat, through the right armrest's loop, left of the left leg.
     strokes = [([(420, 322), (540, 322)], "bg", 8), ([(505, 222), (560, 222)], "bg", 6),

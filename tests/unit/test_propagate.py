@@ -10,10 +10,9 @@ import pytest
 from egonet.errors import EgonetError
 from egonet.grabcut import propagate
 from egonet.grabcut.propagation import warp_mask
+from tests.realdata import EGONET_SAMPLES, PRIMESENSE
 
-SHARED = Path(__file__).resolve().parents[2].parent / "shared" / "data"
-PRIMESENSE = SHARED / "rgbd-primesense"
-REAL_FRAMES = SHARED / "egonet-samples" / "rgb"
+REAL_FRAMES = EGONET_SAMPLES / "rgb"
 
 
 def _iou(a: np.ndarray, b: np.ndarray) -> float:
