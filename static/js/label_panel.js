@@ -42,6 +42,8 @@ export function updateControls() {
   const badge = $("#status-badge");
   badge.className = `status status-${meta.status}`;
   badge.textContent = meta.status.replace("_", " ");
+  const tile = document.querySelector(".film-frame.current"); // the filmstrip follows this frame's status
+  if (tile) tile.dataset.status = meta.status;
   $("#no-ao").checked = doc.noActionObject;
   const finished = meta.status === "done" || meta.status === "reviewed";
   if (editable) {

@@ -97,7 +97,7 @@ def test_label_a_real_rgbd_video_propagate_accept_a_suggestion_and_export(live_a
         page.click("#mark-done")
         page.wait_for_function("() => document.querySelector('#status-badge').textContent === 'done'")
         settle(page)
-    open_frame(page, live_server, f1)
+        page.wait_for_selector(f".film-frame.current[data-id='{frame_id}'][data-status='done']")
     page.wait_for_selector("#filmstrip-frames[data-ready='1']")
     assert page.locator(".film-frame[data-status='done']").count() == 3
     screenshot(page, "video-4-done")
