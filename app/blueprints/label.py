@@ -2,8 +2,11 @@
 
 Who may do what:
     * annotators and admins label: the labelling page, their own annotation
-      (read, save, mask upload) and the GrabCut operations;
-    * reviewers and admins review: the review page and accept / reject;
+      (read, save, reopen, mask upload), presence on a frame;
+    * reviewers and admins review: the review page, accept / reject, and a
+      fix of a done annotation's masks before deciding;
+    * all staff run GrabCut, each in their own sessions (a reviewer's fix
+      uses it too), and keep their undo history of what they may edit;
     * all staff see the overview, read any annotation and its masks, and
       download exports.
 
@@ -30,6 +33,7 @@ bp = Blueprint("label", __name__)
 
 LABELLERS = (Role.ANNOTATOR, Role.ADMIN)
 REVIEWERS = (Role.REVIEWER, Role.ADMIN)
+EDITORS = (Role.ANNOTATOR, Role.REVIEWER, Role.ADMIN)  # who draws: labellers, and reviewers fixing a mask
 
 INSTANCE = Obj(
     {
@@ -39,13 +43,17 @@ INSTANCE = Obj(
         "mask": labelling.Rle(),
     }
 )
-SAVE = {
+FIX = {
     "version": Int(min=0),
     "instances": List(INSTANCE, max_len=labelling.MAX_INSTANCES),
     "no_action_object": Bool(default=False),
+}
+SAVE = {
+    **FIX,
     "status": Str(choices=[s.value for s in labelling.AUTHOR_STATUSES], nullable=True, default=None),
     "time_spent_delta_s": Float(min=0, max=labelling.MAX_TIME_DELTA_S, default=0.0),
 }
+VERSION = {"version": Int(min=0)}
 POINT = List(Float(), min_len=2, max_len=2)
 TARGET = {"frame_id": Int(min=1), "instance": Str(min_len=1, max_len=40)}
 # use_depth: null or absent = the frame's depth when it has one (see labelling.grabcut_box).
@@ -119,8 +127,11 @@ def page_config(frame: Frame, *, mode: str, annotation: Annotation | None = None
     }
     if mode == "label":
         previous, following = frames_service.neighbours(frame)
+        config["heartbeat_s"] = labelling.HEARTBEAT_S
         config["urls"].update(
             annotation=url_for("label.own_annotation", frame_id=frame.id),
+            reopen=url_for("label.reopen_annotation", frame_id=frame.id),
+            presence=url_for("label.presence", frame_id=frame.id),
             time=url_for("label.add_time", frame_id=frame.id),
             previous=url_for("label.frame", frame_id=previous) if previous else None,
             next=url_for("label.frame", frame_id=following) if following else None,
@@ -135,8 +146,10 @@ def page_config(frame: Frame, *, mode: str, annotation: Annotation | None = None
             {"id": run.id, "label": f"Run {run.id}: {run.name}"} for run in labelling.suggestion_runs()
         ]
     else:
+        config["own"] = annotation.author_id == current_user.id
         config["urls"].update(
             annotation=url_for("label.annotation", annotation_id=annotation.id),
+            fix=url_for("label.fix_annotation", annotation_id=annotation.id),
             review=url_for("label.review_annotation", annotation_id=annotation.id),
             next_review=url_for("label.next_review", after=annotation.id),
         )
@@ -219,7 +232,10 @@ def annotation_json(annotation: Annotation | None, frame: Frame) -> dict:
         "review_comment": None,
         "reviewer": None,
         "reviewed_at": None,
+        "fixed_by": None,
+        "fixed_at": None,
         "updated_at": None,
+        "history_url": None,
         "mask_url": None,
         "proposed_by_run_id": None,
         "proposed_by_checkpoint_id": None,
@@ -237,7 +253,10 @@ def annotation_json(annotation: Annotation | None, frame: Frame) -> dict:
         review_comment=annotation.review_comment,
         reviewer=annotation.reviewer.username if annotation.reviewer else None,
         reviewed_at=annotation.reviewed_at.isoformat() if annotation.reviewed_at else None,
+        fixed_by=annotation.fixed_by.username if annotation.fixed_by else None,
+        fixed_at=annotation.fixed_at.isoformat() if annotation.fixed_at else None,
         updated_at=annotation.updated_at.isoformat(),
+        history_url=url_for("label.history", annotation_id=annotation.id),
         mask_url=url_for("label.annotation_mask", annotation_id=annotation.id) if annotation.mask_path else None,
         proposed_by_run_id=annotation.proposed_by_run_id,
         proposed_by_checkpoint_id=annotation.proposed_by_checkpoint_id,
@@ -275,6 +294,29 @@ def save_annotation(frame_id: int):
     fr = labelling.get_frame(frame_id)
     annotation = labelling.save_annotation(fr, me(), data)
     return annotation_json(annotation, fr)
+
+
+@bp.post("/api/label/frames/<int:frame_id>/annotation/reopen")
+@roles(*LABELLERS)
+def reopen_annotation(frame_id: int):
+    """``{version}``: put the user's done or reviewed annotation back in progress ("Edit")."""
+    data = json_body(VERSION)
+    fr = labelling.get_frame(frame_id)
+    return annotation_json(labelling.reopen_annotation(fr, me(), version=data["version"]), fr)
+
+
+@bp.post("/api/label/frames/<int:frame_id>/presence")
+@roles(*LABELLERS)
+def presence(frame_id: int):
+    """``{open}``: the user has the frame open (true, every HEARTBEAT_S) or left it (false);
+    answers who else is on the frame (``others``: open, or with an annotation of it)."""
+    data = json_body({"open": Bool()})
+    fr = labelling.get_frame(frame_id)
+    if data["open"]:
+        labelling.mark_present(fr, me())
+    else:
+        labelling.leave(fr, me())
+    return {"others": [h.to_dict() for h in labelling.others_on(fr, me())], "ttl_s": labelling.PRESENCE_TTL_S}
 
 
 @bp.post("/api/label/frames/<int:frame_id>/annotation/time")
@@ -413,6 +455,45 @@ def upload_instance_mask(annotation_id: int, position: int):
     return annotation_json(ann, ann.frame)
 
 
+@bp.put("/api/label/annotations/<int:annotation_id>")
+@roles(*REVIEWERS)
+def fix_annotation(annotation_id: int):
+    """A reviewer's fix of a done annotation's masks (``{version, instances, no_action_object}``), before deciding."""
+    data = json_body(FIX)
+    ann = labelling.fix_annotation(labelling.get_annotation(annotation_id), me(), data)
+    return annotation_json(ann, ann.frame)
+
+
+@bp.get("/api/label/annotations/<int:annotation_id>/history")
+@roles(*EDITORS)
+def history(annotation_id: int):
+    """The user's undo history of the annotation as the page stored it (gzip), 404 without one;
+    ``X-Annotation-Version`` is the version it ends at."""
+    row = labelling.get_history(labelling.get_annotation(annotation_id), me())
+    if row is None:
+        raise Problem("no undo history kept for this annotation", status=404, fields={"history": "none"})
+    response = Response(row.data, mimetype="application/gzip")
+    response.headers["Cache-Control"] = "no-store"
+    response.headers["X-Annotation-Version"] = str(row.version)
+    return response
+
+
+@bp.put("/api/label/annotations/<int:annotation_id>/history")
+@roles(*EDITORS)
+def put_history(annotation_id: int):
+    """Store the page's undo history (gzip body, ``?version=N``: the annotation's version it ends at); 204."""
+    version = query_int("version", min=1)
+    if version is None:
+        raise Problem("version: give the annotation's version as ?version=N", fields={"version": "is required"})
+    limit = labelling.MAX_HISTORY_BYTES
+    if (request.content_length or 0) > limit:
+        raise Problem(f"history: more than the {limit} bytes an undo history may take", status=413,
+                      fields={"history": f"over {limit} bytes"})
+    data = request.stream.read(limit + 1)
+    labelling.put_history(labelling.get_annotation(annotation_id), me(), version=version, data=data)
+    return "", 204
+
+
 @bp.post("/api/label/annotations/<int:annotation_id>/review")
 @roles(*REVIEWERS)
 def review_annotation(annotation_id: int):
@@ -431,6 +512,7 @@ def _mask_file(relative: str):
 
 # --------------------------------------------------------------------------
 # API: GrabCut, on the server, one session per user, frame and instance
+# (a reviewer fixing a done annotation has sessions of their own on its frame)
 
 
 def png_response(mask, *, can_undo: bool | None = None, started: float | None = None) -> Response:
@@ -444,12 +526,15 @@ def png_response(mask, *, can_undo: bool | None = None, started: float | None = 
 
 
 def _target(data: dict) -> tuple[Frame, str]:
+    """The frame and object of a GrabCut step; 409 while the user's annotation of the frame is finished."""
     fr = labelling.get_frame(data["frame_id"], field="frame_id")
-    return fr, labelling.check_key(data["instance"])
+    key = labelling.check_key(data["instance"])
+    labelling.check_open_frame(fr, me())
+    return fr, key
 
 
 @bp.post("/api/label/grabcut/box")
-@roles(*LABELLERS)
+@roles(*EDITORS)
 def grabcut_box():
     """``{frame_id, instance, box: [x0, y0, x1, y1], use_depth?}`` -> the object's first mask (PNG)."""
     started = time.perf_counter()
@@ -461,7 +546,7 @@ def grabcut_box():
 
 
 @bp.post("/api/label/grabcut/stroke")
-@roles(*LABELLERS)
+@roles(*EDITORS)
 def grabcut_stroke():
     """``{frame_id, instance, points: [[x, y], ...], label: fg|bg, radius}`` -> the updated mask (PNG)."""
     started = time.perf_counter()
@@ -474,7 +559,7 @@ def grabcut_stroke():
 
 
 @bp.post("/api/label/grabcut/undo")
-@roles(*LABELLERS)
+@roles(*EDITORS)
 def grabcut_undo():
     """``{frame_id, instance}`` -> the mask before the last GrabCut operation (PNG)."""
     started = time.perf_counter()
@@ -484,7 +569,7 @@ def grabcut_undo():
 
 
 @bp.get("/api/label/grabcut/mask.png")
-@roles(*LABELLERS)
+@roles(*EDITORS)
 def grabcut_mask():
     """``?frame_id=&instance=`` -> the session's current mask (PNG), 404 without a session."""
     frame_id = query_int("frame_id")

@@ -65,6 +65,9 @@ class Annotation(Base):
     # Who accepted or rejected the annotation last, and when.
     reviewer_id: Mapped[int | None] = mapped_column(ForeignKey("user.id"))
     reviewed_at: Mapped[datetime | None] = mapped_column(UTCDateTime())
+    # A reviewer who fixed the masks before deciding, and when (the annotation stays its author's).
+    fixed_by_id: Mapped[int | None] = mapped_column(ForeignKey("user.id"))
+    fixed_at: Mapped[datetime | None] = mapped_column(UTCDateTime())
     created_at: Mapped[datetime] = mapped_column(UTCDateTime(), default=utcnow)
     updated_at: Mapped[datetime] = mapped_column(UTCDateTime(), default=utcnow, onupdate=utcnow)
     # Ids, not relationships: a deleted run or checkpoint leaves the annotation as it is.
@@ -76,6 +79,7 @@ class Annotation(Base):
     frame: Mapped[Frame] = relationship(back_populates="annotations")
     author: Mapped[User] = relationship(foreign_keys=[author_id])
     reviewer: Mapped[User | None] = relationship(foreign_keys=[reviewer_id])
+    fixed_by: Mapped[User | None] = relationship(foreign_keys=[fixed_by_id])
     instances: Mapped[list["Instance"]] = relationship(
         back_populates="annotation", order_by="Instance.position", cascade="all, delete-orphan", passive_deletes=True
     )
@@ -140,3 +144,44 @@ class GrabCutState(Base):
     updated_at: Mapped[datetime] = mapped_column(UTCDateTime(), default=utcnow, onupdate=utcnow)
 
     __mapper_args__ = {"version_id_col": revision, "version_id_generator": lambda _: uuid.uuid4().hex}
+
+
+class EditHistory(Base):
+    """A person's undo / redo history of an annotation on the labelling page,
+    so it survives reloads, restarts and another browser.
+
+    ``data`` is what the page sent (gzip-compressed JSON: the history's
+    snapshots as row runs); the server never decodes it, it only bounds its
+    size (LABEL_HISTORY_MAX_BYTES). ``version`` is the annotation's version
+    the history ends at: the page restores it as it is when that is still
+    the annotation's version, and otherwise bridges the gap with one undoable
+    step (``app.services.labelling.history``).
+    """
+
+    __tablename__ = "edit_history"
+    __table_args__ = (UniqueConstraint("user_id", "annotation_id"),)
+
+    id: Mapped[int] = mapped_column(primary_key=True)
+    user_id: Mapped[int] = mapped_column(ForeignKey("user.id", ondelete="CASCADE"))
+    annotation_id: Mapped[int] = mapped_column(ForeignKey("annotation.id", ondelete="CASCADE"), index=True)
+    version: Mapped[int]
+    data: Mapped[bytes] = mapped_column(LargeBinary)
+    updated_at: Mapped[datetime] = mapped_column(UTCDateTime(), default=utcnow, onupdate=utcnow)
+
+
+class FramePresence(Base):
+    """Who has a frame open on the labelling page: the page says so when it
+    opens the frame and then every half minute; a row not seen for
+    ``presence.PRESENCE_TTL_S`` no longer counts (the tab was closed or the
+    machine slept)."""
+
+    __tablename__ = "frame_presence"
+    __table_args__ = (UniqueConstraint("frame_id", "user_id"),)
+
+    id: Mapped[int] = mapped_column(primary_key=True)
+    frame_id: Mapped[int] = mapped_column(ForeignKey("frame.id", ondelete="CASCADE"), index=True)
+    user_id: Mapped[int] = mapped_column(ForeignKey("user.id", ondelete="CASCADE"))
+    opened_at: Mapped[datetime] = mapped_column(UTCDateTime(), default=utcnow)
+    seen_at: Mapped[datetime] = mapped_column(UTCDateTime(), default=utcnow, index=True)
+
+    user: Mapped[User] = relationship()

@@ -131,24 +131,31 @@ def test_statuses_no_action_object_and_time_spent(app, annotator):
     done = annotator.put(url, json=body(v, no_action_object=True, status="done", time_spent_delta_s=7.5)).get_json()
     assert done["status"] == "done" and done["no_action_object"] and done["mask_url"] is None
     assert done["time_spent_s"] == pytest.approx(20.0)
-    # A time-only save keeps the status; an edit of a done annotation stays done (to be reviewed again).
-    same = annotator.put(url, json=body(done["version"], no_action_object=True, time_spent_delta_s=1)).get_json()
-    assert same["status"] == "done" and same["time_spent_s"] == pytest.approx(21.0)
-    edited = annotator.put(url, json=body(same["version"], square(0, 5, 0, 5))).get_json()
-    assert edited["status"] == "done"
-    reopened = annotator.put(url, json=body(edited["version"], square(0, 5, 0, 5), status="in_progress")).get_json()
-    assert reopened["status"] == "in_progress"
+    # A done annotation is read-only: any save is refused until it is reopened, and costs nothing.
+    for attempt in (body(done["version"], no_action_object=True), body(done["version"], square(0, 5, 0, 5))):
+        refused = annotator.put(url, json=attempt)
+        assert refused.status_code == 409, refused.get_json()
+        error = refused.get_json()
+        assert error["reason"] == "finished" and "reopen it" in error["message"] and "status" in error["fields"]
+    reopen_url = f"{url}/reopen"
+    assert annotator.post(reopen_url, json={"version": done["version"] - 1}).status_code == 409
+    reopened = annotator.post(reopen_url, json={"version": done["version"]}).get_json()
+    assert reopened["status"] == "in_progress" and reopened["version"] == done["version"] + 1
+    assert annotator.post(reopen_url, json={"version": reopened["version"]}).get_json()["version"] == reopened["version"]
+    edited = annotator.put(url, json=body(reopened["version"], square(0, 5, 0, 5))).get_json()
+    assert edited["status"] == "in_progress" and edited["time_spent_s"] == pytest.approx(20.0)
+    reopened = edited
     # Time alone (sent when the page is hidden) adds up without a new version.
     time_url = f"{url}/time"
     assert annotator.post(time_url, json={"seconds": 4}).status_code == 204
     assert annotator.post(time_url, json={"seconds": -4}).get_json()["fields"] == {"seconds": "must be >= 0"}
     after = annotator.get(url).get_json()
-    assert after["version"] == reopened["version"] and after["time_spent_s"] == pytest.approx(25.0)
+    assert after["version"] == reopened["version"] and after["time_spent_s"] == pytest.approx(24.0)
     other_frame = make_frames(app, n=1, activity="hotel")[0]
     assert annotator.post(f"/api/label/frames/{other_frame}/annotation/time", json={"seconds": 1}).status_code == 404
     with app.app_context():
         annotation = db.session.execute(db.select(Annotation)).scalar_one()
-        assert annotation.mask_path is not None and annotation.time_spent_s == pytest.approx(25.0)
+        assert annotation.mask_path is not None and annotation.time_spent_s == pytest.approx(24.0)
 
 
 def broken_counts(change):

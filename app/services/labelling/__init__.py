@@ -5,7 +5,9 @@ the server-side GrabCut sessions that help draw it; import it from here.
       statuses) and its instances;
     * ``grabcut``: the GrabCut sessions (their saved state, this worker's
       caches, locks, box / stroke / undo and what each may cost);
-    * ``review``: accept / reject, the annotators' and reviewers' queues;
+    * ``review``: accept / reject, a reviewer's fix, the annotators' and reviewers' queues;
+    * ``history``: the labelling page's undo / redo history, kept on the server;
+    * ``presence``: who else has a frame open or an annotation of it;
     * ``masks``: masks as COCO RLE and PNG, checked before they are decoded;
     * ``propagation``: carrying an annotation to the next / from the previous
       frame of its sequence, and the sequence's filmstrip;
@@ -18,10 +20,13 @@ from app.services.labelling.annotations import (
     MAX_TIME_DELTA_S,
     add_time,
     check_key,
+    check_open,
+    check_open_frame,
     empty_mask,
     get_annotation,
     get_frame,
     instance_of,
+    reopen_annotation,
     save_annotation,
     upload_instance_mask,
     user_annotation,
@@ -36,6 +41,7 @@ from app.services.labelling.grabcut import (
     grabcut_undo,
     stroke_pixels,
 )
+from app.services.labelling.history import MAX_HISTORY_BYTES, get_history, put_history
 from app.services.labelling.masks import Rle, coco_decode, decode_rle, max_rle_chars
 from app.services.labelling.propagation import (
     FILMSTRIP_MAX,
@@ -59,8 +65,10 @@ from app.services.labelling.suggest import (
     suggest_from_page,
     suggestion_runs,
 )
+from app.services.labelling.presence import HEARTBEAT_S, PRESENCE_TTL_S, leave, mark_present, others_on
 from app.services.labelling.review import (
     annotator_queue,
+    fix_annotation,
     next_to_review,
     next_unlabelled,
     review_annotation,
@@ -70,7 +78,10 @@ from app.services.labelling.review import (
 __all__ = [
     "AUTHOR_STATUSES",
     "FILMSTRIP_MAX",
+    "HEARTBEAT_S",
+    "MAX_HISTORY_BYTES",
     "MAX_INSTANCES",
+    "PRESENCE_TTL_S",
     "MAX_TIME_DELTA_S",
     "BatchReport",
     "Filmstrip",
@@ -84,26 +95,35 @@ __all__ = [
     "annotator_queue",
     "check_box",
     "check_key",
+    "check_open",
+    "check_open_frame",
     "check_stroke",
     "coco_decode",
     "copy_from_previous",
     "decode_rle",
     "empty_mask",
     "filmstrip",
+    "fix_annotation",
     "get_annotation",
     "get_frame",
+    "get_history",
     "grabcut_box",
     "grabcut_keys",
     "grabcut_mask",
     "grabcut_stroke",
     "grabcut_undo",
     "instance_of",
+    "leave",
+    "mark_present",
     "max_rle_chars",
     "next_to_review",
     "next_unlabelled",
+    "others_on",
     "propagate_to_next",
     "proposal_regions",
+    "put_history",
     "queue_suggestions",
+    "reopen_annotation",
     "resolve_run",
     "review_annotation",
     "review_queue",

@@ -13,9 +13,14 @@ Statuses. An annotation starts in progress; its author marks it done (at
 least one drawn instance, or "no action-object"); a reviewer accepts a done
 annotation (reviewed) or rejects it with a comment (rejected), which sends it
 back to its author with the comment (see ``review``). Editing a rejected
-annotation puts it back in progress; editing a done or reviewed one leaves it
-done, so a changed annotation is reviewed again. Marking it done lets go of
-the GrabCut sessions of instances it no longer has.
+annotation puts it back in progress. A done or reviewed annotation is
+read-only: a save, a mask upload or a GrabCut step on it is refused (409,
+``reason: "finished"``) until its author reopens it (``reopen_annotation``,
+the page's "Edit"), which puts it back in progress, so it must be marked
+done, and reviewed, again; reopening a reviewed one withdraws its
+acceptance. Nothing demotes a finished annotation silently. (A reviewer may
+fix a done annotation's masks before deciding: ``review.fix_annotation``.)
+Marking it done lets go of the GrabCut sessions of instances it no longer has.
 
 Proposals. An instance a model proposed (``suggest``) keeps its mark through
 saves that bring its key with the same mask; a save that changes its mask
@@ -34,7 +39,7 @@ from sqlalchemy.orm.exc import StaleDataError
 
 from app.errors import Problem
 from app.extensions import db
-from app.models import Annotation, Frame, Instance, InstanceKind, Status, User, utcnow
+from app.models import FINISHED, Annotation, Frame, Instance, InstanceKind, Status, User, utcnow
 from app.services import media
 from app.services.labelling.grabcut import forget_sessions
 from app.services.labelling.masks import decode_mask_png, decode_rle
@@ -131,12 +136,30 @@ def save_annotation(frame: Frame, user: User, data: dict) -> Annotation:
     existing = user_annotation(frame, user)
     if data["version"] != (existing.version if existing is not None else 0):
         raise stale(existing.version if existing is not None else 0)  # before any mask is decoded or stored
+    if existing is not None:
+        check_open(existing)
+    status = Status(data["status"]) if data["status"] else None
+    return _write(
+        frame,
+        user,
+        version=data["version"],
+        specs=instance_specs(frame, data["instances"]),
+        no_action_object=data["no_action_object"],
+        status=status,
+        time_delta_s=data["time_spent_delta_s"],
+    )
+
+
+def instance_specs(frame: Frame, instances: list[dict]) -> list["InstanceSpec"]:
+    """A save's instances (``key``, ``kind``, ``label``, ``mask`` as RLE), checked, with their masks stored.
+
+    Mask files go first: if the commit then fails, only unreferenced
+    content-addressed files remain.
+    """
     shape = (frame.height, frame.width)
-    _check_keys([item["key"] for item in data["instances"]])
-    masks = [decode_rle(item["mask"], shape, field=f"instances[{i}].mask") for i, item in enumerate(data["instances"])]
-    # Mask files first: if the commit then fails, only unreferenced
-    # content-addressed files remain.
-    specs = [
+    _check_keys([item["key"] for item in instances])
+    masks = [decode_rle(item["mask"], shape, field=f"instances[{i}].mask") for i, item in enumerate(instances)]
+    return [
         InstanceSpec(
             key=item["key"],
             kind=InstanceKind(item["kind"]) if item["kind"] else None,
@@ -144,18 +167,60 @@ def save_annotation(frame: Frame, user: User, data: dict) -> Annotation:
             mask_path=media.store(egonet_io.encode_png(mask), ".png"),
             mask=mask,
         )
-        for item, mask in zip(data["instances"], masks)
+        for item, mask in zip(instances, masks)
     ]
-    status = Status(data["status"]) if data["status"] else None
-    return _write(
-        frame,
-        user,
-        version=data["version"],
-        specs=specs,
-        no_action_object=data["no_action_object"],
-        status=status,
-        time_delta_s=data["time_spent_delta_s"],
+
+
+def check_open(annotation: Annotation) -> None:
+    """Refuse to change a done or reviewed annotation that was not reopened.
+
+    Raises:
+        Problem: 409 with ``reason: "finished"`` and ``current_version``.
+    """
+    if annotation.status not in FINISHED:
+        return
+    what = "done" if annotation.status is Status.DONE else "reviewed (accepted)"
+    raise Problem(
+        f"this annotation is {what} and read-only: reopen it (Edit) to change it, which puts it back in progress",
+        status=409,
+        fields={"status": f"is {annotation.status.value}: reopen it first"},
+        reason="finished",
+        current_version=annotation.version,
     )
+
+
+def check_open_frame(frame: Frame, user: User) -> None:
+    """Refuse a change of the user's annotation of the frame while it is done or reviewed (see ``check_open``)."""
+    annotation = user_annotation(frame, user)
+    if annotation is not None:
+        check_open(annotation)
+
+
+def reopen_annotation(frame: Frame, user: User, *, version: int) -> Annotation:
+    """Put the user's done or reviewed annotation back in progress ("Edit"), with a version check.
+
+    A reviewed annotation loses its acceptance: it must be marked done and
+    reviewed again. The last decision's reviewer and comment stay on it.
+    An annotation already open is returned as it is.
+
+    Raises:
+        Problem: 404 when the user has no annotation of the frame, 409 for a stale ``version``.
+    """
+    annotation = user_annotation(frame, user)
+    if annotation is None:
+        raise Problem("you have no annotation of this frame to reopen", status=404, fields={"frame_id": "no annotation"})
+    if version != annotation.version:
+        raise stale(annotation.version)
+    if annotation.status not in FINISHED:
+        return annotation
+    annotation.status = Status.IN_PROGRESS
+    annotation.updated_at = utcnow()
+    try:
+        db.session.commit()
+    except StaleDataError:
+        db.session.rollback()
+        raise stale(user_annotation(frame, user).version) from None
+    return annotation
 
 
 def _check_keys(keys: list[str]) -> None:
@@ -183,6 +248,7 @@ def upload_instance_mask(annotation: Annotation, user: User, *, position: int, v
         raise Problem("only its author can change an annotation", status=403)
     if version != annotation.version:
         raise stale(annotation.version)
+    check_open(annotation)
     current = annotation.instances
     if not 0 <= position <= len(current):
         raise Problem(f"there is no instance {position} (the annotation has {len(current)})", status=404,
@@ -218,9 +284,11 @@ def _write(
     status: Status | None,
     time_delta_s: float,
     proposed_by: tuple[int, int] | None = None,
+    fixed_by: User | None = None,
 ) -> Annotation:
     """Write the user's annotation of the frame (see ``save_annotation``);
-    ``proposed_by`` ``(run id, checkpoint id)`` records a suggestion's source."""
+    ``proposed_by`` ``(run id, checkpoint id)`` records a suggestion's source,
+    ``fixed_by`` the reviewer whose fix this is (``review.fix_annotation``)."""
     annotation = user_annotation(frame, user)
     current = annotation.version if annotation is not None else 0
     if version != current:
@@ -253,6 +321,8 @@ def _write(
     annotation.no_action_object = no_action_object
     annotation.mask_path = union_path
     annotation.status = _next_status(annotation.status, requested=status, changed=changed)
+    if fixed_by is not None and changed:
+        annotation.fixed_by, annotation.fixed_at = fixed_by, utcnow()
     annotation.time_spent_s = (annotation.time_spent_s or 0.0) + time_delta_s
     annotation.updated_at = utcnow()  # always an UPDATE, so the version moves on
     _commit(annotation, frame, user, specs, changed=changed)
@@ -342,15 +412,12 @@ def _check_complete(specs: list[InstanceSpec], no_action_object: bool) -> None:
 
 
 def _next_status(current: Status, *, requested: Status | None, changed: bool) -> Status:
-    if requested is Status.DONE:
-        # Confirming "done" on an accepted annotation that did not change keeps the acceptance.
-        return Status.REVIEWED if current is Status.REVIEWED and not changed else Status.DONE
-    if requested is Status.IN_PROGRESS:
-        return Status.IN_PROGRESS
+    if requested is not None:
+        return requested
     if not changed:
         return current
-    if current in (Status.DONE, Status.REVIEWED):
-        return Status.DONE  # an edited finished annotation goes back to review
+    if current is Status.DONE:
+        return Status.DONE  # a reviewer's fix (review.fix_annotation): still waiting for the decision
     return Status.IN_PROGRESS
 
 

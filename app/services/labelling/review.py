@@ -1,10 +1,15 @@
-"""Review and the queues: a reviewer's decision on a done annotation, and
-which frames and annotations wait for whom.
+"""Review and the queues: a reviewer's decision on a done annotation, a
+reviewer's fix of its masks, and which frames and annotations wait for whom.
 
 A reviewer accepts a done annotation (reviewed; its GrabCut sessions go) or
-rejects it with a comment (rejected, back to its author). An annotator's
-queue runs in dataset order (activity, sequence, index) over the frames
-nobody else has taken; a reviewer's runs oldest first.
+rejects it with a comment (rejected, back to its author). Before deciding, a
+reviewer may fix its masks on the review page (``fix_annotation``): the fix
+is saved into the author's annotation (it stays theirs, one per frame and
+author, with the author's time), with the usual version check, and records
+the reviewer as ``fixed_by`` with ``fixed_at``; it stays done, waiting for
+the decision, which the reviewer then makes on the fixed version. An
+annotator's queue runs in dataset order (activity, sequence, index) over the
+frames nobody else has taken or has open; a reviewer's runs oldest first.
 """
 
 from dataclasses import dataclass
@@ -15,8 +20,10 @@ from sqlalchemy.orm.exc import StaleDataError
 from app.errors import Problem
 from app.extensions import db
 from app.models import FINISHED, Activity, Annotation, Frame, Sequence, Status, User, utcnow
-from app.services.labelling.annotations import get_annotation, stale
+from app.services.labelling.annotations import _write, get_annotation, instance_specs, stale, user_annotation
 from app.services.labelling.grabcut import forget_sessions
+from app.services.labelling.history import forget_histories
+from app.services.labelling.presence import held_by_others
 
 # --------------------------------------------------------------------------
 # Review
@@ -37,24 +44,55 @@ def review_annotation(annotation: Annotation, reviewer: User, *, version: int, d
         raise Problem("comment: say what to fix when rejecting", fields={"comment": "required when rejecting"})
     if annotation.version != version:
         raise stale(annotation.version)
-    if annotation.status is not Status.DONE:
-        raise Problem(
-            f"only done annotations can be reviewed; this one is {annotation.status.value.replace('_', ' ')}",
-            status=409,
-            fields={"status": f"is {annotation.status.value}"},
-        )
+    _check_done(annotation)
     annotation.status = Status.REVIEWED if decision == "accept" else Status.REJECTED
     annotation.review_comment = comment
     annotation.reviewer = reviewer
     annotation.reviewed_at = utcnow()
+    forget_histories(annotation, user=reviewer)
+    if user_annotation(annotation.frame, reviewer) is None:
+        forget_sessions(annotation.frame, reviewer, keep=set())  # those of a fix
     if annotation.status is Status.REVIEWED:
         forget_sessions(annotation.frame, annotation.author, keep=set())
+        forget_histories(annotation)
     try:
         db.session.commit()
     except StaleDataError:
         db.session.rollback()
         raise stale(get_annotation(annotation.id).version) from None
     return annotation
+
+
+def fix_annotation(annotation: Annotation, reviewer: User, data: dict) -> Annotation:
+    """Save a reviewer's fix of a done annotation's masks, before the decision.
+
+    ``data`` holds ``version``, ``instances`` and ``no_action_object`` as a
+    save does (``annotations.save_annotation``). The annotation stays its
+    author's and stays done; ``fixed_by`` / ``fixed_at`` record the fix.
+
+    Raises:
+        Problem: 403 for the reviewer's own annotation (fix it on the
+            labelling page), 409 for a stale ``version`` or an annotation
+            that is not done, 400 naming a bad field.
+    """
+    if annotation.author_id == reviewer.id:
+        raise Problem("this is your own annotation: change it on the labelling page", status=403,
+                      fields={"annotation_id": "is your own"})
+    if data["version"] != annotation.version:
+        raise stale(annotation.version)
+    _check_done(annotation)
+    frame, author = annotation.frame, annotation.author
+    return _write(frame, author, version=data["version"], specs=instance_specs(frame, data["instances"]),
+                  no_action_object=data["no_action_object"], status=None, time_delta_s=0.0, fixed_by=reviewer)
+
+
+def _check_done(annotation: Annotation) -> None:
+    if annotation.status is not Status.DONE:
+        raise Problem(
+            f"only done annotations can be reviewed; this one is {annotation.status.value.replace('_', ' ')}",
+            status=409,
+            fields={"status": f"is {annotation.status.value}"},
+        )
 
 
 # --------------------------------------------------------------------------
@@ -69,7 +107,8 @@ def _unlabelled_for(user: User):
     """SQL condition: the frame still needs labelling, as far as ``user`` goes.
 
     A frame is taken when any annotation of it is finished, or another
-    person's is in progress or rejected (it is theirs to finish).
+    person's is in progress or rejected (it is theirs to finish), or another
+    person has it open (``presence``).
     """
     taken = exists().where(
         Annotation.frame_id == Frame.id,
@@ -78,7 +117,7 @@ def _unlabelled_for(user: User):
             and_(Annotation.author_id != user.id, Annotation.status.in_((Status.IN_PROGRESS, Status.REJECTED))),
         ),
     )
-    return ~taken
+    return ~taken & ~held_by_others(user)
 
 
 def next_unlabelled(user: User, *, after: Frame | None = None, activity_id: int | None = None) -> int | None:

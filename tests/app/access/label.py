@@ -1,9 +1,11 @@
 """Access rules of the label area (see __init__).
 
-Annotators and admins label (the labelling page, their own annotation, GrabCut);
-reviewers and admins review; all staff see the overview, read annotations and
-their masks, and download exports. Bodiless writes answer 400 (the body or
-``?version=`` is missing), and so do the GrabCut mask without its query.
+Annotators and admins label (the labelling page, their own annotation,
+presence); reviewers and admins review (and fix a done annotation's masks);
+all staff run GrabCut and keep undo histories (a reviewer's fix draws too),
+see the overview, read annotations and their masks, and download exports.
+Bodiless writes answer 400 (the body or ``?version=`` is missing), and so do
+the GrabCut mask without its query; nobody has a stored undo history (404).
 """
 
 from app.extensions import db
@@ -17,6 +19,7 @@ from tests.app.factories import image_folder
 
 LABELLERS = frozenset({Role.ANNOTATOR, Role.ADMIN})
 REVIEWERS = frozenset({Role.REVIEWER, Role.ADMIN})
+EDITORS = LABELLERS | REVIEWERS
 
 RULES = {
     "label.index": (STAFF, 200),
@@ -28,15 +31,20 @@ RULES = {
     "label.own_annotation": (LABELLERS, 200),
     "label.save_annotation": (LABELLERS, 400),
     "label.add_time": (LABELLERS, 400),
+    "label.reopen_annotation": (LABELLERS, 400),
+    "label.presence": (LABELLERS, 400),
+    "label.fix_annotation": (REVIEWERS, 400),
+    "label.history": (EDITORS, 404),
+    "label.put_history": (EDITORS, 400),
     "label.annotation": (STAFF, 200),
     "label.annotation_mask": (STAFF, 200),
     "label.instance_mask": (STAFF, 200),
     "label.upload_instance_mask": (LABELLERS, 400),
     "label.review_annotation": (REVIEWERS, 400),
-    "label.grabcut_box": (LABELLERS, 400),
-    "label.grabcut_stroke": (LABELLERS, 400),
-    "label.grabcut_undo": (LABELLERS, 400),
-    "label.grabcut_mask": (LABELLERS, 400),
+    "label.grabcut_box": (EDITORS, 400),
+    "label.grabcut_stroke": (EDITORS, 400),
+    "label.grabcut_undo": (EDITORS, 400),
+    "label.grabcut_mask": (EDITORS, 400),
     "label.propagate_next": (LABELLERS, 404),
     "label.copy_previous": (LABELLERS, 404),
     "label.filmstrip": (LABELLERS, 200),
