@@ -108,6 +108,7 @@ def page_config(frame: Frame, *, mode: str, annotation: Annotation | None = None
     """What the page script needs: the frame, its media and the API's URLs."""
     config = {
         "mode": mode,
+        "history_max_bytes": labelling.MAX_HISTORY_BYTES,
         "frame": {
             "id": frame.id,
             "width": frame.width,

@@ -150,6 +150,7 @@ export function saveText({ state, error, retryAt }, now = Date.now()) {
   if (state === "saved") return "All changes saved";
   if (state === "pending") return "Unsaved changes…";
   if (state === "saving") return "Saving…";
+  if (state === "conflict" && error?.body?.reason === "finished") return "Not saved: this frame is done and read-only — Edit to change it";
   if (state === "conflict") return "Not saved: this frame was saved elsewhere";
   const status = error?.status;
   if (status === 401) return "Not saved: you are signed out — sign in again in another tab";
@@ -159,6 +160,18 @@ export function saveText({ state, error, retryAt }, now = Date.now()) {
   else if (status === 400 && error.body?.error === "csrf") reason = "the page's security token was refused; reload the page";
   if (retryAt === null || retryAt === undefined) return `Not saved: ${reason}`;
   return `Not saved: ${reason}; retrying in ${Math.max(1, Math.ceil((retryAt - now) / 1000))}s`;
+}
+
+// What the page's save indicator says, from the saver and the page's own
+// work: a server step under way (`running`, a GrabCut call) is not saved
+// yet, and a step that failed (`dropped`: {what, reason}) is not in the
+// document at all, so neither may read "All changes saved". A failed or
+// refused save says so first. Returns {state, text}.
+export function indicator({ saver, running = 0, dropped = null }, now = Date.now()) {
+  if (saver.state === "conflict" || saver.state === "error") return { state: saver.state, text: saveText(saver, now) };
+  if (dropped) return { state: "error", text: `Not applied: ${dropped.what} — ${dropped.reason}` };
+  if (running > 0) return { state: "saving", text: "Working…" };
+  return { state: saver.state, text: saveText(saver, now) };
 }
 
 // Seconds of active work on a page: counted while the page is visible and

@@ -60,3 +60,44 @@ export function dragBox(a, b, width, height) {
   if (x1 - x0 < 2 || y1 - y0 < 2) return null;
   return [x0, y0, x1, y1];
 }
+
+// After the viewport changed size (a banner came or went, the window was
+// resized): keep the image point that was at the viewport's centre there.
+export function recentre(view, oldWidth, oldHeight, newWidth, newHeight) {
+  return { scale: view.scale, tx: view.tx + (newWidth - oldWidth) / 2, ty: view.ty + (newHeight - oldHeight) / 2 };
+}
+
+// Which part of box [x0, y0, x1, y1) (image pixels) the screen point (sx, sy)
+// grabs: a corner ("nw", "ne", "se", "sw"), an edge ("n", "e", "s", "w"),
+// the inside ("move"), or null; `grip` is how near (screen pixels) counts.
+export function boxHit(view, box, sx, sy, grip = 7) {
+  const a = toScreen(view, box[0], box[1]);
+  const b = toScreen(view, box[2], box[3]);
+  if (sx < a.x - grip || sx > b.x + grip || sy < a.y - grip || sy > b.y + grip) return null;
+  const near = (v, edge) => Math.abs(v - edge) <= grip;
+  const ns = near(sy, a.y) ? "n" : near(sy, b.y) ? "s" : "";
+  const we = near(sx, a.x) ? "w" : near(sx, b.x) ? "e" : "";
+  if (ns || we) return ns + we;
+  return sx > a.x && sx < b.x && sy > a.y && sy < b.y ? "move" : null;
+}
+
+// The box after dragging its part `hit` by (dx, dy) image pixels: whole
+// pixels, inside the width x height image, at least 2 pixels a side.
+export function editBox(box, hit, dx, dy, width, height) {
+  let [x0, y0, x1, y1] = box;
+  if (hit === "move") {
+    const mx = Math.round(Math.min(width - x1, Math.max(-x0, dx)));
+    const my = Math.round(Math.min(height - y1, Math.max(-y0, dy)));
+    return [x0 + mx, y0 + my, x1 + mx, y1 + my];
+  }
+  if (hit.includes("w")) x0 = Math.min(x1 - 2, Math.max(0, Math.round(x0 + dx)));
+  if (hit.includes("e")) x1 = Math.max(x0 + 2, Math.min(width, Math.round(x1 + dx)));
+  if (hit.includes("n")) y0 = Math.min(y1 - 2, Math.max(0, Math.round(y0 + dy)));
+  if (hit.includes("s")) y1 = Math.max(y0 + 2, Math.min(height, Math.round(y1 + dy)));
+  return [x0, y0, x1, y1];
+}
+
+// The CSS cursor for a part of a box.
+export function boxCursor(hit) {
+  return { n: "ns-resize", s: "ns-resize", e: "ew-resize", w: "ew-resize", nw: "nwse-resize", se: "nwse-resize", ne: "nesw-resize", sw: "nesw-resize", move: "move" }[hit] || "";
+}

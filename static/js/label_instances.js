@@ -1,7 +1,7 @@
-// The labelling page's list of action-objects: adding, selecting and
-// deleting them, their kind and name, the "no action-object" flag, and
-// commit(), which records an edit in the undo history and lets autosave
-// send it.
+// The labelling page's list of action-objects: adding, selecting, showing
+// or hiding (on the canvas only; not saved) and deleting them, their kind
+// and name, the "no action-object" flag, and commit(), which records an
+// edit in the undo history and lets autosave send it.
 
 import { updateControls } from "./label_panel.js";
 import { autosaver } from "./label_save.js";
@@ -51,8 +51,21 @@ export function select(key) {
   renderInstances();
 }
 
+// Show or hide an object on the canvas (the selected one when no key is given).
+export function toggleHidden(key = ui.selectedKey) {
+  const inst = instance(key);
+  if (!inst) return;
+  inst.hidden = !inst.hidden;
+  renderOverlay();
+  renderInstances();
+}
+
 // The checkbox: marking the frame empty deletes what is drawn, once confirmed.
 function setNoActionObject(event) {
+  if (!editable) {
+    event.target.checked = doc.noActionObject;
+    return;
+  }
   const drawn = doc.instances.filter((i) => i.mask.some((v) => v)).length;
   if (event.target.checked && drawn && !window.confirm(`Delete the ${drawn} drawn object(s) and mark the frame "no action-object"?`)) {
     event.target.checked = false;
@@ -67,7 +80,7 @@ function setNoActionObject(event) {
 }
 
 export function wireInstances() {
-  if (editable) $("#no-ao").addEventListener("change", setNoActionObject);
+  $("#no-ao").addEventListener("change", setNoActionObject);
 }
 
 export function renderInstances() {
@@ -75,16 +88,20 @@ export function renderInstances() {
   list.replaceChildren();
   doc.instances.forEach((inst, k) => {
     const li = document.createElement("li");
-    li.className = "instance" + (inst.key === ui.selectedKey ? " selected" : "");
+    li.className = "instance" + (inst.key === ui.selectedKey ? " selected" : "") + (inst.hidden ? " hidden-object" : "");
     li.dataset.key = inst.key;
     const area = countSet(inst.mask);
     const [r, g, b] = inst.colour;
     li.innerHTML = `
-      <button type="button" class="pick" title="Select (${k + 1})">
-        <span class="swatch"></span>
-        <span class="name">Object ${k + 1}</span>
-        <span class="area">${area ? `${((100 * area) / N).toFixed(1)}%` : "empty"}</span>
-      </button>
+      <div class="instance-head">
+        <button type="button" class="pick" title="Select (${k + 1})">
+          <span class="swatch"></span>
+          <span class="name">Object ${k + 1}</span>
+          <span class="area">${area ? `${((100 * area) / N).toFixed(1)}%` : "empty"}</span>
+        </button>
+        <button type="button" class="visibility quiet"
+          title="${inst.hidden ? "Show" : "Hide"} this object on the image (V: the selected one)">${inst.hidden ? "Show" : "Hide"}</button>
+      </div>
       <div class="instance-fields">
         <select class="kind" aria-label="kind" ${editable ? "" : "disabled"}>
           <option value="">kind…</option><option value="tactile">tactile</option><option value="visual">visual</option>
@@ -96,6 +113,10 @@ export function renderInstances() {
     li.querySelector(".kind").value = inst.kind || "";
     li.querySelector(".label").value = inst.label || "";
     li.querySelector(".pick").addEventListener("click", () => select(inst.key));
+    li.querySelector(".visibility").addEventListener("click", (e) => {
+      e.currentTarget.blur();
+      toggleHidden(inst.key);
+    });
     li.querySelector(".kind").addEventListener("change", (e) => {
       inst.kind = e.target.value || null;
       commit();

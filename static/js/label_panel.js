@@ -4,7 +4,7 @@
 // calls, undo and redo one at a time, so the server sees them in page order.
 
 import { ApiError } from "./api.js";
-import { $, clock, doc, editable, history, meta } from "./label_state.js";
+import { $, clock, doc, editable, finished, history, meta, reviewing } from "./label_state.js";
 
 let busy = 0;
 let messageTimer = null;
@@ -45,21 +45,20 @@ export function updateControls() {
   const tile = document.querySelector(".film-frame.current"); // the filmstrip follows this frame's status
   if (tile) tile.dataset.status = meta.status;
   $("#no-ao").checked = doc.noActionObject;
-  const finished = meta.status === "done" || meta.status === "reviewed";
-  if (editable) {
-    $("#undo").disabled = !history.canUndo;
-    $("#redo").disabled = !history.canRedo;
-    $("#mark-done").hidden = finished;
-    $("#done-next").hidden = finished;
-    $("#reopen").hidden = !finished;
+  $("#undo").disabled = !editable || !history.canUndo;
+  $("#redo").disabled = !editable || !history.canRedo;
+  if (!reviewing) {
+    $("#mark-done").hidden = finished();
+    $("#done-next").hidden = finished();
   }
   const banner = $("#review-note");
-  if (meta.reviewComment) {
+  const fixed = meta.fixedBy ? `Fixed in review by ${meta.fixedBy}.` : "";
+  if (meta.reviewComment || fixed) {
     banner.hidden = false;
     banner.classList.toggle("rejected", meta.status === "rejected");
     const who = meta.reviewer ? ` by ${meta.reviewer}` : "";
-    $("#review-note-title").textContent = meta.status === "rejected" ? `Returned${who} — please fix:` : `Reviewer's note${who}:`;
-    $("#review-note-text").textContent = meta.reviewComment;
+    $("#review-note-title").textContent = !meta.reviewComment ? "" : meta.status === "rejected" ? `Returned${who} — please fix:` : `Reviewer's note${who}:`;
+    $("#review-note-text").textContent = [meta.reviewComment, fixed].filter(Boolean).join(" ");
   } else {
     banner.hidden = true;
   }
@@ -67,6 +66,6 @@ export function updateControls() {
 }
 
 export function updateTime() {
-  const total = Math.round(meta.timeSpent + (editable ? clock.pending : 0));
+  const total = Math.round(meta.timeSpent + (reviewing ? 0 : clock.pending));
   $("#time-spent").textContent = `${Math.floor(total / 60)}:${String(total % 60).padStart(2, "0")}`;
 }

@@ -13,7 +13,7 @@
 import { autosaver, leave } from "./label_save.js";
 import { errorText, setBusy, showMessage } from "./label_panel.js";
 import { carry } from "./label_server.js";
-import { $, config, editable } from "./label_state.js";
+import { $, config, reviewing } from "./label_state.js";
 
 const WHAT = {
   propagate: { busy: "Propagating to the next frame…", target: "the next frame" },
@@ -24,7 +24,7 @@ let running = false;
 
 // kind: "propagate" or "copy_previous".
 async function run(kind, { replace = false, version = null } = {}) {
-  if (!editable || running || !config.urls[kind]) return;
+  if (reviewing || running || !config.urls[kind]) return; // a finished frame may be carried on, not onto
   running = true;
   hideBanner();
   try {
@@ -68,7 +68,7 @@ export const propagateNext = () => run("propagate");
 export const copyPrevious = () => run("copy_previous");
 
 export function wirePropagate() {
-  if (!editable) return;
+  if (reviewing) return;
   $("#propagate-next")?.addEventListener("click", propagateNext);
   $("#copy-previous")?.addEventListener("click", copyPrevious);
   $("#carry-replace").addEventListener("click", () => {

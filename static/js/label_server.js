@@ -7,7 +7,12 @@ import { H, N, W, config } from "./label_state.js";
 import { maskFromRGBA } from "./mask_codec.js";
 
 async function decodeMaskPng(blob) {
-  const bitmap = await createImageBitmap(blob, { colorSpaceConversion: "none", premultiplyAlpha: "none" });
+  let bitmap;
+  try {
+    bitmap = await createImageBitmap(blob, { colorSpaceConversion: "none", premultiplyAlpha: "none" });
+  } catch {
+    throw new Error("the server's mask could not be read as an image");
+  }
   if (bitmap.width !== W || bitmap.height !== H) throw new Error(`mask is ${bitmap.width}x${bitmap.height}, the frame ${W}x${H}`);
   const c = document.createElement("canvas");
   c.width = W;
@@ -52,6 +57,35 @@ export function getAnnotation() {
 
 export function putAnnotation(body, { keepalive = false } = {}) {
   return api("PUT", config.urls.annotation, body, { keepalive });
+}
+
+// A reviewer's fix of the annotation under review (the review page's own URL).
+export function putFix(body, { keepalive = false } = {}) {
+  return api("PUT", config.urls.fix, body, { keepalive });
+}
+
+export function postReopen(body) {
+  return api("POST", config.urls.reopen, body);
+}
+
+// {open: true} every heartbeat while the page shows the frame, {open: false} on leaving -> {others}.
+export function postPresence(open, { keepalive = false } = {}) {
+  return api("POST", config.urls.presence, { open }, { keepalive });
+}
+
+// The stored undo history: {version, blob}, or null when there is none.
+export async function getHistory(url) {
+  try {
+    const response = await request("GET", url, undefined, { headers: { Accept: "application/gzip" } });
+    return { version: Number(response.headers.get("X-Annotation-Version")), blob: await response.blob() };
+  } catch (err) {
+    if (err.status === 404) return null;
+    throw err;
+  }
+}
+
+export function putHistory(url, version, blob, { keepalive = false } = {}) {
+  return request("PUT", `${url}?version=${version}`, blob, { headers: { "Content-Type": "application/gzip" }, keepalive });
 }
 
 export function postTime(seconds) {

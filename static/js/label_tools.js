@@ -1,30 +1,42 @@
 // The labelling page's tools and what the pointer does with them: pan, box
-// and fg/bg strokes (GrabCut), paint and erase by hand, the brush radius,
-// and the wheel's zoom.
+// and fg/bg strokes (GrabCut), paint and erase by hand, the polygon, the
+// brush radius, and the wheel's zoom. The box tool also edits the selected
+// object's box (label_shapes.js). While the page is read-only (a done frame
+// before "Edit", the review page before "Fix the mask") only panning and
+// zooming work, and a drag says why nothing else does.
 
 import { dragBox, pan, toImage, toPixel, wheelFactor, zoomAt } from "./geometry.js";
 import { depthChoice } from "./label_depth.js";
 import { runGrabcut } from "./label_grabcut.js";
 import { addInstance, commit } from "./label_instances.js";
 import { showMessage } from "./label_panel.js";
-import { $, $$, H, W, clock, editable, instance, selected, target, ui } from "./label_state.js";
+import { boxDrag, hoverBox, polygonClick, polygonDoubleClick } from "./label_shapes.js";
+import { $, $$, H, W, clock, editable, instance, reviewing, selected, target, ui } from "./label_state.js";
 import { canvas, draw, renderOverlay, setView, view } from "./label_view.js";
 import { paintSegment } from "./raster.js";
 
 // Each tool's key.
-export const TOOLS = { box: "b", fg: "f", bg: "g", paint: "p", erase: "e", pan: "h" };
+export const TOOLS = { box: "b", fg: "f", bg: "g", paint: "p", erase: "e", polygon: "l", pan: "h" };
 
 const HINTS = {
-  box: "Drag a box around the object: GrabCut outlines it.",
+  box: "Drag a box around the object: GrabCut outlines it. Drag the selected object's box, or its handles, to cut it again.",
   fg: "Paint over parts that belong to the object (GrabCut).",
   bg: "Paint over background that was taken in (GrabCut).",
   paint: "Paint the mask by hand.",
   erase: "Erase the mask by hand.",
+  polygon: "Click the object's corners; click the first one again (or Enter, or double-click) to fill it. Backspace drops a corner, Esc cancels.",
   pan: "Drag to move the image.",
 };
 
+// Why the canvas does not take an edit now.
+export function readOnlyReason() {
+  return reviewing
+    ? "Read-only: press “Fix the mask” to change this annotation before you decide."
+    : "This frame is finished and read-only: press Edit (above the image) to change it.";
+}
+
 export function setTool(name) {
-  if (!editable && name !== "pan") return;
+  if (name !== "polygon") ui.polygon = null;
   ui.tool = name;
   $$("[data-tool]").forEach((b) => b.classList.toggle("active", b.dataset.tool === ui.tool));
   canvas.dataset.tool = ui.tool;
@@ -68,10 +80,16 @@ function onPointerDown(event) {
     event.preventDefault();
     return;
   }
-  if (event.button !== 0 || !editable) return;
+  if (event.button !== 0) return;
+  if (!editable) {
+    showMessage(readOnlyReason(), "info");
+    return;
+  }
   const p = toImage(view, s.x, s.y);
   if (ui.tool === "box") {
-    ui.drag = { type: "box", start: p, end: p };
+    ui.drag = boxDrag(s, p) || { type: "box", start: p, end: p };
+  } else if (ui.tool === "polygon") {
+    polygonClick(p, s, event.detail);
   } else if (ui.tool === "fg" || ui.tool === "bg") {
     ui.drag = { type: "stroke", label: ui.tool, points: [toPixel(p)] };
   } else {
@@ -93,6 +111,7 @@ function onPointerMove(event) {
   $("#cursor-pos").textContent = p.x >= 0 && p.y >= 0 && p.x < W && p.y < H ? `${Math.floor(p.x)}, ${Math.floor(p.y)}` : "";
   const drag = ui.drag;
   if (!drag) {
+    if (ui.tool === "box") hoverBox(s);
     draw();
     return;
   }
@@ -101,6 +120,8 @@ function onPointerMove(event) {
     drag.last = s;
   } else if (drag.type === "box") {
     drag.end = p;
+  } else if (drag.type === "edit-box") {
+    drag.move(p);
   } else if (drag.type === "stroke") {
     const q = toPixel(p);
     const last = drag.points[drag.points.length - 1];
@@ -123,7 +144,9 @@ function onPointerUp() {
   if (!done) return;
   if (done.type === "box") {
     const box = dragBox(done.start, done.end, W, H);
-    if (box) runGrabcut("box", { box, ...depthChoice() });
+    if (box) runGrabcut("box", { box, ...depthChoice() }, target({ fresh: true }).key);
+  } else if (done.type === "edit-box") {
+    done.finish();
   } else if (done.type === "stroke") {
     const inst = selected();
     if (!inst || !inst.engine) {
@@ -161,7 +184,8 @@ export function wireTools() {
     draw();
   });
   canvas.addEventListener("wheel", onWheel, { passive: false });
+  canvas.addEventListener("dblclick", () => editable && ui.tool === "polygon" && polygonDoubleClick());
   canvas.addEventListener("auxclick", (e) => e.preventDefault());
   $$("[data-tool]").forEach((b) => b.addEventListener("click", () => setTool(b.dataset.tool)));
-  if (editable) $("#brush-size").addEventListener("input", (e) => setBrush(Number(e.target.value)));
+  $("#brush-size").addEventListener("input", (e) => setBrush(Number(e.target.value)));
 }

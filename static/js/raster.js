@@ -71,3 +71,29 @@ export function countSet(mask) {
   for (let i = 0; i < mask.length; i++) n += mask[i];
   return n;
 }
+
+// Fill a closed polygon (engine coordinates: pixel centres at integers) into
+// a mask: the pixels whose centre is inside it (even-odd), and those within
+// half a pixel of its edges, so a polygon around a thin object never comes
+// out empty. Returns the touched rectangle or null.
+export function fillPolygon(mask, width, height, points, value) {
+  if (points.length < 3) return null;
+  const ys = points.map((p) => p.y);
+  const top = Math.max(0, Math.ceil(Math.min(...ys)));
+  const bottom = Math.min(height - 1, Math.floor(Math.max(...ys)));
+  for (let y = top; y <= bottom; y++) {
+    const xs = [];
+    for (let i = 0; i < points.length; i++) {
+      const a = points[i];
+      const b = points[(i + 1) % points.length];
+      if ((a.y <= y && y < b.y) || (b.y <= y && y < a.y)) xs.push(a.x + ((y - a.y) * (b.x - a.x)) / (b.y - a.y));
+    }
+    xs.sort((p, q) => p - q);
+    for (let k = 0; k + 1 < xs.length; k += 2) {
+      const x0 = Math.max(0, Math.ceil(xs[k]));
+      const x1 = Math.min(width - 1, Math.floor(xs[k + 1]));
+      for (let x = x0; x <= x1; x++) mask[y * width + x] = value;
+    }
+  }
+  return paintPolyline(mask, width, height, [...points, points[0]], 0.5, value);
+}

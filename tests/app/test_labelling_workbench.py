@@ -2,6 +2,7 @@
 are read-only until reopened, a reviewer fixes a mask before accepting, undo
 histories are kept on the server, and who else is on a frame."""
 
+import html
 import re
 from datetime import timedelta
 from pathlib import Path
@@ -199,7 +200,7 @@ def test_the_shortcuts_overlay_and_the_readme_list_the_same_keys(app, make_user)
     page = signed_in(app, make_user, "annotator", "ann").get(f"/label/frames/{frame_id}").get_data(as_text=True)
     overlay = page[page.index('id="shortcuts"'):]
     overlay = overlay[:overlay.index("</dl>")]
-    shown = [(re.sub(r"<[^>]+>", "", k).replace("&amp;", "&").strip(), re.sub(r"<[^>]+>", "", d).replace("&amp;", "&").strip())
+    shown = [(html.unescape(k).strip(), html.unescape(d).strip())
              for k, d in re.findall(r"<dt>(.*?)</dt>\s*<dd>(.*?)</dd>", overlay, re.S)]
     assert len(shown) > 20
     assert readme_shortcuts() == shown

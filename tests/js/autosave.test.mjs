@@ -1,7 +1,7 @@
 import assert from "node:assert/strict";
 import { test } from "node:test";
 
-import { ActiveClock, Autosaver, retried, saveText } from "../../static/js/autosave.js";
+import { ActiveClock, Autosaver, indicator, retried, saveText } from "../../static/js/autosave.js";
 
 // A fake clock and timers: run(ms) advances time and fires due timers in order.
 function fakeTime() {
@@ -251,4 +251,22 @@ test("the clock counts visible, recently active seconds only", () => {
   assert.equal(clock.take(), 0);
   clock.giveBack(3);
   assert.equal(clock.take(), 3);
+});
+
+test("the indicator never says saved while a step runs or after one was dropped", () => {
+  const saved = { state: "saved", error: null, retryAt: null };
+  assert.deepEqual(indicator({ saver: saved }), { state: "saved", text: "All changes saved" });
+  assert.deepEqual(indicator({ saver: saved, running: 1 }), { state: "saving", text: "Working…" });
+  const dropped = { what: "your Object stroke", reason: "the server could not be reached" };
+  assert.deepEqual(indicator({ saver: saved, running: 1, dropped }), {
+    state: "error",
+    text: "Not applied: your Object stroke — the server could not be reached",
+  });
+  // A failed save speaks first: it is the one that loses the most.
+  const failed = { state: "error", error: { status: 0 }, retryAt: null };
+  assert.equal(indicator({ saver: failed, dropped }).text, "Not saved: the server could not be reached");
+  const finished = { state: "conflict", error: { status: 409, body: { reason: "finished" } }, retryAt: null };
+  assert.equal(indicator({ saver: finished }).text, "Not saved: this frame is done and read-only — Edit to change it");
+  const conflict = { state: "conflict", error: { status: 409, body: {} }, retryAt: null };
+  assert.equal(indicator({ saver: conflict }).text, "Not saved: this frame was saved elsewhere");
 });

@@ -1,7 +1,7 @@
 import assert from "node:assert/strict";
 import { test } from "node:test";
 
-import { MAX_SCALE, MIN_SCALE, dragBox, fit, pan, toImage, toPixel, toScreen, wheelFactor, zoomAt } from "../../static/js/geometry.js";
+import { MAX_SCALE, MIN_SCALE, boxCursor, boxHit, dragBox, editBox, fit, pan, recentre, toImage, toPixel, toScreen, wheelFactor, zoomAt } from "../../static/js/geometry.js";
 
 const close = (a, b, eps = 1e-9) => assert.ok(Math.abs(a - b) < eps, `${a} != ${b}`);
 
@@ -51,4 +51,35 @@ test("a dragged box becomes clipped pixel bounds", () => {
   assert.deepEqual(dragBox({ x: -20, y: -20 }, { x: 500, y: 30 }, 100, 50), [0, 0, 100, 30]);
   assert.equal(dragBox({ x: 5, y: 5 }, { x: 5.5, y: 40 }, 100, 50), null);
   assert.equal(dragBox({ x: -20, y: -20 }, { x: -5, y: -5 }, 100, 50), null);
+});
+
+test("recentring after a resize keeps the centre's image point at the centre", () => {
+  const view = { scale: 2, tx: 10, ty: -40 };
+  const before = toImage(view, 400, 300);
+  const after = recentre(view, 800, 600, 800, 540); // a banner took 60 px
+  const p = toImage(after, 400, 270);
+  close(p.x, before.x);
+  close(p.y, before.y);
+  assert.equal(after.scale, 2);
+});
+
+test("a box's corners, edges and inside are grabbed within a few screen pixels", () => {
+  const view = { scale: 2, tx: 0, ty: 0 };
+  const box = [10, 10, 60, 40]; // screen (20, 20) - (120, 80)
+  assert.equal(boxHit(view, box, 21, 19), "nw");
+  assert.equal(boxHit(view, box, 119, 82), "se");
+  assert.equal(boxHit(view, box, 70, 20), "n");
+  assert.equal(boxHit(view, box, 124, 50), "e");
+  assert.equal(boxHit(view, box, 70, 50), "move");
+  assert.equal(boxHit(view, box, 140, 50), null);
+  assert.equal(boxCursor("ne"), "nesw-resize");
+  assert.equal(boxCursor(null), "");
+});
+
+test("editing a box moves or resizes it in whole pixels, inside the image, never below 2 px", () => {
+  assert.deepEqual(editBox([10, 10, 60, 40], "move", 5.4, -3.6, 100, 80), [15, 6, 65, 36]);
+  assert.deepEqual(editBox([10, 10, 60, 40], "move", 100, 100, 100, 80), [50, 50, 100, 80]); // stops at the edge
+  assert.deepEqual(editBox([10, 10, 60, 40], "se", 10, 100, 100, 80), [10, 10, 70, 80]);
+  assert.deepEqual(editBox([10, 10, 60, 40], "w", 80, 0, 100, 80), [58, 10, 60, 40]);
+  assert.deepEqual(editBox([10, 10, 60, 40], "n", 0, -30, 100, 80), [10, 0, 60, 40]);
 });

@@ -38,3 +38,35 @@ test("the oldest entries fall off past the limit", () => {
   assert.ok(!h.canUndo && !h.canRedo);
   assert.throws(() => new History(0), /limit/);
 });
+
+test("a packed history reads back with its shared states shared again", () => {
+  const h = new History(10);
+  const s0 = { n: 0 };
+  const s1 = { n: 1 };
+  const s2 = { n: 2 };
+  h.push({ before: s0, after: s1, op: null });
+  h.push({ before: s1, after: s2, op: { kind: "box", key: "a", params: { box: [1, 2, 3, 4] } } });
+  h.undo();
+  const data = JSON.parse(JSON.stringify(h.pack((s) => ({ m: s.n }))));
+  assert.equal(data.states.length, 3); // s1 once, though two entries hold it
+  const back = History.unpack(data, { fromData: (d) => ({ n: d.m }) });
+  assert.equal(back.done.length, 1);
+  assert.equal(back.undone.length, 1);
+  assert.equal(back.latest.n, 1);
+  assert.equal(back.done[0].after, back.undone[0].before); // the same object again
+  assert.deepEqual(back.redo().op, { kind: "box", key: "a", params: { box: [1, 2, 3, 4] } });
+  assert.equal(back.latest.n, 2);
+});
+
+test("unpack refuses what is not a history, and keeps only the limit", () => {
+  assert.throws(() => History.unpack({ states: [], done: [[0, 1, null]], undone: [] }), /state 0/);
+  assert.throws(() => History.unpack(null), /not a packed history/);
+  const h = new History(50);
+  for (let i = 0; i < 20; i++) h.push({ before: { i }, after: { i: i + 1 }, op: null });
+  const back = History.unpack(h.pack(), { limit: 5 });
+  assert.equal(back.done.length, 5);
+  assert.equal(back.latest.i, 20);
+  back.trim(2);
+  assert.equal(back.done.length, 2);
+  assert.equal(back.undo().after.i, 20);
+});

@@ -1,7 +1,7 @@
 import assert from "node:assert/strict";
 import { test } from "node:test";
 
-import { boundingBox, countSet, paintPolyline, paintSegment, unionRect } from "../../static/js/raster.js";
+import { boundingBox, countSet, fillPolygon, paintPolyline, paintSegment, unionRect } from "../../static/js/raster.js";
 
 function rows(mask, width) {
   const out = [];
@@ -41,4 +41,23 @@ test("a polyline is the union of its segments", () => {
 test("rectangles unite", () => {
   assert.deepEqual(unionRect(null, { x0: 1, y0: 2, x1: 3, y1: 4 }), { x0: 1, y0: 2, x1: 3, y1: 4 });
   assert.deepEqual(unionRect({ x0: 0, y0: 5, x1: 2, y1: 6 }, { x0: 1, y0: 2, x1: 3, y1: 4 }), { x0: 0, y0: 2, x1: 3, y1: 6 });
+});
+
+test("a polygon fills the pixels whose centre is inside, and a thin one is never empty", () => {
+  const mask = new Uint8Array(8 * 6);
+  // A triangle with corners on pixel centres (1, 1), (6, 1), (1, 4): its long side runs
+  // x = 6 - 5 (y - 1) / 3, so row 2 is inside up to x = 4.33 and row 3 up to 2.67; (5, 2) and
+  // (3, 3) are 0.34 and 0.17 px from that side, so they are taken too.
+  const rect = fillPolygon(mask, 8, 6, [{ x: 1, y: 1 }, { x: 6, y: 1 }, { x: 1, y: 4 }], 1);
+  assert.deepEqual(rows(mask, 8), ["00000000", "01111110", "01111100", "01110000", "01000000", "00000000"]);
+  assert.deepEqual(rect, { x0: 0, y0: 0, x1: 8, y1: 6 });
+  // A sliver a tenth of a pixel wide along row 2 still marks the row's pixels it runs over.
+  const thin = new Uint8Array(8 * 6);
+  fillPolygon(thin, 8, 6, [{ x: 1, y: 2 }, { x: 6, y: 2 }, { x: 6, y: 2.1 }, { x: 1, y: 2.1 }], 1);
+  assert.deepEqual(rows(thin, 8)[2], "01111110");
+  assert.equal(countSet(thin), 6);
+  // Erasing with a polygon; fewer than three corners do nothing.
+  fillPolygon(mask, 8, 6, [{ x: 0, y: 0 }, { x: 7, y: 0 }, { x: 7, y: 1.4 }, { x: 0, y: 1.4 }], 0);
+  assert.equal(rows(mask, 8)[1], "00000000");
+  assert.equal(fillPolygon(mask, 8, 6, [{ x: 0, y: 0 }, { x: 3, y: 3 }], 1), null);
 });
