@@ -16,8 +16,8 @@ import { errorText, showMessage, updateControls } from "./label_panel.js";
 import { applyMeta, autosaver } from "./label_save.js";
 import { postReopen } from "./label_server.js";
 import { keepHistory } from "./label_history.js";
-import { $, $$, config, editable, finished, meta, reviewing, setEditable } from "./label_state.js";
-import { setTool } from "./label_tools.js";
+import { $, $$, config, editable, finished, meta, reviewing, setEditable, ui } from "./label_state.js";
+import { readOnlyReason, setTool } from "./label_tools.js";
 
 const DAY = { year: "numeric", month: "short", day: "numeric", hour: "2-digit", minute: "2-digit" };
 let fixing = false;
@@ -55,7 +55,11 @@ export function updateLock() {
   }
   const saveBox = $("#save-box");
   if (saveBox && reviewing) saveBox.hidden = !fixing;
-  if (was !== editable) renderInstances(); // the objects' fields follow
+  if (was !== editable) {
+    renderInstances(); // the objects' fields follow
+    if (editable) setTool(ui.tool);
+  }
+  if (!editable) $("#tool-hint").textContent = readOnlyReason();
   updateControls();
 }
 

@@ -37,6 +37,7 @@ export function readOnlyReason() {
 
 export function setTool(name) {
   if (name !== "polygon") ui.polygon = null;
+  canvas.style.cursor = ""; // the box handles' cursor, if any
   ui.tool = name;
   $$("[data-tool]").forEach((b) => b.classList.toggle("active", b.dataset.tool === ui.tool));
   canvas.dataset.tool = ui.tool;
