@@ -84,6 +84,7 @@ function fix() {
   setTool("box");
   $("#fix").hidden = true;
   $("#fixing").hidden = false;
+  showMessage(`Fixing ${meta.author}'s annotation: changes save into it as you go.`, "info");
 }
 
 export function wireLock() {
