@@ -60,7 +60,10 @@ from app.services.labelling.suggest import (
     suggestion_runs,
 )
 from app.services.labelling.review import (
+    INSTANCE_COLOURS,
     annotator_queue,
+    instance_colour,
+    mask_thumbnail,
     next_to_review,
     next_unlabelled,
     review_annotation,
@@ -69,6 +72,7 @@ from app.services.labelling.review import (
 
 __all__ = [
     "AUTHOR_STATUSES",
+    "INSTANCE_COLOURS",
     "FILMSTRIP_MAX",
     "MAX_INSTANCES",
     "MAX_TIME_DELTA_S",
@@ -97,7 +101,9 @@ __all__ = [
     "grabcut_mask",
     "grabcut_stroke",
     "grabcut_undo",
+    "instance_colour",
     "instance_of",
+    "mask_thumbnail",
     "max_rle_chars",
     "next_to_review",
     "next_unlabelled",
