@@ -113,7 +113,7 @@ def _default_config(instance: Path) -> dict:
         # into EXPORT_ROOT; at most EXPORT_MAX_PENDING waiting per person, the
         # EXPORT_KEEP most recent finished ones kept.
         EXPORT_ROOT=str(instance / "exports"),
-        EXPORT_INLINE_MAX_PIXELS=200_000_000,
+        EXPORT_INLINE_MAX_PIXELS=50_000_000,
         EXPORT_MAX_PENDING=2,
         EXPORT_KEEP=10,
         QUEUE_URL=os.environ.get("EGONET_QUEUE_URL") or f"sqlite:///{instance / 'queue.sqlite3'}",

@@ -4,7 +4,7 @@
 // range" switch; arrow keys move to the previous / next frame.
 import { scaleTicks } from "./heat_scale.js";
 import { boundingBox } from "./raster.js";
-import { maskFromRGBA, outlineBand, paintBand, tagText, thicknessFor } from "./outline.js";
+import { maskFromRGBA, outlineBand, paintBand, placeTag, tagText, thicknessFor } from "./outline.js";
 
 const config = JSON.parse(document.getElementById("viewer-config").textContent);
 const { width: W, height: H } = config.frame;
@@ -43,7 +43,7 @@ function updateBands({ force = false } = {}) {
   return true;
 }
 
-function drawTag(ctx, o, scale) {
+function drawTag(ctx, o, scale, placed) {
   if (!o.box) return;
   const text = tagText(o.number, o.kind);
   const size = TAG_FONT_PX * scale;
@@ -51,8 +51,7 @@ function drawTag(ctx, o, scale) {
   const pad = 3 * scale;
   const w = ctx.measureText(text).width + 2 * pad;
   const h = size + 2 * pad;
-  const x = Math.min(Math.max(0, o.box[0]), W - w);
-  const y = o.box[1] >= h ? o.box[1] - h : Math.min(o.box[1], H - h);
+  const { x, y } = placeTag(o.box, w, h, W, H, placed);
   ctx.fillStyle = `rgb(${o.colour.join(",")})`;
   ctx.fillRect(x, y, w, h);
   ctx.fillStyle = "#111";
@@ -68,7 +67,8 @@ function draw() {
   for (const canvas of canvases) {
     const ctx = canvas.getContext("2d");
     ctx.putImageData(picture, 0, 0);
-    for (const o of visible) drawTag(ctx, o, scale);
+    const placed = [];
+    for (const o of visible) drawTag(ctx, o, scale, placed);
   }
   document.getElementById("views").dataset.outlines = String(visible.length);
 }
@@ -113,7 +113,8 @@ function wirePrediction() {
 }
 
 document.addEventListener("keydown", (event) => {
-  if (event.target.closest("input, textarea, select") || event.ctrlKey || event.metaKey || event.altKey) return;
+  // Keys typed into a field are its own (a ticked box takes none of these).
+  if (event.target.closest("input:not([type=checkbox]), textarea, select") || event.ctrlKey || event.metaKey || event.altKey) return;
   if ((event.key === "o" || event.key === "O") && master) {
     master.checked = !master.checked;
     draw();

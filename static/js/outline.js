@@ -63,3 +63,18 @@ export function thicknessFor(naturalWidth, shownWidth, screenPixels = 2) {
 export function tagText(number, kind) {
   return kind ? `${number} ${kind}` : `${number}`;
 }
+
+// Where an object's tag (w x h) goes: above its box's top-left corner, else
+// just inside it, else under or at the bottom of the box — the first place
+// that stays in the picture (W x H) and overlaps no tag in `placed`
+// ([x, y, w, h] each; the chosen one is added).
+export function placeTag(box, w, h, W, H, placed) {
+  const [x0, y0, , y1] = box;
+  const x = Math.min(Math.max(0, x0), Math.max(0, W - w));
+  const clampY = (y) => Math.min(Math.max(0, y), Math.max(0, H - h));
+  const candidates = [y0 - h, y0, y1, y1 - h].filter((y) => y >= 0 && y + h <= H).map((y) => [x, y]);
+  const free = ([cx, cy]) => placed.every(([px, py, pw, ph]) => cx + w <= px || px + pw <= cx || cy + h <= py || py + ph <= cy);
+  const [tx, ty] = candidates.find(free) ?? candidates[0] ?? [x, clampY(y0)];
+  placed.push([tx, ty, w, h]);
+  return { x: tx, y: ty };
+}

@@ -2,7 +2,7 @@ import assert from "node:assert/strict";
 import { test } from "node:test";
 
 import { scaleTicks, formatTick } from "../../static/js/heat_scale.js";
-import { maskFromRGBA, outlineBand, paintBand, tagText, thicknessFor } from "../../static/js/outline.js";
+import { maskFromRGBA, outlineBand, paintBand, placeTag, tagText, thicknessFor } from "../../static/js/outline.js";
 import { formatBytes, progressText } from "../../static/js/export.js";
 
 function grid(rows) {
@@ -85,4 +85,13 @@ test("an export's progress line", () => {
     "10 of 10 frames: 12 annotations, 15 action-objects, 2.3 MB",
   );
   assert.equal(formatBytes(999), "999 Bytes");
+});
+
+test("tags sit above their box, inside it when that place is taken or off the picture", () => {
+  const placed = [];
+  assert.deepEqual(placeTag([10, 30, 60, 80], 20, 10, 100, 100, placed), { x: 10, y: 20 });
+  assert.deepEqual(placeTag([15, 32, 50, 70], 20, 10, 100, 100, placed), { x: 15, y: 32 }); // above is taken
+  assert.deepEqual(placeTag([0, 0, 40, 40], 20, 10, 100, 100, []), { x: 0, y: 0 }); // at the top: inside
+  assert.deepEqual(placeTag([95, 50, 100, 60], 20, 10, 100, 100, []), { x: 80, y: 40 }); // kept in the picture
+  assert.equal(placed.length, 2);
 });
