@@ -4,8 +4,8 @@ Who may do what:
     * annotators and admins label: the labelling page, their own annotation
       (read, save, mask upload) and the GrabCut operations;
     * reviewers and admins review: the review page and accept / reject;
-    * all staff see the overview, read any annotation and its masks, and
-      download exports.
+    * all staff see the overview (with the review queue's mask thumbnails),
+      read any annotation and its masks, and export (app.blueprints.exports).
 
 Masks never travel inside JSON as base64: the page saves them as COCO RLE,
 reads them as PNG from their own URLs, and GrabCut answers with a PNG.
@@ -16,10 +16,10 @@ import time
 from flask import Blueprint, Response, current_app, flash, redirect, render_template, request, send_file, url_for
 from flask_login import current_user
 
+from app.blueprints import exports
 from app.errors import Problem
 from app.extensions import db
 from app.models import Annotation, Frame, InstanceKind, Role, Status
-from app.blueprints import exports
 from app.security import roles
 from app.services import exchange
 from app.services import frames as frames_service

@@ -22,7 +22,7 @@ from app.extensions import db
 from app.models import User, utcnow
 from app.models.exports import ExportJob, ExportStatus
 from app.queue import enqueue
-from app.services.exchange.selection import ExchangeProblem, ExportOptions, Plan, plan_export
+from app.services.exchange.selection import ExchangeProblem, ExportOptions, Plan
 from app.services.exchange.writing import write_zip
 
 ACTIVE = (ExportStatus.QUEUED, ExportStatus.RUNNING)

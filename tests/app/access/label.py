@@ -31,7 +31,6 @@ RULES = {
     "label.next_unlabelled": (LABELLERS, 302),
     "label.review": (REVIEWERS, 200),
     "label.next_review": (REVIEWERS, 302),
-    "label.export": (STAFF, 200),
     "label.own_annotation": (LABELLERS, 200),
     "label.save_annotation": (LABELLERS, 400),
     "label.add_time": (LABELLERS, 400),
