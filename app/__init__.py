@@ -108,6 +108,14 @@ def _default_config(instance: Path) -> dict:
         SQLALCHEMY_ENGINE_OPTIONS={"pool_pre_ping": True},
         MEDIA_ROOT=str(instance / "media"),
         CACHE_ROOT=str(instance / "cache"),
+        # Exports (app.services.exchange.jobs): one up to this many mask pixels
+        # and without images is built in the request, bigger ones by the worker
+        # into EXPORT_ROOT; at most EXPORT_MAX_PENDING waiting per person, the
+        # EXPORT_KEEP most recent finished ones kept.
+        EXPORT_ROOT=str(instance / "exports"),
+        EXPORT_INLINE_MAX_PIXELS=50_000_000,
+        EXPORT_MAX_PENDING=2,
+        EXPORT_KEEP=10,
         QUEUE_URL=os.environ.get("EGONET_QUEUE_URL") or f"sqlite:///{instance / 'queue.sqlite3'}",
         MAX_CONTENT_LENGTH=64 * 1024 * 1024,
         SESSION_COOKIE_HTTPONLY=True,
@@ -180,7 +188,19 @@ def _register(app: Flask) -> None:
     """The throttle, the queue, the error handlers, the access checks and
     security headers, the blueprints, the navigation and the ``flask egonet`` CLI."""
     from app import errors, queue, security, throttle
-    from app.blueprints import api, auth, frames, label, navigation, participate, scores, studies, training, users
+    from app.blueprints import (
+        api,
+        auth,
+        exports,
+        frames,
+        label,
+        navigation,
+        participate,
+        scores,
+        studies,
+        training,
+        users,
+    )
     from app.cli import bp as cli_bp
 
     throttle.init_app(app)
@@ -188,7 +208,7 @@ def _register(app: Flask) -> None:
     errors.register(app)
     security.register(app)
     app.register_blueprint(auth.bp)
-    for module in (frames, api, label, studies, participate, training, scores, users):
+    for module in (frames, api, label, exports, studies, participate, training, scores, users):
         app.register_blueprint(module.bp)
     app.context_processor(navigation)
     app.register_blueprint(cli_bp)

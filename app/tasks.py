@@ -9,7 +9,7 @@ from app.extensions import db
 from app.models import User
 from app.models.training import Checkpoint, TrainingRun
 from app.queue import job
-from app.services import labelling
+from app.services import exchange, labelling
 from app.services.training import TrainingProblem, execute_run, frames_for_prediction, predict
 
 
@@ -41,3 +41,9 @@ def suggest_frames(run_id: int, frame_ids: list[int], user_id: int, device: str 
     if run is None or user is None:
         raise labelling.SuggestProblem(f"no training run {run_id}" if run is None else f"no user {user_id}")
     return labelling.suggest_frames(run, frames_for_prediction(frame_ids=frame_ids), user, device=device).proposals
+
+
+@job
+def build_export(export_id: int) -> int:
+    """Write a queued export's zip (see app.services.exchange.jobs); returns its frames."""
+    return exchange.build_export(export_id).done

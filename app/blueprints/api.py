@@ -28,7 +28,7 @@ def frame_json(frame: Frame, status) -> dict:
         "rgb_url": url_for("frames.media_file", name=frame.rgb_path),
         "depth_url": url_for("frames.depth", frame_id=frame.id) if frame.depth_path else None,
         "dhg_url": url_for("frames.media_file", name=frame.dhg_path) if frame.dhg_path else None,
-        "meta": frame.meta,
+        "meta": frames_service.shown_meta(frame),  # without the demo renderer's truth
     }
 
 

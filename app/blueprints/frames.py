@@ -1,11 +1,12 @@
 """Pages for browsing the dataset: activities, frame grids, the frame viewer, media."""
 
-from flask import Blueprint, abort, current_app, render_template, request, send_file, send_from_directory
+from flask import Blueprint, abort, current_app, render_template, request, send_file, send_from_directory, url_for
 
 from app.extensions import db
 from app.models import Activity, Frame
+from app.models.training import Prediction
 from app.services import frames as frames_service
-from app.services import media
+from app.services import labelling, media
 from app.services import training as training_service
 
 bp = Blueprint("frames", __name__)
@@ -43,9 +44,58 @@ def frame(frame_id: int):
     previous, following = frames_service.neighbours(fr)
     status = frames_service.frame_statuses([fr.id])[fr.id]
     prediction = training_service.latest_prediction(fr.id)
+    spread = frames_service.prediction_range(prediction) if prediction else None
     return render_template(
-        "frames/frame.html", frame=fr, status=status, previous=previous, following=following, prediction=prediction
+        "frames/frame.html",
+        frame=fr,
+        status=status,
+        previous=previous,
+        following=following,
+        prediction=prediction,
+        spread=spread,
+        meta=frames_service.shown_meta(fr),
+        viewer_config=viewer_config(fr, prediction, spread),
     )
+
+
+def viewer_config(frame: Frame, prediction: Prediction | None, spread) -> dict:
+    """What the viewer's script draws: every annotation's instances (colour, kind, mask URL) and the heat map's scales."""
+    annotations, colour = [], 0
+    for annotation, shown in frames_service.viewer_annotations(frame):
+        instances = []
+        for instance in annotation.instances:
+            instances.append({
+                "position": instance.position,
+                "kind": instance.kind.value if instance.kind else None,
+                "label": instance.label,
+                "colour": labelling.instance_colour(colour),
+                "mask_url": url_for("label.instance_mask", annotation_id=annotation.id, position=instance.position),
+            })
+            colour += 1
+        annotations.append({"id": annotation.id, "author": annotation.author.username, "status": annotation.status.value,
+                            "no_action_object": annotation.no_action_object, "shown": shown, "instances": instances})
+    config = {"frame": {"width": frame.width, "height": frame.height}, "annotations": annotations, "prediction": None}
+    if prediction is not None:
+        config["prediction"] = {
+            "overlay_url": url_for("training.prediction_overlay", prediction_id=prediction.id),
+            "normalised_url": url_for("frames.normalised_prediction", prediction_id=prediction.id)
+            if spread.can_normalise else None,
+            "low": spread.low,
+            "high": spread.high,
+        }
+    return config
+
+
+@bp.get("/frames/predictions/<int:prediction_id>/normalised.png")
+def normalised_prediction(prediction_id: int):
+    """The prediction's heat map stretched to its own range: for the eye only (the viewer's switch)."""
+    prediction = db.get_or_404(Prediction, prediction_id)
+    return send_file(frames_service.normalised_overlay(prediction), mimetype="image/png")
+
+
+@bp.get("/frames/colour-bar.png")
+def colour_bar():
+    return send_file(frames_service.colour_bar(), mimetype="image/png", max_age=86400)
 
 
 @bp.get("/frames/<int:frame_id>/thumb.jpg")

@@ -7,8 +7,8 @@ Who may do what:
       fix of a done annotation's masks before deciding;
     * all staff run GrabCut, each in their own sessions (a reviewer's fix
       uses it too), and keep their undo history of what they may edit;
-    * all staff see the overview, read any annotation and its masks, and
-      download exports.
+    * all staff see the overview (with the review queue's mask thumbnails),
+      read any annotation and its masks, and export (app.blueprints.exports).
 
 Masks never travel inside JSON as base64: the page saves them as COCO RLE,
 reads them as PNG from their own URLs, and GrabCut answers with a PNG.
@@ -19,6 +19,7 @@ import time
 from flask import Blueprint, Response, current_app, flash, redirect, render_template, request, send_file, url_for
 from flask_login import current_user
 
+from app.blueprints import exports
 from app.errors import Problem
 from app.extensions import db
 from app.models import Annotation, Frame, InstanceKind, Role, Status
@@ -98,9 +99,11 @@ def index():
         queue=queue,
         reviews=reviews,
         waiting=waiting,
+        export_form=exports.form_values(request.args),
         activities=exchange.activity_names(),
-        statuses=[s for s in Status if s is not Status.TODO],
-        default_statuses=exchange.DEFAULT_STATUSES,
+        annotators=exchange.annotator_names(),
+        statuses=exchange.EXPORTABLE_STATUSES,
+        recent_exports=exchange.recent_exports(),
     )
 
 
@@ -195,23 +198,6 @@ def next_review():
         flash("The review queue is empty.", "info")
         return redirect(url_for("label.index"))
     return redirect(url_for("label.review", annotation_id=target))
-
-
-@bp.get("/label/export")
-def export():
-    """Download the masks as a zip: PNG per frame and/or COCO JSON (see exchange)."""
-    fmt = request.args.get("format", "both")
-    if fmt not in exchange.FORMATS:
-        raise Problem(f"format must be one of {', '.join(exchange.FORMATS)}")
-    try:
-        statuses = [Status(s) for s in request.args.getlist("status")] or list(exchange.DEFAULT_STATUSES)
-    except ValueError:
-        raise Problem(f"status must be among {', '.join(s.value for s in Status)}") from None
-    activities = [a for a in request.args.getlist("activity") if a]
-    archive, count = exchange.export_zip(fmt=fmt, activities=activities, statuses=statuses)
-    response = send_file(archive, mimetype="application/zip", as_attachment=True, download_name="egonet-masks.zip")
-    response.headers["X-Exported-Frames"] = str(count)
-    return response
 
 
 # --------------------------------------------------------------------------
@@ -433,6 +419,16 @@ def annotation_mask(annotation_id: int):
     if ann.mask_path is None:
         return png_response(labelling.empty_mask(ann.frame))
     return _mask_file(ann.mask_path)
+
+
+@bp.get("/api/label/annotations/<int:annotation_id>/thumb.png")
+def annotation_thumbnail(annotation_id: int):
+    """The instances over a transparent background, at the frame thumbnail's size (the queues' tiles).
+
+    Its URL carries ``?v=<version>``, so a browser may keep it: a new version is a new URL.
+    """
+    ann = labelling.get_annotation(annotation_id)
+    return send_file(labelling.mask_thumbnail(ann), mimetype="image/png", max_age=86400)
 
 
 @bp.get("/api/label/annotations/<int:annotation_id>/instances/<int:position>/mask.png")

@@ -8,35 +8,35 @@ from app.cli import bp, progress_bar
 from app.models import Status
 
 STATUS_CHOICES = click.Choice([s.value for s in Status])
+EXPORT_STATUS_CHOICES = click.Choice([s.value for s in Status if s is not Status.TODO])
 
 
 @bp.cli.command("export")
 @click.option("--out", type=click.Path(path_type=Path), required=True, help="New (or empty) folder to write.")
 @click.option("--format", "fmt", type=click.Choice(["png", "coco", "both"]), default="both", show_default=True)
+@click.option("--images", is_flag=True, help="Also copy each exported frame's RGB file into images/.")
 @click.option("--activity", "activities", multiple=True, help="Only this activity (repeat for several) [default: all].")
 @click.option(
     "--status",
     "statuses",
-    type=STATUS_CHOICES,
+    type=EXPORT_STATUS_CHOICES,
     multiple=True,
     help="Export annotations with this status (repeat for several) [default: done and reviewed].",
 )
-def export_command(out, fmt, activities, statuses):
-    """Export action-object masks: masks/<activity>/<sequence>/<frame>.png
-    (binary, the union of the frame's instances) and annotations.json (COCO,
-    one RLE mask per instance)."""
-    from app.services.exchange import DEFAULT_STATUSES, export_folder
+@click.option("--annotator", "annotators", multiple=True,
+              help="Only this user's annotations (repeat for several) [default: everyone's].")
+def export_command(out, fmt, images, activities, statuses, annotators):
+    """Export every annotation that passes the filters: masks/<activity>/<sequence>/<frame>.png
+    (the frame's mask: its best annotation's union), annotators/<user>/... (each
+    annotation's union), annotations.json (COCO, one RLE mask per instance, with
+    its annotator and status) and, with --images, images/ (the RGB files)."""
+    from app.services.exchange import DEFAULT_STATUSES, ExportOptions, export_folder
 
+    options = ExportOptions.of(fmt=fmt, images=images, activities=activities, statuses=statuses or DEFAULT_STATUSES,
+                               annotators=annotators)
     with progress_bar("Exporting") as (on_start, on_progress):
-        report = export_folder(
-            out,
-            fmt=fmt,
-            activities=list(activities),
-            statuses=[Status(s) for s in statuses] or list(DEFAULT_STATUSES),
-            on_start=on_start,
-            on_progress=on_progress,
-        )
-    click.echo(f"{out}: {report.frames} frames, {report.instances} action-objects exported")
+        report = export_folder(out, options, on_start=on_start, on_progress=on_progress)
+    click.echo(f"{out}: {report.summary()}")
 
 
 @bp.cli.command("import-annotations")
@@ -47,8 +47,9 @@ def export_command(out, fmt, activities, statuses):
 @click.option("--skip-missing", is_flag=True, help="Skip masks of frames that are not in the database.")
 def import_annotations_command(path, author, status, replace, skip_missing):
     """Import masks from an export (folder or zip from `flask egonet export` or
-    the download button), a COCO JSON file, or a folder of PNG masks laid out
-    as <activity>/<sequence>/<frame>.png. The frames must be imported first."""
+    the Label page: every annotator's annotations), a COCO JSON file, or a folder
+    of PNG masks laid out as <activity>/<sequence>/<frame>.png. The frames must
+    be imported first."""
     from app.services.exchange import import_annotations
 
     with progress_bar("Importing") as (on_start, on_progress):

@@ -6,7 +6,7 @@ from app.models.frames import Activity, Frame, Sequence
 from app.models.users import Role, User
 
 # Every model module is imported here so the metadata (and Alembic) sees it.
-from app.models import studies, training  # noqa: E402, F401
+from app.models import exports, studies, training  # noqa: E402, F401
 
 __all__ = [
     "FINISHED",

@@ -10,9 +10,24 @@ from sqlalchemy import func
 
 from app.extensions import db
 from app.models import Activity, Annotation, Frame, Sequence, Status
+from app.models.training import Prediction
 from app.services import media
+from app.services.demo import DEMO_SOURCE
+from app.services.training import read_probability
 from egonet import io
+from egonet.overlay import heatmap
 
+# What a demo frame's metadata says about its answer (egonet.synth's truth: the
+# action-object, its kind, where it is, the hands on it, its mask's size).
+# The viewer never shows these: on an unlabelled frame they give the
+# labeller the answer, on a labelled one they prime the reviewer.
+RENDERER_TRUTH_KEYS = frozenset(
+    {"kind", "object", "object_distance_m", "object_height_m", "object_rgb", "hands_touching", "mask_fraction"}
+)
+# Maps whose range is narrower than this are shown on the probability scale only.
+MIN_NORMALISE_RANGE = 1e-3
+THUMB_WIDTH = 240
+THUMB_MAX_HEIGHT = 480
 # The status a frame shows is the most advanced of its annotations.
 STATUS_ORDER = [Status.TODO, Status.REJECTED, Status.IN_PROGRESS, Status.DONE, Status.REVIEWED]
 
@@ -100,20 +115,28 @@ def frame_depth(frame: Frame) -> np.ndarray | None:
 
 def depth_preview(frame: Frame) -> Path:
     """A colour-mapped PNG of the frame's depth (near = warm), cached on disk."""
-    return _cached(f"depth-{Path(frame.depth_path).stem}.png", lambda: _colour_depth(io.read_depth(media.absolute_path(frame.depth_path))))
+    return cached(f"depth-{Path(frame.depth_path).stem}.png", lambda: _colour_depth(io.read_depth(media.absolute_path(frame.depth_path))))
 
 
-def thumbnail(frame: Frame, *, width: int = 240) -> Path:
+def thumbnail_size(frame: Frame) -> tuple[int, int]:
+    """(width, height) of the frame's thumbnail (and of its masks' thumbnails, which lie over it).
+
+    ``THUMB_WIDTH`` wide, the frame's aspect, at most ``THUMB_MAX_HEIGHT`` tall.
+    """
+    return THUMB_WIDTH, max(1, min(THUMB_MAX_HEIGHT, round(frame.height * THUMB_WIDTH / frame.width)))
+
+
+def thumbnail(frame: Frame) -> Path:
     """A small JPEG of the frame for grids, cached on disk."""
+    size = thumbnail_size(frame)
 
     def make() -> bytes:
         rgb = io.read_image(media.absolute_path(frame.rgb_path))
-        h = max(1, round(rgb.shape[0] * width / rgb.shape[1]))
-        small = cv2.resize(rgb, (width, h), interpolation=cv2.INTER_AREA)
+        small = cv2.resize(rgb, size, interpolation=cv2.INTER_AREA)
         ok, buf = cv2.imencode(".jpg", cv2.cvtColor(small, cv2.COLOR_RGB2BGR), [cv2.IMWRITE_JPEG_QUALITY, 85])
         return buf.tobytes()
 
-    return _cached(f"thumb{width}-{frame.content_hash}.jpg", make)
+    return cached(f"thumb{size[0]}x{size[1]}-{frame.content_hash}.jpg", make)
 
 
 def _colour_depth(depth: np.ndarray) -> bytes:
@@ -127,9 +150,69 @@ def _colour_depth(depth: np.ndarray) -> bytes:
     return buf.tobytes()
 
 
-def _cached(name: str, make) -> Path:
+def cached(name: str, make) -> Path:
     """Return a derived file under CACHE_ROOT, making it atomically on first use."""
     path = Path(current_app.config["CACHE_ROOT"]) / name
     if not path.exists():
         media.write_atomic(path, make())
     return path
+
+
+# --------------------------------------------------------------------------
+# The frame viewer
+
+
+def shown_meta(frame: Frame) -> dict:
+    """The frame's metadata as staff see it: without the demo renderer's truth (``RENDERER_TRUTH_KEYS``)."""
+    meta = frame.meta or {}
+    if frame.sequence.source != DEMO_SOURCE:
+        return dict(meta)
+    return {k: v for k, v in meta.items() if k not in RENDERER_TRUTH_KEYS}
+
+
+def viewer_annotations(frame: Frame) -> list[tuple[Annotation, bool]]:
+    """The frame's annotations, its ground truth first (then by status and latest update), each with
+    whether the viewer shows it at first: the finished ones (done, reviewed)."""
+    rank = {s: i for i, s in enumerate(reversed(STATUS_ORDER))}
+    ordered = sorted(frame.annotations, key=lambda a: (rank[a.status], -a.updated_at.timestamp(), -a.id))
+    return [(a, a.status in (Status.DONE, Status.REVIEWED)) for a in ordered]
+
+
+@dataclass
+class PredictionRange:
+    """A prediction map's lowest and highest probability, and whether stretching it can show more."""
+
+    low: float
+    high: float
+
+    @property
+    def can_normalise(self) -> bool:
+        return self.high - self.low >= MIN_NORMALISE_RANGE
+
+
+def prediction_range(prediction: Prediction) -> PredictionRange:
+    """The map's range (read from its 16-bit PNG)."""
+    probability = read_probability(prediction.path)
+    return PredictionRange(float(probability.min()), float(probability.max()))
+
+
+def normalised_overlay(prediction: Prediction) -> Path:
+    """The prediction's heat map stretched to its own range (low -> 0, high -> 1), cached.
+
+    For display only: the viewer's "normalise" switch. Scores, thresholds and
+    stored predictions always use the probabilities themselves.
+    """
+
+    def make() -> bytes:
+        probability = read_probability(prediction.path)
+        low, high = float(probability.min()), float(probability.max())
+        stretched = (probability - low) / max(high - low, MIN_NORMALISE_RANGE)
+        return io.encode_png(heatmap(stretched))
+
+    return cached(f"predictions/overlay-range-{Path(prediction.path).stem}.png", make)
+
+
+def colour_bar() -> Path:
+    """The heat map's colours and opacity from probability 0 (left) to 1 (right), 256 x 12 RGBA, cached."""
+    ramp = np.repeat(np.linspace(0.0, 1.0, 256, dtype=np.float32)[None, :], 12, axis=0)
+    return cached("colour-bar-v1.png", lambda: io.encode_png(heatmap(ramp)))

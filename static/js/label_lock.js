@@ -92,4 +92,8 @@ export function wireLock() {
   $("#edit")?.addEventListener("click", edit);
   $("#fix")?.addEventListener("click", fix);
   if (reviewing && config.own) $("#fix").disabled = true;
+  // The review queue's "Fix" link opens the review page ready to fix.
+  if (reviewing && !config.own && location.hash === "#fix") {
+    document.addEventListener("label:annotation", () => { if (!fixing) fix(); }, { once: true });
+  }
 }

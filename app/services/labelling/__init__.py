@@ -67,8 +67,11 @@ from app.services.labelling.suggest import (
 )
 from app.services.labelling.presence import HEARTBEAT_S, PRESENCE_TTL_S, leave, mark_present, others_on
 from app.services.labelling.review import (
+    INSTANCE_COLOURS,
     annotator_queue,
     fix_annotation,
+    instance_colour,
+    mask_thumbnail,
     next_to_review,
     next_unlabelled,
     review_annotation,
@@ -77,6 +80,7 @@ from app.services.labelling.review import (
 
 __all__ = [
     "AUTHOR_STATUSES",
+    "INSTANCE_COLOURS",
     "FILMSTRIP_MAX",
     "HEARTBEAT_S",
     "MAX_HISTORY_BYTES",
@@ -112,9 +116,11 @@ __all__ = [
     "grabcut_mask",
     "grabcut_stroke",
     "grabcut_undo",
+    "instance_colour",
     "instance_of",
     "leave",
     "mark_present",
+    "mask_thumbnail",
     "max_rle_chars",
     "next_to_review",
     "next_unlabelled",

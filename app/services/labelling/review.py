@@ -1,5 +1,6 @@
 """Review and the queues: a reviewer's decision on a done annotation, a
-reviewer's fix of its masks, and which frames and annotations wait for whom.
+reviewer's fix of its masks, which frames and annotations wait for whom, and
+the masks' thumbnails they show.
 
 A reviewer accepts a done annotation (reviewed; its GrabCut sessions go) or
 rejects it with a comment (rejected, back to its author). Before deciding, a
@@ -12,18 +13,46 @@ annotator's queue runs in dataset order (activity, sequence, index) over the
 frames nobody else has taken or has open; a reviewer's runs oldest first.
 """
 
+import hashlib
 from dataclasses import dataclass
+from pathlib import Path
 
+import cv2
+import numpy as np
 from sqlalchemy import and_, exists, func, or_, tuple_
+from sqlalchemy.orm import joinedload, selectinload
 from sqlalchemy.orm.exc import StaleDataError
 
 from app.errors import Problem
 from app.extensions import db
 from app.models import FINISHED, Activity, Annotation, Frame, Sequence, Status, User, utcnow
+from app.services import frames as frames_service
+from app.services import media
 from app.services.labelling.annotations import _write, get_annotation, instance_specs, stale, user_annotation
 from app.services.labelling.grabcut import forget_sessions
 from app.services.labelling.history import forget_histories
 from app.services.labelling.presence import held_by_others
+from egonet import io
+
+# The instances' colours, in order (the labelling page's, the frame viewer's and the thumbnails').
+INSTANCE_COLOURS = (
+    (0, 180, 255),
+    (255, 60, 170),
+    (255, 140, 0),
+    (255, 214, 0),
+    (110, 220, 60),
+    (150, 95, 255),
+    (0, 205, 170),
+    (255, 110, 110),
+)
+# Opacity (0-255) of a thumbnail's filled object and of its outline.
+THUMB_FILL_ALPHA = 90
+THUMB_LINE_ALPHA = 255
+
+
+def instance_colour(i: int) -> tuple[int, int, int]:
+    """The colour of the ``i``-th instance (0-based), as (R, G, B)."""
+    return INSTANCE_COLOURS[i % len(INSTANCE_COLOURS)]
 
 # --------------------------------------------------------------------------
 # Review
@@ -185,7 +214,11 @@ def review_queue(*, limit: int = 200) -> tuple[list[Annotation], int]:
     """Done annotations waiting for a decision, oldest first, and how many there are."""
     waiting = db.select(Annotation).filter_by(status=Status.DONE)
     total = db.session.execute(db.select(func.count()).select_from(waiting.subquery())).scalar_one()
-    rows = db.session.execute(waiting.order_by(Annotation.updated_at, Annotation.id).limit(limit)).scalars().all()
+    rows = db.session.execute(
+        waiting.options(selectinload(Annotation.instances), joinedload(Annotation.author),
+                        joinedload(Annotation.frame).joinedload(Frame.sequence).joinedload(Sequence.activity))
+        .order_by(Annotation.updated_at, Annotation.id).limit(limit)
+    ).unique().scalars().all()
     return rows, total
 
 
@@ -200,3 +233,42 @@ def next_to_review(reviewer: User, *, after: Annotation | None = None) -> int | 
     if after is not None:
         query = query.where(Annotation.id != after.id)
     return db.session.execute(query.limit(1)).scalar_one_or_none()
+
+
+# --------------------------------------------------------------------------
+# Thumbnails
+
+
+def mask_thumbnail(annotation: Annotation) -> Path:
+    """The annotation's instances as an RGBA PNG the size of the frame's thumbnail, cached on disk.
+
+    Each instance is filled faintly and outlined in its colour
+    (``instance_colour``) on a transparent background, so the picture lies
+    over the frame's thumbnail (``frames.thumbnail_size``: 240 px wide, so
+    its cost is bounded whatever the frame's size). Masks are stored by
+    content, so the cache is named after the instances' mask files and never
+    goes stale.
+    """
+    frame = annotation.frame
+    width, height = frames_service.thumbnail_size(frame)
+    paths = [i.mask_path for i in annotation.instances]
+    digest = hashlib.sha256("|".join([f"{width}x{height}", *paths]).encode()).hexdigest()[:32]
+
+    def make() -> bytes:
+        picture = np.zeros((height, width, 4), np.uint8)
+        for i, path in enumerate(paths):
+            small = _shrunk(io.read_mask(media.absolute_path(path)), (width, height))
+            colour = instance_colour(i)
+            picture[small] = (*colour, THUMB_FILL_ALPHA)
+            contours, _ = cv2.findContours(small.astype(np.uint8), cv2.RETR_EXTERNAL, cv2.CHAIN_APPROX_NONE)
+            cv2.drawContours(picture, contours, -1, (*colour, THUMB_LINE_ALPHA), 1)
+        ok, buf = cv2.imencode(".png", cv2.cvtColor(picture, cv2.COLOR_RGBA2BGRA))
+        return buf.tobytes()
+
+    return frames_service.cached(f"review/mask-{digest}.png", make)
+
+
+def _shrunk(mask: np.ndarray, size: tuple[int, int]) -> np.ndarray:
+    """A bool mask at ``size`` (width, height): a pixel is set when a quarter of what it covers is,
+    so thin and small objects still show."""
+    return cv2.resize(mask.astype(np.float32), size, interpolation=cv2.INTER_AREA) >= 0.25

@@ -24,6 +24,8 @@ RULES = {
     "frames.thumbnail": (STAFF, 200),
     "frames.depth": (STAFF, 200),
     "frames.media_file": (STAFF, 200),
+    "frames.normalised_prediction": (STAFF, 200),
+    "frames.colour_bar": (STAFF, 200),
     "api.activities": (STAFF, 200),
     "api.activity_frames": (STAFF, 200),
     "api.frame": (STAFF, 200),

@@ -3,13 +3,20 @@
 Annotators and admins label (the labelling page, their own annotation,
 presence); reviewers and admins review (and fix a done annotation's masks);
 all staff run GrabCut and keep undo histories (a reviewer's fix draws too),
-see the overview, read annotations and their masks, and download exports.
-Bodiless writes answer 400 (the body or ``?version=`` is missing), and so do
-the GrabCut mask without its query; nobody has a stored undo history (404).
+see the overview, read annotations and their masks, and export. Bodiless
+writes answer 400 (the body or ``?version=`` is missing), and so do the
+GrabCut mask without its query; nobody has a stored undo history (404); an
+export form without a status goes back to the Label page (302).
+``url_values`` makes a finished export (row and zip) for its page and download.
 """
+
+import zipfile
+from pathlib import Path
 
 from app.extensions import db
 from app.models import Annotation, Frame, Instance, Role, Status
+from app.models.exports import ExportJob, ExportStatus
+from app.services.exchange import ExportOptions
 from app.services import media
 from app.services.importing import import_path
 from app.services.users import create_user
@@ -27,7 +34,6 @@ RULES = {
     "label.next_unlabelled": (LABELLERS, 302),
     "label.review": (REVIEWERS, 200),
     "label.next_review": (REVIEWERS, 302),
-    "label.export": (STAFF, 200),
     "label.own_annotation": (LABELLERS, 200),
     "label.save_annotation": (LABELLERS, 400),
     "label.add_time": (LABELLERS, 400),
@@ -38,6 +44,7 @@ RULES = {
     "label.put_history": (EDITORS, 400),
     "label.annotation": (STAFF, 200),
     "label.annotation_mask": (STAFF, 200),
+    "label.annotation_thumbnail": (STAFF, 200),
     "label.instance_mask": (STAFF, 200),
     "label.upload_instance_mask": (LABELLERS, 400),
     "label.review_annotation": (REVIEWERS, 400),
@@ -50,6 +57,10 @@ RULES = {
     "label.filmstrip": (LABELLERS, 200),
     "label.suggest": (LABELLERS, 400),
     "label.accept_proposal": (LABELLERS, 400),
+    "exports.create": (STAFF, 302),
+    "exports.detail": (STAFF, 200),
+    "exports.status": (STAFF, 200),
+    "exports.download": (STAFF, 200),
 }
 
 
@@ -62,8 +73,14 @@ def url_values(app, tmp_path) -> dict:
         annotation = Annotation(frame=frame, author=author, status=Status.DONE, mask_path=path)
         annotation.instances.append(Instance(position=0, key="a", mask_path=path))
         db.session.add(annotation)
+        export = ExportJob(status=ExportStatus.DONE, options=ExportOptions().to_dict(), file_name="export-access.zip")
+        db.session.add(export)
         db.session.commit()
-        return {"frame_id": frame.id, "annotation_id": annotation.id, "position": 0}
+        root = Path(app.config["EXPORT_ROOT"])
+        root.mkdir(parents=True, exist_ok=True)
+        with zipfile.ZipFile(root / export.file_name, "w") as archive:
+            archive.writestr("annotations.json", "{}")
+        return {"frame_id": frame.id, "annotation_id": annotation.id, "position": 0, "export_id": export.id}
 
 
 def _square(height: int, width: int):
