@@ -1,14 +1,14 @@
 """exports: zips of masks (and images) built by the worker for the Label page
 
 Revision ID: 0011
-Revises: 0006
+Revises: 0010
 """
 
 from alembic import op
 import sqlalchemy as sa
 
 revision = "0011"
-down_revision = "0006"
+down_revision = "0010"
 branch_labels = None
 depends_on = None
 

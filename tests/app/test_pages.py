@@ -95,7 +95,7 @@ def test_the_review_queue_shows_each_mask_over_its_frame(app, admin_client, tmp_
     page = admin_client.get("/label/").get_data(as_text=True)
     queue = page[page.index('id="review-queue"'):]
     assert f'src="/api/label/annotations/{done_id}/thumb.png?v=' in queue and "2 objects: tactile" in queue
-    assert f'class="fix-link" href="/label/frames/{frame_id}"' in queue
+    assert f'class="fix-link" href="/label/annotations/{done_id}/review#fix"' in queue
 
     with admin_client.get(f"/api/label/annotations/{done_id}/thumb.png?v=2") as response:
         assert response.status_code == 200 and response.mimetype == "image/png"

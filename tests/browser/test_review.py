@@ -118,10 +118,11 @@ def test_review_queue_thumbnails_and_the_export_form(live_app, live_server, brow
     page.goto(f"{live_server}/label/")
     assert page.locator("#recent-exports tbody tr").count() == 1
     screenshot(page, "review-queue-1920x1080")
+    assert failed == []
 
     # Fix opens the review page with the tools on.
     page.locator("#review-queue .fix-link").first.click()
     page.wait_for_selector("#fixing:not([hidden])")
     assert page.is_hidden("#fix")
-    assert failed == []
+    screenshot(page, "review-fix-1920x1080")
     context.close()
