@@ -303,9 +303,10 @@ def comprehension():
 
 def _answers(count: int) -> dict[int, int]:
     """``q0``..``q{count-1}`` -> option index; anything else in the form is refused (a bounded body)."""
-    unknown = [k for k in request.form if k != "csrf_token" and not re.fullmatch(r"q\d{1,2}", k)]
-    if unknown or len(request.form) > count + 1:
-        raise Problem("unexpected answers in the form", fields={(unknown or ["form"])[0]: "unknown field"})
+    expected = {f"q{i}" for i in range(count)} | {"csrf_token"}
+    unknown = sorted(k for k in request.form if k not in expected)
+    if unknown:
+        raise Problem(f"{unknown[0]}: there is no such question", fields={unknown[0]: "unknown field"})
     answers = {}
     for i in range(count):
         value = request.form.get(f"q{i}", "")
