@@ -11,7 +11,8 @@
 // Reaction times are performance.now() milliseconds since the frame was
 // painted: the image is decoded first (img.decode()), put on the page, and
 // the timestamp of the next animation frame, the one that first shows it,
-// is the zero. The next frame is preloaded and decoded while the current
+// is the zero (or, for a photo first seen when the cover is lifted, that
+// moment's frame). The next frame is preloaded and decoded while the current
 // one is on screen, so it appears as soon as the server answers.
 
 import { api, ApiError } from "./api.js";
@@ -73,8 +74,8 @@ function say(text) {
 }
 
 async function show(state) {
-  if (state.step !== "trials") {
-    location.assign(state.redirect);
+  if (state.redirect) {
+    location.assign(state.redirect); // the phase is over (the practice, or the session)
     return;
   }
   const received = performance.now();
@@ -129,9 +130,14 @@ function layout() {
 // Cover the stage while the window cannot show the study as it asks.
 function check(rect = null) {
   let problem = windowProblem(innerWidth, innerHeight, display, rect);
-  const wantsFullscreen = display.fullscreen && !document.fullscreenElement;
+  // The timed part only (a page change leaves full screen: the practice would ask twice); browsers
+  // without the Fullscreen API (an iPhone's) cannot be asked for it.
+  const wantsFullscreen = display.fullscreen && !practice && document.fullscreenEnabled && !document.fullscreenElement;
   if (!problem && wantsFullscreen) problem = "This study is done in full screen.";
+  const uncovered = blocked && problem === null;
   blocked = problem !== null;
+  // A photo first seen when the cover goes: its reaction times count from then.
+  if (uncovered && trial && clicks.length === 0) requestAnimationFrame((timestamp) => (paintedAt = timestamp));
   ui.blocker.hidden = !blocked;
   ui.blockerText.textContent = problem || "";
   ui.fullscreen.hidden = !wantsFullscreen;
@@ -170,6 +176,7 @@ async function refresh() {
 
 async function submit({ none = false, timedOut = false } = {}) {
   if (busy || !trial) return;
+  if (resizeTimer !== null) logResize();
   busy = true;
   updateButtons();
   const rect = image.getBoundingClientRect();
@@ -254,11 +261,17 @@ document.addEventListener("keydown", (event) => {
 window.addEventListener("blur", () => log("blur"));
 window.addEventListener("focus", () => log("focus"));
 document.addEventListener("visibilitychange", () => log("visibility", { state: document.visibilityState }));
+// A resize is logged once the window has settled (200 ms), or with the answer if that comes first.
 let resizeTimer = null;
+function logResize() {
+  clearTimeout(resizeTimer);
+  resizeTimer = null;
+  log("resize", { width: innerWidth, height: innerHeight });
+}
 window.addEventListener("resize", () => {
   layout();
   clearTimeout(resizeTimer);
-  resizeTimer = setTimeout(() => log("resize", { width: innerWidth, height: innerHeight }), 200);
+  resizeTimer = setTimeout(logResize, 200);
 });
 
 ui.fullscreen.addEventListener("click", () => {

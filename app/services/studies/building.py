@@ -193,10 +193,7 @@ def create_study(
         check_int(trial_limit_s, "trial_limit_s", 1, 24 * 3600)
     if sigma_px is not None:
         sigma_px = check_number(sigma_px, "sigma_px", 0.5, 10_000)
-    try:
-        order = ActivityOrder(activity_order)
-    except ValueError:
-        raise StudyProblem(f"activity_order must be one of {', '.join(ActivityOrder)}", field="activity_order") from None
+    order = _activity_order(activity_order)
     activities, eligible = _eligible_frames(activity_ids, frames_per_activity)
     names = [a.name for a in activities]
     condition_list = protocol.check_conditions(conditions, activity_names=names, frames_per_activity=frames_per_activity)
@@ -235,14 +232,26 @@ def create_study(
     _add_frames(study, practice, catch, start=len(main))
     study.sigma_scaled = sigma_px is None
     study.sigma_px = sigma_px if sigma_px is not None else scaled_sigma(max(f.width for f in main))
-    for position, item in enumerate(condition_list, start=1):
-        quota = link["quotas"].get(item["name"]) if link else None
-        study.conditions.append(StudyCondition(position=position, name=item["name"], overrides=item["overrides"], quota=quota))
-    db.session.flush()
+    _add_conditions(study, condition_list, quotas=link["quotas"] if link else {})
     if study.participants:
         recruiting.rebuild_participants(study)
     db.session.commit()
     return study
+
+
+def _add_conditions(study: Study, conditions: list[dict[str, Any]], *, quotas: dict[str, int]) -> None:
+    for position, item in enumerate(conditions, start=1):
+        study.conditions.append(
+            StudyCondition(position=position, name=item["name"], overrides=item["overrides"], quota=quotas.get(item["name"]))
+        )
+    db.session.flush()
+
+
+def _activity_order(value: Any) -> ActivityOrder:
+    try:
+        return ActivityOrder(value)
+    except ValueError:
+        raise StudyProblem(f"activity_order must be one of {', '.join(ActivityOrder)}", field="activity_order") from None
 
 
 def _completion_columns(completion: dict[str, Any]) -> dict[str, Any]:

@@ -65,6 +65,11 @@ class Checks:
     catch_failed: int = 0
 
     @property
+    def asked(self) -> bool:
+        """Whether the study has any check for this participant (questions or catch trials)."""
+        return self.comprehension != "none" or self.catch_total > 0
+
+    @property
     def passed(self) -> bool | None:
         if self.comprehension == "failed" or self.catch_failed:
             return False

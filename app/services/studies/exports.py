@@ -136,7 +136,7 @@ def _trial_row(study: Study, trial: Trial, truth: _Truth) -> dict[str, Any]:
         "frame_source": frame.source_name,
         "frame_width": frame.width,
         "frame_height": frame.height,
-        "outcome": trial.outcome.value if trial.outcome else "pending",
+        "outcome": trial.outcome.value if trial.outcome else ("not_reached" if trial.participant.finished_at else "pending"),
         "clicks": len(trial.clicks),
         "hit": truth.hit(trial),
         "rt_ms": trial.rt_ms,
