@@ -89,7 +89,8 @@ class StudyForm(Form):
     catch_trials = TextAreaField("Attention checks (catch trials)", validators=[Length(max=20_000)],
                                  description='[{"frame": 42, "position": 10, "box": [x0, y0, x1, y1]}]; without a box, the frame\'s ground truth')
     comprehension = TextAreaField("Comprehension questions", validators=[Length(max=50_000)],
-                                  description='[{"question": "...", "options": ["...", "..."], "answer": 0}], or {"questions": [...], "max_attempts": 3}')
+                                  description='[{"question": "...", "options": ["...", "..."], "answer": 0}], '
+                                              'or {"questions": [...], "max_attempts": 3}')
     conditions = TextAreaField("Conditions (between subjects)", validators=[Length(max=50_000)],
                                description='[{"name": "fast", "trial_limit_seconds": 5}, {"name": "slow", "trial_limit_seconds": 20}]')
     open_link = BooleanField("Open link: anyone with the link may take part (Prolific, MTurk)")

@@ -20,18 +20,21 @@ def _study(study_id: int):
     return study
 
 
-def _open_link(study, base_url: str | None) -> str | None:
-    """The study's open link: absolute with a base URL (``--base-url`` or the ``PUBLIC_URL`` setting), else its path."""
+def _base(base_url: str | None) -> str:
+    """The links' start: ``--base-url``, else the ``PUBLIC_URL`` setting, else nothing (the links are paths)."""
     from flask import current_app
 
-    if study.open_link_token is None:
-        return None
-    base = (base_url or current_app.config.get("PUBLIC_URL") or "").rstrip("/")
-    return f"{base}/s/o/{study.open_link_token}"
+    return (base_url or current_app.config.get("PUBLIC_URL") or "").rstrip("/")
+
+
+def _open_link(study, base_url: str | None) -> str | None:
+    return f"{_base(base_url)}/s/o/{study.open_link_token}" if study.open_link_token else None
 
 
 BASE_URL = click.option(
-    "--base-url", default=None, help="The site's address for the links, e.g. https://studies.example.org [default: the PUBLIC_URL setting, else paths only]."
+    "--base-url",
+    default=None,
+    help="The site's address for the links, e.g. https://studies.example.org [default: the PUBLIC_URL setting, else paths only].",
 )
 
 
@@ -84,7 +87,7 @@ def study_show_command(study_id, fmt, base_url):
             "condition": studies.condition_name(p),
             "checks_passed": results[p.id].passed,
             "completion_code": p.completion_code,
-            "link": f"{(base_url or '').rstrip('/')}/s/l/{p.link_token}" if p.link_token and p.link_used_at is None else None,
+            "link": f"{_base(base_url)}/s/l/{p.link_token}" if p.link_token and p.link_used_at is None else None,
         }
         for p in study.participants
     ]

@@ -8,8 +8,8 @@ import numpy as np
 import pytest
 
 from app.extensions import db
-from app.models import Activity, Status
-from app.models.studies import FrameKind, Participant, Study
+from app.models import Activity, Status, User
+from app.models.studies import FrameKind, Study
 from app.services import studies
 from app.services.importing import import_path
 from egonet import clicks as egonet_clicks
@@ -196,7 +196,7 @@ def test_edit_before_anyone_enters_then_duplicate_and_delete(app, admin_client, 
         copy_id, users = duplicate.id, [p.user_id for p in duplicate.participants]
     assert admin_client.post(f"/studies/{copy_id}/delete").headers["Location"].endswith("/studies/")
     with app.app_context():
-        assert db.session.get(Study, copy_id) is None and all(db.session.get(Participant, u) is None for u in users)
+        assert db.session.get(Study, copy_id) is None and all(db.session.get(User, u) is None for u in users)
     assert admin_client.post(f"/studies/{study_id}/status", data={"status": "archived"}).status_code == 400
     assert admin_client.post(f"/studies/{study_id}/status", data={"status": "paused"}).status_code == 302
     assert b'id="study-status">paused' in admin_client.get(f"/studies/{study_id}").data

@@ -405,7 +405,9 @@ def duplicate_study(study: Study, *, created_by: User | None = None) -> Study:
         created_by=created_by,
     )
     for sf in study.frames:
-        copy.frames.append(StudyFrame(frame_id=sf.frame_id, position=sf.position, kind=sf.kind, catch_position=sf.catch_position, region=sf.region))
+        copy.frames.append(
+            StudyFrame(frame_id=sf.frame_id, position=sf.position, kind=sf.kind, catch_position=sf.catch_position, region=sf.region)
+        )
     for c in study.conditions:
         copy.conditions.append(StudyCondition(position=c.position, name=c.name, overrides=dict(c.overrides), quota=c.quota))
     db.session.add(copy)

@@ -13,6 +13,7 @@ from app.services.studies.building import eligible_counts
 from app.services.studies.common import now
 from app.services.studies.masks import cached_superpixels
 from app.services.studies.recruiting import condition_places, places_taken
+from app.services.studies.session import has_pending
 
 
 @dataclass
@@ -48,7 +49,7 @@ def progress(participant: Participant) -> Progress:
     elif participant.started_at is not None:
         status = "time up" if now() >= participant.deadline else "running"
     elif participant.instructions_done_at is not None:
-        status = "practice"
+        status = "practice" if has_pending(participant, FrameKind.PRACTICE) else "ready"
     elif participant.consented_at is not None:
         status = "consented"
     else:
