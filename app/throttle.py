@@ -1,4 +1,4 @@
-"""Throttling of guesses: passwords, participant codes, single-use links.
+"""Throttling of guesses (passwords, participant codes, study links) and of open-link admissions.
 
 Flask-Limiter counts failed attempts per key (for log-in: the account and the
 client's address) in a fixed window that starts at the first failure. Only
@@ -8,6 +8,11 @@ right are never slowed down, and a success forgets the failures before it
 failures are reached within ``RATELIMIT_WINDOW``, every attempt for that key
 is answered 429 with ``Retry-After`` until the window ends, a correct
 password included.
+
+A study's open link is public: each admission through it makes a
+participant with their trials, so admissions are counted per address too
+(``RATELIMIT_ARRIVALS``, default 30 per hour; a participant resuming with
+the same platform id is not counted).
 
 Storage: in memory (per server process) by default; Redis when
 ``RATELIMIT_STORAGE_URI`` is a ``redis://`` URL, or, when it is unset and
@@ -46,6 +51,7 @@ def init_app(app: Flask) -> None:
     app.config.setdefault("RATELIMIT_ENABLED", True)
     app.config.setdefault("RATELIMIT_FAILURES", 20)
     app.config.setdefault("RATELIMIT_WINDOW", "15 minutes")
+    app.config.setdefault("RATELIMIT_ARRIVALS", "30 per hour")
     app.config["RATELIMIT_STORAGE_URI"] = storage_uri(app)
     app.config.setdefault("RATELIMIT_HEADERS_ENABLED", True)
     limiter.init_app(app)
@@ -54,6 +60,11 @@ def init_app(app: Flask) -> None:
 def failures_limit() -> str:
     """The limit string from the config, e.g. ``20 per 15 minutes``."""
     return f"{current_app.config['RATELIMIT_FAILURES']} per {current_app.config['RATELIMIT_WINDOW']}"
+
+
+def arrivals_limit() -> str:
+    """Admissions through open study links per address (``RATELIMIT_ARRIVALS``)."""
+    return current_app.config["RATELIMIT_ARRIVALS"]
 
 
 def failed(response: Response) -> bool:

@@ -1,37 +1,39 @@
-"""The participant side of a human study: consent, instructions, timed trials.
+"""The participant side of a human study: entering, consent, instructions and questions, practice, timed trials, the end.
 
 (The admin side is ``app.blueprints.studies``. This blueprint keeps its
 registered name ``study`` and its URLs under ``/s``.)
 
-A participant enters with an access code (a public form) or a single-use
-link, which signs them in as their participant user. Opening the link shows
-a Start button; only pressing it (a POST) uses the link, so a link-preview
-bot that fetches it does not burn it. Wrong codes and unknown links are
-throttled per address, like log-in (``app.throttle``). Every other page and
-call needs that sign-in (``@roles(Role.PARTICIPANT)``) and goes through
-``_participant`` / ``_owned_trial``, which load the caller's own enrolment
-and trial and refuse anything else, so one participant can never reach
-another's session. The only images served here are the frames of the
-participant's trial on screen and the next one; ground truth never leaves
-the server. Nothing here may be stored by the browser (``no-store``): Back
-after the end must not bring back a trial with its clock running.
+A participant enters with an access code (a public form), a single-use
+link, or the study's open link (``/s/o/<token>``, with a recruiting
+platform's parameters such as ``PROLIFIC_PID``), which signs them in as
+their participant user. Opening a link shows a Start button; only pressing
+it (a POST) uses a single-use link or admits through the open link, so a
+link-preview bot that fetches it does neither. Wrong codes and unknown
+links are throttled per address, like log-in, and so are admissions through
+the open link (``app.throttle``). Every other page and call needs that
+sign-in (``@roles(Role.PARTICIPANT)``) and goes through ``_participant`` /
+``_owned_trial``, which load the caller's own enrolment and trial and refuse
+anything else, so one participant can never reach another's session. The
+only images served here are the frames of the participant's trial on screen
+and the next one; ground truth never leaves the server. Nothing here may be
+stored by the browser (``no-store``): Back after the end must not bring back
+a trial with its clock running.
 """
 
-from flask import Blueprint, redirect, render_template, request, send_file, url_for
+import re
+
+from flask import Blueprint, g, redirect, render_template, request, send_file, url_for
 from flask_login import current_user, login_user
-from app.forms import Form
 from werkzeug.wrappers import Response
-from wtforms import StringField
-from wtforms.validators import DataRequired, Length
 
 from app.errors import Problem
 from app.extensions import db
+from app.forms import CodeForm
 from app.models import Role
-from app.models.studies import EventKind, Participant, Trial
+from app.models.studies import EventKind, FrameKind, Participant, Study, Trial
 from app.security import public, roles
-from app.services import media
-from app.services import studies
-from app.throttle import address, failed, failures_limit, limiter, too_many_attempts
+from app.services import media, studies
+from app.throttle import address, arrivals_limit, failed, failures_limit, limiter, too_many_attempts
 from app.validation import Bool, Float, Int, List, Obj, Str, json_body
 
 bp = Blueprint("study", __name__, url_prefix="/s")
@@ -39,18 +41,23 @@ bp = Blueprint("study", __name__, url_prefix="/s")
 STEP_ENDPOINTS = {
     "consent": "study.consent",
     "instructions": "study.instructions",
+    "practice": "study.practice",
+    "ready": "study.ready",
     "trials": "study.trials",
     "done": "study.done",
 }
 DAY_MS = 24 * 3600 * 1000.0
 CLIENT_EVENTS = {k.value for k in EventKind if k is not EventKind.RELOAD}
+# Phones, from the browser's own words (the page checks the pointer and the window too).
+PHONE = re.compile(r"iPhone|iPod|Android.*Mobile|Windows Phone|IEMobile|BlackBerry|Opera Mini|Mobile.*Firefox", re.I)
+SIZE = Obj({"width": Int(min=0, max=100_000), "height": Int(min=0, max=100_000)}, default=None, nullable=True)
 
 CLICK = Obj({"x": Float(), "y": Float(), "rt_ms": Float(min=0, max=DAY_MS)})
 EVENT = Obj(
     {
         "kind": Str(choices=CLIENT_EVENTS),
         "t_ms": Float(min=-DAY_MS, max=DAY_MS),
-        "state": Str(choices={"visible", "hidden", "prerender"}, default=None, nullable=True),
+        "state": Str(choices={"visible", "hidden", "prerender", "entered", "exited"}, default=None, nullable=True),
         "width": Int(min=0, max=100_000, default=None, nullable=True),
         "height": Int(min=0, max=100_000, default=None, nullable=True),
         "x": Float(default=None, nullable=True),
@@ -67,6 +74,14 @@ ANSWER = {
     "display": Obj({"width": Float(min=0, max=100_000), "height": Float(min=0, max=100_000)}, default=None, nullable=True),
     "pixel_ratio": Float(min=0, max=100, default=None, nullable=True),
 }
+ENVIRONMENT = {
+    "screen": SIZE,
+    "window": SIZE,
+    "pixel_ratio": Float(min=0, max=100, default=None, nullable=True),
+    "time_zone": Str(max_len=64, default=None, nullable=True),
+    "touch": Bool(default=None, nullable=True),
+}
+TIME_ZONE = re.compile(r"[A-Za-z0-9_+\-/]{1,64}")
 
 
 # Wrong codes and unknown links count together, per address; past the limit
@@ -76,10 +91,11 @@ ANSWER = {
 guesses = limiter.shared_limit(
     failures_limit, scope="study-entry", key_func=address, deduct_when=failed, error_message=too_many_attempts
 )
-
-
-class CodeForm(Form):
-    code = StringField("Access code", validators=[DataRequired(), Length(max=32)])
+# Admissions through an open link, per address: each makes a participant and their trials.
+arrivals = limiter.limit(
+    arrivals_limit, key_func=address, methods=["POST"], deduct_when=lambda response: g.get("admitted", False),
+    error_message=too_many_attempts,
+)  # fmt: skip
 
 
 @bp.after_request
@@ -110,10 +126,39 @@ def _go_to_step(participant: Participant) -> Response:
     return redirect(url_for(STEP_ENDPOINTS[studies.step(participant)]))
 
 
+def _notice(title: str, message: str, status: int) -> tuple[str, int]:
+    return render_template("study/notice.html", title=title, message=message), status
+
+
+def _refused(exc: studies.StudyProblem):
+    """A polite page for a study that takes nobody now (full, paused, closed)."""
+    titles = {"full": "This study is full", "paused": "This study is paused", "closed": "This study is closed"}
+    return _notice(titles.get(exc.extra.get("reason"), "Not now"), exc.message, exc.status)
+
+
+def _device_refused(study: Study):
+    """A phone, when the study needs a computer: said before anything else (None when the device may take part)."""
+    if study.display.get("allow_phones", True) or not PHONE.search(request.user_agent.string or ""):
+        return None
+    return _notice("This study needs a computer", "It cannot be done on a phone: please open the same link on a desktop or laptop.", 403)
+
+
 def _sign_in(participant: Participant) -> Response:
     if not login_user(participant.user):
         raise Problem("this participant has been deactivated", status=403)
     return _go_to_step(participant)
+
+
+def _enter(participant: Participant):
+    """Sign in a participant who came by code or link, unless their study refuses newcomers or their device."""
+    refused = _device_refused(participant.study)
+    if refused is not None:
+        return refused
+    try:
+        studies.check_may_enter(participant)
+    except studies.StudyProblem as exc:
+        return _refused(exc)
+    return _sign_in(participant)
 
 
 @bp.route("/", methods=["GET", "POST"])
@@ -129,7 +174,7 @@ def entry():
     if form.validate_on_submit():
         participant = studies.participant_by_code(form.code.data)
         if participant is not None:
-            return _sign_in(participant)
+            return _enter(participant)
         form.code.errors.append("This code is not known. Check it and try again.")
         status = 401
     elif form.errors:
@@ -142,10 +187,69 @@ def entry():
 @guesses
 def link(token: str):
     """A single-use link: GET shows the Start button, the POST it sends signs in and uses the link."""
+    participant = studies.link_participant(token)
     if request.method == "GET":
-        participant = studies.link_participant(token)
-        return render_template("study/link.html", study=participant.study, trials=len(participant.trials))
-    return _sign_in(studies.use_link(token))
+        refused = _device_refused(participant.study)
+        if refused is not None:
+            return refused
+        return render_template("study/link.html", study=participant.study, trials=studies.progress(participant).total)
+    try:
+        studies.check_may_enter(participant)
+    except studies.StudyProblem as exc:
+        return _refused(exc)
+    return _enter(studies.use_link(token))
+
+
+@bp.route("/o/<open_token>", methods=["GET", "POST"])
+@public
+@guesses
+@arrivals
+def open_link(open_token: str):
+    """The study's open link: GET says what the study is (or that it is full, paused or closed); its Start
+    (a POST carrying the platform's parameters) admits, or resumes the participant with the same external id."""
+    study = studies.open_link_study(open_token)
+    source = request.args if request.method == "GET" else request.form
+    arrival = studies.parse_arrival(source)
+    refused = _device_refused(study)
+    if refused is not None:
+        return refused
+    known = studies.by_external_id(study, arrival.external_id)
+    if request.method == "GET":
+        reason = None if known is not None else studies.availability(study)
+        if reason is not None:
+            return _refused(studies.refusal(reason))
+        return render_template(
+            "study/open.html", study=study, arrival=arrival, known=known, params=_platform_params(source),
+            trials=_timed_trials(study), minutes=study.time_limit_s / 60,
+        )  # fmt: skip
+    try:
+        participant = studies.admit(study, arrival, user_agent=request.user_agent.string)
+    except studies.StudyProblem as exc:
+        if exc.status == 400:
+            raise
+        return _refused(exc)
+    g.admitted = known is None
+    return _sign_in(participant)
+
+
+def _platform_params(source) -> dict[str, str]:
+    """The platform's parameters, to carry from the link's GET to its Start button (already checked)."""
+    names = [name for _, id_param, others in studies.PLATFORMS for name in (id_param, *others)]
+    return {name: source[name] for name in names if source.get(name)}
+
+
+def _timed_trials(study: Study) -> int:
+    return len(study.frames) - len(study.frames_of(FrameKind.PRACTICE))
+
+
+def _steps(participant: Participant) -> list[str]:
+    has_practice = bool(participant.study.frames_of(FrameKind.PRACTICE))
+    return ["Consent", "Instructions", *(["Practice"] if has_practice else []), "Photos", "Done"]
+
+
+def _page(template: str, participant: Participant, current: str, **context):
+    return render_template(template, participant=participant, study=participant.study, steps=_steps(participant), current=current,
+                           **context)  # fmt: skip
 
 
 @bp.route("/consent", methods=["GET", "POST"])
@@ -160,7 +264,17 @@ def consent():
         return _go_to_step(participant)
     if studies.step(participant) != "consent":
         return _go_to_step(participant)
-    return render_template("study/consent.html", study=participant.study)
+    return _page("study/consent.html", participant, "Consent")
+
+
+def _instructions_page(participant: Participant, *, wrong: bool = False, left: int | None = None, status: int = 200):
+    settings = studies.settings_of(participant)
+    return _page(
+        "study/instructions.html", participant, "Instructions",
+        settings=settings, trials=studies.progress(participant).total, practice=len(participant.study.frames_of(FrameKind.PRACTICE)),
+        questions=participant.study.comprehension.get("questions") or [], wrong=wrong, left=left,
+        code=studies.format_code(participant.code),
+    ), status  # fmt: skip
 
 
 @bp.get("/instructions")
@@ -169,13 +283,36 @@ def instructions():
     participant = _participant()
     if studies.step(participant) != "instructions":
         return _go_to_step(participant)
-    return render_template(
-        "study/instructions.html",
-        participant=participant,
-        study=participant.study,
-        trials=len(participant.trials),
-        code=studies.format_code(participant.code),
-    )
+    return _instructions_page(participant)
+
+
+@bp.post("/comprehension")
+@roles(Role.PARTICIPANT)
+def comprehension():
+    """One try at the questions on the instructions: every answer right goes on; wrong ones show the page again."""
+    participant = _participant()
+    questions = participant.study.comprehension.get("questions") or []
+    if studies.step(participant) != "instructions" or not questions:
+        return _go_to_step(participant)
+    answers = _answers(len(questions))
+    left = studies.answer_comprehension(participant, answers)
+    if studies.step(participant) != "instructions":
+        return _go_to_step(participant)
+    return _instructions_page(participant, wrong=True, left=left, status=400)
+
+
+def _answers(count: int) -> dict[int, int]:
+    """``q0``..``q{count-1}`` -> option index; anything else in the form is refused (a bounded body)."""
+    expected = {f"q{i}" for i in range(count)} | {"csrf_token"}
+    unknown = sorted(k for k in request.form if k not in expected)
+    if unknown:
+        raise Problem(f"{unknown[0]}: there is no such question", fields={unknown[0]: "unknown field"})
+    answers = {}
+    for i in range(count):
+        value = request.form.get(f"q{i}", "")
+        if value.isdigit() and len(value) <= 2:
+            answers[i] = int(value)
+    return answers
 
 
 @bp.post("/start")
@@ -186,13 +323,36 @@ def start():
     return _go_to_step(participant)
 
 
+@bp.get("/practice")
+@roles(Role.PARTICIPANT)
+def practice():
+    participant = _participant()
+    if studies.step(participant) != "practice":
+        return _go_to_step(participant)
+    return _trial_page(participant, "practice")
+
+
+@bp.get("/ready")
+@roles(Role.PARTICIPANT)
+def ready():
+    participant = _participant()
+    if studies.step(participant) != "ready":
+        return _go_to_step(participant)
+    settings = studies.settings_of(participant)
+    return _page("study/ready.html", participant, "Photos", settings=settings, trials=studies.progress(participant).total)
+
+
 @bp.get("/trials")
 @roles(Role.PARTICIPANT)
 def trials():
     participant = _participant()
     if studies.step(participant) != "trials":
         return _go_to_step(participant)
-    return render_template("study/trials.html", study=participant.study)
+    return _trial_page(participant, "trials")
+
+
+def _trial_page(participant: Participant, phase: str):
+    return render_template("study/trials.html", study=participant.study, phase=phase, display=participant.study.display)
 
 
 @bp.get("/done")
@@ -201,7 +361,8 @@ def done():
     participant = _participant()
     if studies.step(participant) != "done":
         return _go_to_step(participant)
-    return render_template("study/done.html", participant=participant, progress=studies.progress(participant))
+    code, redirect_url = studies.completion(participant)
+    return _page("study/done.html", participant, "Done", progress=studies.progress(participant), code=code, redirect_url=redirect_url)
 
 
 def _state_json(state: studies.SessionState) -> dict:
@@ -212,7 +373,8 @@ def _state_json(state: studies.SessionState) -> dict:
         "total": state.total,
         "time_left_s": state.time_left_s,
         "trial_time_left_s": state.trial_time_left_s,
-        "redirect": None if state.step == "trials" else url_for(STEP_ENDPOINTS[state.step]),
+        "feedback": state.feedback,
+        "redirect": None if state.step in ("trials", "practice") else url_for(STEP_ENDPOINTS[state.step]),
         "trial": None,
         "next": None,
     }
@@ -263,6 +425,18 @@ def submit(trial_id: int):
         pixel_ratio=data["pixel_ratio"],
     )
     return _state_json(studies.submit(participant, trial, answer))
+
+
+@bp.post("/api/environment")
+@roles(Role.PARTICIPANT)
+def environment():
+    """What the page reports of the screen, window, pixel ratio and time zone (stored with the session)."""
+    participant = _participant()
+    data = json_body(ENVIRONMENT)
+    if data["time_zone"] is not None and not TIME_ZONE.fullmatch(data["time_zone"]):
+        raise Problem("invalid field time_zone: an IANA name such as Europe/Paris", fields={"time_zone": "not a time zone name"})
+    studies.record_environment(participant, data, user_agent=request.user_agent.string)
+    return {"recorded": True}
 
 
 @bp.get("/trials/<int:trial_id>/image")

@@ -1,74 +1,37 @@
 """Human-study builder and results (admin pages).
 
-List and create studies, add participants (codes or single-use links),
-follow their progress, look at each participant's soft masks and the mean
-map per frame over the frame (the paper's Fig. 5), and export the results.
+List, create (from the builder's form or a definition file), edit before
+anyone entered, duplicate, delete, open, pause and close studies; add
+participants (codes in bulk or single-use links), deactivate them, follow
+their progress and checks; look at each participant's soft masks and the
+mean map per frame over the frame (the paper's Fig. 5), and export the
+results, the participants (codes, status, completion codes) and the
+study's definition file.
 """
 
 import json
 
 from flask import Blueprint, Response, flash, redirect, render_template, request, stream_with_context, url_for
 from flask_login import current_user
-from app.forms import Form
-from wtforms import (
-    BooleanField,
-    FloatField,
-    IntegerField,
-    SelectChoice,
-    SelectField,
-    SelectMultipleField,
-    StringField,
-    TextAreaField,
-)
-from wtforms.validators import DataRequired, InputRequired, Length, NumberRange, Optional
-from wtforms.widgets import CheckboxInput, ListWidget
+from wtforms import SelectChoice
 
 from app.errors import Problem
 from app.extensions import db
-from app.models import Role
-from app.models.studies import ANSWERED, EntryKind, Participant, Study, StudyFrame, Trial
+from app.forms import DefinitionFileForm, ParticipantsForm, StudyForm
+from app.models import Activity, Role
+from app.models.studies import ANSWERED, EntryKind, FrameKind, Participant, Study, StudyFrame, Trial
 from app.security import roles
-from app.services import ground_truth
-from app.services import studies
-from egonet.clicks import SUPERPIXEL_DEFAULTS
+from app.services import ground_truth, studies
 
 bp = Blueprint("studies", __name__, url_prefix="/studies")
 
 PER_PAGE = 60
-# Service field names -> form field names, where they differ.
-FORM_FIELDS = {"time_limit_s": "time_limit_min"}
-
-
-class StudyForm(Form):
-    name = StringField("Name", validators=[DataRequired(), Length(max=200)])
-    activities = SelectMultipleField(
-        "Activities",
-        coerce=int,
-        widget=ListWidget(prefix_label=False),
-        option_widget=CheckboxInput(),
-        validators=[DataRequired(message="Choose at least one activity.")],
-    )
-    frames_per_activity = IntegerField("Frames per activity", default=100, validators=[InputRequired(), NumberRange(1, 100_000)])
-    seed = IntegerField("Seed", validators=[InputRequired(), NumberRange(0, 2**31 - 1)])
-    time_limit_min = FloatField("Session time limit (minutes)", default=60, validators=[InputRequired(), NumberRange(0.05, 7 * 24 * 60)])
-    trial_limit_s = IntegerField("Per-trial limit (seconds, empty for none)", validators=[Optional(), NumberRange(1, 24 * 3600)])
-    multiple_clicks = BooleanField("Several clicks per frame (then Next; otherwise one click answers)", default=True)
-    sigma_px = FloatField("Click width sigma (native pixels)", default=60.0, validators=[InputRequired(), NumberRange(0.5, 10_000)])
-    superpixel_method = SelectField("Superpixels", choices=[SelectChoice("slic", "SLIC"), SelectChoice("felzenszwalb", "Felzenszwalb")],
-                                    default=SUPERPIXEL_DEFAULTS.method)
-    n_segments = IntegerField("SLIC regions", default=SUPERPIXEL_DEFAULTS.n_segments, validators=[Optional()])
-    compactness = FloatField("SLIC compactness", default=SUPERPIXEL_DEFAULTS.compactness, validators=[Optional()])
-    scale = FloatField("Felzenszwalb scale", default=SUPERPIXEL_DEFAULTS.scale, validators=[Optional()])
-    min_size = IntegerField("Felzenszwalb minimum region size", default=SUPERPIXEL_DEFAULTS.min_size, validators=[Optional()])
-    max_side = IntegerField("Working resolution: longest side (px, empty for native)", default=SUPERPIXEL_DEFAULTS.max_side,
-                            validators=[Optional()])
-    instructions = TextAreaField("Instructions", default=studies.DEFAULT_INSTRUCTIONS, validators=[Length(max=20_000)])
-    consent = TextAreaField("Consent", default=studies.DEFAULT_CONSENT, validators=[Length(max=20_000)])
-
-
-class ParticipantsForm(Form):
-    count = IntegerField("How many", default=5, validators=[InputRequired(), NumberRange(1, 500)])
-    entry = SelectField("Entry", choices=[SelectChoice("code", "access codes"), SelectChoice("link", "single-use links (and codes)")], default="code")
+MAX_DEFINITION_BYTES = 1024 * 1024
+# The open link's query string for each platform (their placeholders, filled in by the platform).
+PLATFORM_QUERIES = {
+    "Prolific": "PROLIFIC_PID={{%PROLIFIC_PID%}}&STUDY_ID={{%STUDY_ID%}}&SESSION_ID={{%SESSION_ID%}}",
+    "MTurk (external question)": "workerId=${workerId}&assignmentId=${assignmentId}&hitId=${hitId}",
+}
 
 
 def _study(study_id: int) -> Study:
@@ -108,53 +71,146 @@ def index():
     return render_template("studies/index.html", rows=studies.study_summaries())
 
 
+def _builder(form: StudyForm, *, study: Study | None = None, status: int = 200):
+    return render_template(
+        "studies/new.html", form=form, counts=studies.eligible_counts(), study=study, widths=_eligible_widths(),
+        upload=DefinitionFileForm(formdata=None), reference=studies.REFERENCE_WIDTH,
+    ), status  # fmt: skip
+
+
+def _eligible_widths() -> list[tuple[int, float]]:
+    """The widths of the eligible frames with the click width scaled to each (the builder's default)."""
+    widths = sorted({frame.width for frame in ground_truth.labelled_frames()})
+    return [(w, studies.scaled_sigma(w)) for w in widths]
+
+
+def _activity_choices(form: StudyForm) -> tuple[dict[int, str], dict[str, int]]:
+    activities = db.session.execute(db.select(Activity).order_by(Activity.name)).scalars().all()
+    form.activities.choices = [SelectChoice(a.id, a.name) for a in activities]
+    return {a.id: a.name for a in activities}, {a.name: a.id for a in activities}
+
+
+def _show_problem(form: StudyForm, exc: studies.StudyProblem) -> None:
+    target = form.field_for(exc.field)
+    if target is not None:
+        target.errors = [*target.errors, str(exc)]
+    else:
+        flash(str(exc), "error")
+
+
 @bp.route("/new", methods=["GET", "POST"])
 @roles(Role.ADMIN)
 def create():
-    counts = studies.eligible_counts()
     form = StudyForm()
-    form.activities.choices = [SelectChoice(activity.id, activity.name) for activity, _ in counts]
+    names, _ = _activity_choices(form)
     if request.method == "GET":
         form.seed.data = studies.new_seed()
     if form.validate_on_submit():
-        method = form.superpixel_method.data
-        options = {name: getattr(form, name).data for name in studies.SUPERPIXEL_OPTIONS[method]}
-        try:
-            study = studies.create_study(
-                name=form.name.data,
-                activity_ids=form.activities.data,
-                frames_per_activity=form.frames_per_activity.data,
-                seed=form.seed.data,
-                time_limit_s=max(1, round(form.time_limit_min.data * 60)),
-                trial_limit_s=form.trial_limit_s.data,
-                multiple_clicks=form.multiple_clicks.data,
-                sigma_px=form.sigma_px.data,
-                superpixels={"method": method, **options, "max_side": form.max_side.data},
-                instructions=form.instructions.data or "",
-                consent=form.consent.data or "",
-                created_by=current_user._get_current_object(),
-            )
-        except studies.StudyProblem as exc:
-            target = getattr(form, FORM_FIELDS.get(exc.field, exc.field or ""), None)
-            if target is not None:
-                target.errors = [*target.errors, str(exc)]
+        doc = form.definition(names)
+        if doc is not None:
+            try:
+                study = studies.study_from_definition(doc, created_by=current_user._get_current_object())
+            except studies.StudyProblem as exc:
+                _show_problem(form, exc)
             else:
-                flash(str(exc), "error")
-        else:
-            flash(f"Study created: {len(study.frames)} frames drawn with seed {study.seed}.")
-            return redirect(url_for("studies.detail", study_id=study.id))
-    status = 400 if request.method == "POST" else 200
-    return render_template("studies/new.html", form=form, counts=counts), status
+                flash(f"Study created: {len(study.frames_of(FrameKind.MAIN))} frames drawn with seed {study.seed}.")
+                return redirect(url_for("studies.detail", study_id=study.id))
+    return _builder(form, status=400 if request.method == "POST" else 200)
+
+
+@bp.post("/import")
+@roles(Role.ADMIN)
+def create_from_file():
+    """Create a study from an uploaded definition file (the one a study's definition.json download gives)."""
+    upload = DefinitionFileForm()
+    if not upload.validate_on_submit():
+        raise Problem("choose a definition file (JSON)", fields={"definition": "required"})
+    data = upload.definition.data.read(MAX_DEFINITION_BYTES + 1)
+    if len(data) > MAX_DEFINITION_BYTES:
+        raise Problem("a definition file has at most 1 MiB", status=413, fields={"definition": "too large"})
+    try:
+        doc = json.loads(data)
+    except ValueError as exc:
+        raise Problem(f"the definition file is not valid JSON: {exc}", fields={"definition": "not valid JSON"}) from None
+    study = studies.study_from_definition(doc, created_by=current_user._get_current_object())
+    flash(f"Study created from the definition file: {len(study.frames_of(FrameKind.MAIN))} frames drawn with seed {study.seed}.")
+    return redirect(url_for("studies.detail", study_id=study.id))
+
+
+@bp.route("/<int:study_id>/edit", methods=["GET", "POST"])
+@roles(Role.ADMIN)
+def edit(study_id: int):
+    """Change a study's settings (its frames are drawn again) until its first participant enters."""
+    study = _study(study_id)
+    if studies.entered(study):
+        flash("Participants have entered this study: it can no longer be edited. Duplicate it to run it again with changes.", "error")
+        return redirect(url_for("studies.detail", study_id=study.id))
+    form = StudyForm(formdata=None) if request.method == "GET" else StudyForm()
+    names, ids = _activity_choices(form)
+    if request.method == "GET":
+        form.fill(studies.definition_of(study), ids)
+        form.version.data = str(study.version)
+    elif form.validate_on_submit():
+        doc = form.definition(names)
+        version = int(form.version.data) if (form.version.data or "").isdigit() else -1
+        if doc is not None:
+            try:
+                studies.update_from_definition(study, doc, version=version)
+            except studies.StudyProblem as exc:
+                _show_problem(form, exc)
+            else:
+                flash("Study saved: its frames were drawn again.")
+                return redirect(url_for("studies.detail", study_id=study_id))
+    return _builder(form, study=study, status=400 if request.method == "POST" else 200)
+
+
+@bp.post("/<int:study_id>/duplicate")
+@roles(Role.ADMIN)
+def duplicate(study_id: int):
+    copy = studies.duplicate_study(_study(study_id), created_by=current_user._get_current_object())
+    flash(f"Duplicated: the same frames and settings, no participants yet (study {copy.id}).")
+    return redirect(url_for("studies.detail", study_id=copy.id))
+
+
+@bp.post("/<int:study_id>/delete")
+@roles(Role.ADMIN)
+def delete(study_id: int):
+    study = _study(study_id)
+    name = study.name
+    studies.delete_study(study)
+    flash(f"Study {name!r} deleted.")
+    return redirect(url_for("studies.index"))
+
+
+@bp.post("/<int:study_id>/status")
+@roles(Role.ADMIN)
+def set_status(study_id: int):
+    """Open, pause or close the study (new participants only; those already in finish)."""
+    study = studies.set_status(_study(study_id), request.form.get("status", ""))
+    flash(f"The study is {study.status.value}.")
+    return redirect(url_for("studies.detail", study_id=study.id))
 
 
 def _detail(study: Study, form: ParticipantsForm, status: int = 200):
+    studies.close_overdue([p.id for p in study.participants])
     activities, cached = studies.activity_table(study)
+    people = list(study.participants)
+    open_link = url_for("study.open_link", open_token=study.open_link_token, _external=True) if study.open_link_token else None
     return render_template(
         "studies/detail.html",
         study=study,
         activities=activities,
         cached=cached,
-        progress=[studies.progress(p) for p in study.participants],
+        progress=[studies.progress(p) for p in people],
+        checks=studies.checks_of(people),
+        conditions=studies.condition_table(study),
+        places=studies.places_taken(study),
+        entered=studies.entered(study),
+        open_link=open_link,
+        platform_links={name: f"{open_link}?{query}" for name, query in PLATFORM_QUERIES.items()} if open_link else {},
+        practice=study.frames_of(FrameKind.PRACTICE),
+        catch=study.frames_of(FrameKind.CATCH),
+        main=study.frames_of(FrameKind.MAIN),
         form=form,
         exports=studies.EXPORTS,
         format_code=studies.format_code,
@@ -179,18 +235,38 @@ def add_participants(study_id: int):
         except studies.StudyProblem as exc:
             form.count.errors = [*form.count.errors, str(exc)]
         else:
-            flash(f"{len(created)} participants added.")
+            flash(f"{len(created)} participant{'s' if len(created) != 1 else ''} added: download their codes as participants.csv.")
             return redirect(url_for("studies.detail", study_id=study.id) + "#participants")
     return _detail(study, form, 400)
+
+
+def _person(study: Study, participant_id: int) -> Participant:
+    person = db.session.get(Participant, participant_id)
+    if person is None or person.study_id != study.id:
+        raise Problem("no such participant in this study", status=404)
+    return person
+
+
+@bp.post("/<int:study_id>/participants/<int:participant_id>/active")
+@roles(Role.ADMIN)
+def set_active(study_id: int, participant_id: int):
+    """Deactivate a participant (their code and session stop working, their place is freed), or activate them again."""
+    study = _study(study_id)
+    person = _person(study, participant_id)
+    value = request.form.get("active")
+    if value not in ("0", "1"):
+        raise Problem("active must be 0 or 1", fields={"active": "must be 0 or 1"})
+    studies.set_active(person, value == "1")
+    flash(f"{person.label} {'activated' if value == '1' else 'deactivated'}.")
+    return redirect(url_for("studies.detail", study_id=study.id) + "#participants")
 
 
 @bp.get("/<int:study_id>/participants/<int:participant_id>")
 @roles(Role.ADMIN)
 def participant(study_id: int, participant_id: int):
     study = _study(study_id)
-    person = db.session.get(Participant, participant_id)
-    if person is None or person.study_id != study.id:
-        raise Problem("no such participant in this study", status=404)
+    person = _person(study, participant_id)
+    studies.close_overdue([person.id])
     page = _page()
     total = len(person.trials)
     pages = max(1, -(-total // PER_PAGE))
@@ -202,6 +278,7 @@ def participant(study_id: int, participant_id: int):
         study=study,
         person=person,
         progress=studies.progress(person),
+        checks=studies.checks_of([person])[person.id],
         trials=trials,
         answered=ANSWERED,
         page=page,
@@ -269,7 +346,8 @@ def trial_mask(study_id: int, trial_id: int):
 @bp.get("/<int:study_id>/export/<export_name>")
 @roles(Role.ADMIN)
 def export(study_id: int, export_name: str):
-    """The study's results: trials, clicks and events as CSV, everything as JSON, soft masks as PNGs in a zip."""
+    """The study's results: trials, clicks, events and participants as CSV, everything as JSON, the study's
+    definition file, soft masks as PNGs in a zip."""
     study = _study(study_id)
     if export_name not in studies.EXPORTS:
         raise Problem(f"unknown export {export_name!r}; choose one of {', '.join(studies.EXPORTS)}", status=404)
@@ -279,6 +357,8 @@ def export(study_id: int, export_name: str):
         return Response(studies.export_csv(study, table), mimetype="text/csv", headers=headers)
     if export_name == "study.json":
         return Response(json.dumps(studies.export_json(study), indent=1), mimetype="application/json", headers=headers)
+    if export_name == "definition.json":
+        return Response(json.dumps(studies.definition_of(study), indent=1), mimetype="application/json", headers=headers)
 
     def stream():
         # The zip is written while it is sent, after this view's database

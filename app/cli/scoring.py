@@ -27,7 +27,9 @@ def _ids(ctx, param, value: str | None) -> list[int] | None:
 @click.option("--thresholds", type=click.IntRange(min=1, max=10_000), default=99, show_default=True, help="Number T of thresholds k/(T+1).")
 @click.option("--per-image", is_flag=True, help="Average precision and recall over frames instead of pooling pixel counts.")
 @click.option("--no-cache", is_flag=True, help="Score again instead of reading cached statistics.")
-def score_command(runs, studies, fmt, baselines, thresholds, per_image, no_cache):
+@click.option("--exclude-failed-checks", is_flag=True, help="Leave out participants who failed a comprehension or attention check.")
+@click.option("--by-condition", is_flag=True, help="Split the participants' rows by the studies' conditions.")
+def score_command(runs, studies, fmt, baselines, thresholds, per_image, no_cache, exclude_failed_checks, by_condition):
     """Print the score table: MF and AP per activity for models, baselines and people.
 
     Rows are the completed training runs (held-out frames), the baselines
@@ -47,5 +49,7 @@ def score_command(runs, studies, fmt, baselines, thresholds, per_image, no_cache
             use_cache=not no_cache,
             on_start=on_start,
             on_progress=on_progress,
+            exclude_failed_checks=exclude_failed_checks,
+            by_condition=by_condition,
         )
     click.echo(getattr(report, FORMATS[fmt])(), nl=False)

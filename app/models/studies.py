@@ -1,11 +1,14 @@
-"""Human studies: studies, their frames, participants, trials, clicks and events.
+"""Human studies: studies, their frames and conditions, participants, trials, clicks and events.
 
-A study draws frames (``StudyFrame``) once, when it is created. Each
-participant is a ``User`` with the participant role plus a ``Participant``
-row holding the access code, the optional single-use link and the session
-clock (``started_at``, ``deadline``, ``finished_at``, all stamped by the
-server). A participant's trials are created with the participant, in their
-own seeded order; a trial is pending until it has an ``outcome``.
+A study draws frames (``StudyFrame``) once, when it is created (or edited
+before anyone entered): the timed part's frames (``kind`` main), practice
+frames and attention-check (catch) frames. Each participant is a ``User``
+with the participant role plus a ``Participant`` row holding the access
+code, the optional single-use link or the recruiting platform's id, the
+condition they were assigned to and the session clock (``started_at``,
+``deadline``, ``finished_at``, all stamped by the server). A participant's
+trials are created with the participant, in their own seeded order; a trial
+is pending until it has an ``outcome``.
 """
 
 import enum
@@ -25,16 +28,37 @@ def _enum(cls):
 
 
 class EntryKind(enum.StrEnum):
-    """How a participant enters: typing a code, or opening a single-use link (the code still works)."""
+    """How a participant enters: a code, a single-use link, or the study's open link (the code always works)."""
 
     CODE = "code"
     LINK = "link"
+    OPEN = "open"
 
 
 class EndReason(enum.StrEnum):
     COMPLETED = "completed"  # every trial answered
     TIME_UP = "time_up"  # the session deadline passed
     DECLINED = "declined"  # consent refused
+    SCREENED_OUT = "screened_out"  # the comprehension questions were failed too often
+
+
+class StudyStatus(enum.StrEnum):
+    """Whether new participants may enter (those already in always finish)."""
+
+    OPEN = "open"
+    PAUSED = "paused"
+    CLOSED = "closed"
+
+
+class FrameKind(enum.StrEnum):
+    MAIN = "main"  # the timed part: scored
+    PRACTICE = "practice"  # before the timed part, never scored
+    CATCH = "catch"  # attention check with a known answer region, never scored as data
+
+
+class ActivityOrder(enum.StrEnum):
+    SHUFFLED = "shuffled"  # every participant's own random order
+    COUNTERBALANCED = "counterbalanced"  # blocks of one activity, block order rotated over participants
 
 
 class Outcome(enum.StrEnum):
@@ -55,6 +79,7 @@ class EventKind(enum.StrEnum):
     RESIZE = "resize"  # detail: {"width", "height"} of the window
     UNDO = "undo"  # detail: {"x", "y"} of the removed click
     RELOAD = "reload"  # server-side: the trial was served again (page reloaded)
+    FULLSCREEN = "fullscreen"  # detail: {"state": "entered" | "exited"}
 
 
 class Study(Base):
@@ -62,7 +87,17 @@ class Study(Base):
 
     ``superpixels`` holds the keyword options of ``egonet.clicks.superpixels``
     (``method`` plus that method's options); ``sigma_px`` is the click
-    Gaussian's standard deviation at the frame's native resolution.
+    Gaussian's standard deviation at the frame's native resolution. With
+    ``sigma_scaled`` it was the paper's 60 px at 1280 px wide scaled to the
+    frames (``60 * width / 1280``, per frame; ``sigma_px`` records the value
+    for the study's widest frames).
+
+    The open link (``open_link_token``; None when off) admits anyone while
+    the study is open, up to ``cap`` participants; ``arrivals`` counts the
+    admissions and is the row every admission updates first (its lock).
+    ``comprehension``, ``display`` and the conditions are the protocol
+    settings of ``app.services.studies.protocol``; ``version`` grows with
+    every edit.
     """
 
     __tablename__ = "study"
@@ -78,6 +113,18 @@ class Study(Base):
     superpixels: Mapped[dict[str, Any]] = mapped_column(JSON, default=dict)
     instructions: Mapped[str] = mapped_column(Text, default="")
     consent: Mapped[str] = mapped_column(Text, default="")
+    status: Mapped[StudyStatus] = mapped_column(_enum(StudyStatus), default=StudyStatus.OPEN)
+    version: Mapped[int] = mapped_column(default=1)
+    sigma_scaled: Mapped[bool] = mapped_column(default=False)
+    activity_order: Mapped[ActivityOrder] = mapped_column(_enum(ActivityOrder), default=ActivityOrder.SHUFFLED)
+    open_link_token: Mapped[str | None] = mapped_column(String(64), unique=True)
+    cap: Mapped[int | None]
+    arrivals: Mapped[int] = mapped_column(default=0)
+    completion_code: Mapped[str | None] = mapped_column(String(64))
+    failed_code: Mapped[str | None] = mapped_column(String(64))
+    redirect_url: Mapped[str | None] = mapped_column(String(2000))
+    comprehension: Mapped[dict[str, Any]] = mapped_column(JSON, default=dict)
+    display: Mapped[dict[str, Any]] = mapped_column(JSON, default=dict)
     created_by_id: Mapped[int | None] = mapped_column(ForeignKey("user.id"))
     created_at: Mapped[datetime] = mapped_column(UTCDateTime(), default=utcnow)
 
@@ -88,10 +135,43 @@ class Study(Base):
     participants: Mapped[list["Participant"]] = relationship(
         back_populates="study", order_by="Participant.number", cascade="all, delete-orphan", passive_deletes=True
     )
+    conditions: Mapped[list["StudyCondition"]] = relationship(
+        back_populates="study", order_by="StudyCondition.position", cascade="all, delete-orphan", passive_deletes=True
+    )
+
+    def frames_of(self, kind: FrameKind) -> list["StudyFrame"]:
+        return [sf for sf in self.frames if sf.kind is kind]
+
+
+class StudyCondition(Base):
+    """A between-subject condition: its name, what it overrides and its optional quota.
+
+    ``overrides`` uses the definition file's keys (``time_limit_minutes``,
+    ``trial_limit_seconds``, ``instructions``, ``activities``,
+    ``frames_per_activity``); ``quota`` caps the participants the open link
+    admits into it.
+    """
+
+    __tablename__ = "study_condition"
+    __table_args__ = (UniqueConstraint("study_id", "name"), UniqueConstraint("study_id", "position"))
+
+    id: Mapped[int] = mapped_column(primary_key=True)
+    study_id: Mapped[int] = mapped_column(ForeignKey("study.id", ondelete="CASCADE"), index=True)
+    position: Mapped[int]
+    name: Mapped[str] = mapped_column(String(64))
+    overrides: Mapped[dict[str, Any]] = mapped_column(JSON, default=dict)
+    quota: Mapped[int | None]
+
+    study: Mapped[Study] = relationship(back_populates="conditions")
 
 
 class StudyFrame(Base):
-    """A frame drawn for a study; ``position`` is the draw order (activity by activity)."""
+    """A frame drawn for a study; ``position`` is the draw order (activity by activity, then practice and catch frames).
+
+    A catch frame has ``catch_position``, its place in the timed part
+    (1-based), and ``region``: ``{"box": [x0, y0, x1, y1]}`` in native
+    pixels, or None for the frame's ground-truth mask.
+    """
 
     __tablename__ = "study_frame"
     __table_args__ = (UniqueConstraint("study_id", "frame_id"), UniqueConstraint("study_id", "position"))
@@ -101,6 +181,9 @@ class StudyFrame(Base):
     # No cascade: a frame that a study used cannot disappear under its results.
     frame_id: Mapped[int] = mapped_column(ForeignKey("frame.id"), index=True)
     position: Mapped[int]
+    kind: Mapped[FrameKind] = mapped_column(_enum(FrameKind), default=FrameKind.MAIN)
+    catch_position: Mapped[int | None]
+    region: Mapped[dict[str, Any] | None] = mapped_column(JSON)
 
     study: Mapped[Study] = relationship(back_populates="frames")
     frame: Mapped[Frame] = relationship()
@@ -109,13 +192,19 @@ class StudyFrame(Base):
 class Participant(Base):
     """One person taking a study, signed in as ``user``.
 
-    ``deadline`` is ``started_at`` plus the study's time limit, stored when
-    the session starts so the limit in force cannot change under it.
-    ``order_seed`` is the seed the trial order was shuffled with.
+    ``deadline`` is ``started_at`` plus the time limit (the condition's or
+    the study's), stored when the session starts so the limit in force
+    cannot change under it. ``order_seed`` is the seed the trial order was
+    shuffled with. ``external_id`` is the recruiting platform's id
+    (Prolific's ``PROLIFIC_PID``, MTurk's ``workerId``, or ``external_id``;
+    ``platform`` says which) and ``external`` its other parameters; the same
+    id twice is the same participant. ``environment`` is what the page
+    reported of the screen, window, pixel ratio and time zone.
+    ``completion_code`` is the code given at the end.
     """
 
     __tablename__ = "study_participant"
-    __table_args__ = (UniqueConstraint("study_id", "number"),)
+    __table_args__ = (UniqueConstraint("study_id", "number"), UniqueConstraint("study_id", "external_id"))
 
     id: Mapped[int] = mapped_column(primary_key=True)
     study_id: Mapped[int] = mapped_column(ForeignKey("study.id", ondelete="CASCADE"), index=True)
@@ -132,8 +221,19 @@ class Participant(Base):
     finished_at: Mapped[datetime | None] = mapped_column(UTCDateTime())
     end_reason: Mapped[EndReason | None] = mapped_column(_enum(EndReason))
     created_at: Mapped[datetime] = mapped_column(UTCDateTime(), default=utcnow)
+    condition_id: Mapped[int | None] = mapped_column(ForeignKey("study_condition.id", ondelete="SET NULL"), index=True)
+    external_id: Mapped[str | None] = mapped_column(String(64))
+    platform: Mapped[str | None] = mapped_column(String(20))
+    external: Mapped[dict[str, Any]] = mapped_column(JSON, default=dict)
+    user_agent: Mapped[str | None] = mapped_column(String(512))
+    environment: Mapped[dict[str, Any] | None] = mapped_column(JSON)
+    instructions_done_at: Mapped[datetime | None] = mapped_column(UTCDateTime())
+    comprehension_attempts: Mapped[int] = mapped_column(default=0)
+    comprehension_passed_at: Mapped[datetime | None] = mapped_column(UTCDateTime())
+    completion_code: Mapped[str | None] = mapped_column(String(64))
 
     study: Mapped[Study] = relationship(back_populates="participants")
+    condition: Mapped[StudyCondition | None] = relationship()
     user: Mapped[User] = relationship()
     trials: Mapped[list["Trial"]] = relationship(
         back_populates="participant", order_by="Trial.position", cascade="all, delete-orphan", passive_deletes=True
@@ -150,7 +250,8 @@ class Trial(Base):
     ``shown_at`` and ``submitted_at`` are the server's clock; ``rt_ms`` and
     the click times are the page's ``performance.now()`` since the frame was
     painted. ``window_*`` and ``display_*`` are the window and the drawn
-    frame in CSS pixels when the answer was given.
+    frame in CSS pixels when the answer was given. ``hit`` is set for catch
+    trials when they close: whether a click fell in the answer region.
     """
 
     __tablename__ = "study_trial"
@@ -169,6 +270,7 @@ class Trial(Base):
     display_width: Mapped[float | None] = mapped_column(Float)
     display_height: Mapped[float | None] = mapped_column(Float)
     pixel_ratio: Mapped[float | None] = mapped_column(Float)
+    hit: Mapped[bool | None]
 
     participant: Mapped[Participant] = relationship(back_populates="trials")
     study_frame: Mapped[StudyFrame] = relationship()
@@ -182,6 +284,10 @@ class Trial(Base):
     @property
     def frame(self) -> Frame:
         return self.study_frame.frame
+
+    @property
+    def kind(self) -> FrameKind:
+        return self.study_frame.kind
 
 
 class Click(Base):

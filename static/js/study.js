@@ -1,21 +1,30 @@
-// The trial page: shows the participant's current frame scaled to the
-// window, records clicks in native frame pixels with their reaction times,
-// and sends the answer. The server decides which trial is current and
-// when time is up; this page only counts down what the server said.
+// The trial page (the practice and the timed part): shows the participant's
+// current frame fitted to the window, at a fixed size or a fraction of it
+// (the study's display settings), records clicks in native frame pixels
+// with their reaction times, and sends the answer. The server decides which
+// trial is current and when time is up; this page only counts down what the
+// server said. A window below the study's minimum, or one that leaves the
+// full screen the study asks for, is covered until it is put right (the
+// clock runs on: the server keeps time). The page reports the screen,
+// window, pixel ratio and time zone once it loads.
 //
 // Reaction times are performance.now() milliseconds since the frame was
 // painted: the image is decoded first (img.decode()), put on the page, and
 // the timestamp of the next animation frame, the one that first shows it,
-// is the zero. The next frame is preloaded and decoded while the current
+// is the zero (or, for a photo first seen when the cover is lifted, that
+// moment's frame). The next frame is preloaded and decoded while the current
 // one is on screen, so it appears as soon as the server answers.
 
 import { api, ApiError } from "./api.js";
-import { fitRect, formatClock, toDisplay, toNative } from "./trial_geometry.js";
+import { displayRect, roundMs, windowProblem } from "./trial_display.js";
+import { formatClock, toDisplay, toNative } from "./trial_geometry.js";
 import { ClickList, keyAction } from "./trial_input.js";
 
 const app = document.getElementById("trial-app");
 const multiple = app.dataset.multiple === "true";
 const stateUrl = app.dataset.stateUrl;
+const practice = app.dataset.phase === "practice";
+const display = JSON.parse(app.dataset.display || "{}");
 const stage = document.getElementById("stage");
 const ui = {
   progressText: document.getElementById("progress-text"),
@@ -27,6 +36,9 @@ const ui = {
   none: document.getElementById("none"),
   next: document.getElementById("next"),
   message: document.getElementById("message"),
+  blocker: document.getElementById("blocker"),
+  blockerText: document.getElementById("blocker-text"),
+  fullscreen: document.getElementById("fullscreen"),
 };
 const markers = document.createElement("div");
 markers.className = "markers";
@@ -39,9 +51,10 @@ let image = null;
 let clicks = new ClickList({ multiple });
 let events = [];
 let paintedAt = null; // performance.now() time base
-let sessionEnd = null; // performance.now() when the session's time is up
+let sessionEnd = null; // performance.now() when the session's time is up (none in the practice)
 let trialEnd = null; // ... and this trial's, when the study has a per-trial limit
 let busy = false;
+let blocked = false; // the window cannot show the study as it asks (too small, not full screen)
 
 function load(url) {
   if (!images.has(url)) {
@@ -61,12 +74,12 @@ function say(text) {
 }
 
 async function show(state) {
-  if (state.step !== "trials") {
-    location.assign(state.redirect);
+  if (state.redirect) {
+    location.assign(state.redirect); // the phase is over (the practice, or the session)
     return;
   }
   const received = performance.now();
-  sessionEnd = received + state.time_left_s * 1000;
+  sessionEnd = state.time_left_s == null ? null : received + state.time_left_s * 1000;
   trialEnd = state.trial_time_left_s == null ? null : received + state.trial_time_left_s * 1000;
   if (state.next) load(state.next.image_url).catch(() => {}); // preload; a failure shows when its turn comes
   const shown = state.trial;
@@ -88,9 +101,9 @@ async function show(state) {
   paintedAt = null;
   busy = false;
   stage.replaceChildren(image, markers);
-  say("");
+  say(state.feedback || "");
   layout();
-  ui.progressText.textContent = `Photo ${trial.position} of ${state.total}`;
+  ui.progressText.textContent = `${practice ? "Practice" : "Photo"} ${state.done + 1} of ${state.total}`;
   ui.progressBar.max = state.total;
   ui.progressBar.value = state.done;
   ui.trialClock.hidden = trialEnd === null;
@@ -106,11 +119,28 @@ async function show(state) {
 function layout() {
   if (!image || !trial) return;
   const box = stage.getBoundingClientRect();
-  const r = fitRect(trial.width, trial.height, box.width, box.height);
+  const r = displayRect(trial.width, trial.height, box.width, box.height, display);
   for (const el of [image, markers]) {
     Object.assign(el.style, { left: `${r.left}px`, top: `${r.top}px`, width: `${r.width}px`, height: `${r.height}px` });
   }
   drawMarkers();
+  check(r);
+}
+
+// Cover the stage while the window cannot show the study as it asks.
+function check(rect = null) {
+  let problem = windowProblem(innerWidth, innerHeight, display, rect);
+  // The timed part only (a page change leaves full screen: the practice would ask twice); browsers
+  // without the Fullscreen API (an iPhone's) cannot be asked for it.
+  const wantsFullscreen = display.fullscreen && !practice && document.fullscreenEnabled && !document.fullscreenElement;
+  if (!problem && wantsFullscreen) problem = "This study is done in full screen.";
+  const uncovered = blocked && problem === null;
+  blocked = problem !== null;
+  // A photo first seen when the cover goes: its reaction times count from then.
+  if (uncovered && trial && clicks.length === 0) requestAnimationFrame((timestamp) => (paintedAt = timestamp));
+  ui.blocker.hidden = !blocked;
+  ui.blockerText.textContent = problem || "";
+  ui.fullscreen.hidden = !wantsFullscreen;
 }
 
 function drawMarkers() {
@@ -137,7 +167,7 @@ function updateButtons() {
 
 function log(kind, extra = {}) {
   if (events.length >= MAX_EVENTS) return;
-  events.push({ kind, t_ms: paintedAt === null ? 0 : performance.now() - paintedAt, ...extra });
+  events.push({ kind, t_ms: paintedAt === null ? 0 : roundMs(performance.now() - paintedAt), ...extra });
 }
 
 async function refresh() {
@@ -146,6 +176,7 @@ async function refresh() {
 
 async function submit({ none = false, timedOut = false } = {}) {
   if (busy || !trial) return;
+  if (resizeTimer !== null) logResize();
   busy = true;
   updateButtons();
   const rect = image.getBoundingClientRect();
@@ -153,7 +184,7 @@ async function submit({ none = false, timedOut = false } = {}) {
     clicks: none ? [] : clicks.toJSON(),
     none,
     timed_out: timedOut,
-    rt_ms: paintedAt === null ? null : performance.now() - paintedAt,
+    rt_ms: paintedAt === null ? null : roundMs(performance.now() - paintedAt),
     events,
     window: { width: innerWidth, height: innerHeight },
     display: { width: rect.width, height: rect.height },
@@ -186,16 +217,16 @@ function undo() {
 }
 
 function tick() {
-  if (sessionEnd === null) return;
+  if (sessionEnd === null && trialEnd === null) return;
   const t = performance.now();
-  ui.timeLeft.textContent = formatClock((sessionEnd - t) / 1000);
+  if (sessionEnd !== null) ui.timeLeft.textContent = formatClock((sessionEnd - t) / 1000);
   if (trialEnd !== null) ui.trialLeft.textContent = formatClock((trialEnd - t) / 1000);
-  const over = t >= sessionEnd || (trialEnd !== null && t >= trialEnd);
+  const over = (sessionEnd !== null && t >= sessionEnd) || (trialEnd !== null && t >= trialEnd);
   if (over && !busy && trial) submit({ timedOut: true });
 }
 
 stage.addEventListener("pointerdown", (event) => {
-  if (event.button !== 0 || busy || !trial || paintedAt === null) return;
+  if (event.button !== 0 || busy || blocked || !trial || paintedAt === null) return;
   const p = toNative(event.clientX, event.clientY, image.getBoundingClientRect(), trial.width, trial.height);
   if (!p) return;
   event.preventDefault();
@@ -203,7 +234,7 @@ stage.addEventListener("pointerdown", (event) => {
   const y = Math.round(p.y * 100) / 100;
   // An event queued in the very frame that first showed the image can carry
   // a time-stamp a little before that frame's: count it as 0.
-  if (!clicks.add(x, y, Math.max(0, event.timeStamp - paintedAt))) {
+  if (!clicks.add(x, y, roundMs(Math.max(0, event.timeStamp - paintedAt)))) {
     say("You have clicked as often as allowed; press Next.");
     return;
   }
@@ -218,7 +249,7 @@ ui.none.addEventListener("click", () => submit({ none: true }));
 ui.next?.addEventListener("click", () => submit());
 
 document.addEventListener("keydown", (event) => {
-  if (event.repeat || event.altKey || event.ctrlKey || event.metaKey) return;
+  if (event.repeat || event.altKey || event.ctrlKey || event.metaKey || blocked) return;
   const action = keyAction(event.key, { multiple });
   if (!action) return;
   event.preventDefault(); // no button activation or history navigation on top of ours
@@ -230,12 +261,40 @@ document.addEventListener("keydown", (event) => {
 window.addEventListener("blur", () => log("blur"));
 window.addEventListener("focus", () => log("focus"));
 document.addEventListener("visibilitychange", () => log("visibility", { state: document.visibilityState }));
+// A resize is logged once the window has settled (200 ms), or with the answer if that comes first.
 let resizeTimer = null;
+function logResize() {
+  clearTimeout(resizeTimer);
+  resizeTimer = null;
+  log("resize", { width: innerWidth, height: innerHeight });
+}
 window.addEventListener("resize", () => {
   layout();
   clearTimeout(resizeTimer);
-  resizeTimer = setTimeout(() => log("resize", { width: innerWidth, height: innerHeight }), 200);
+  resizeTimer = setTimeout(logResize, 200);
 });
 
+ui.fullscreen.addEventListener("click", () => {
+  document.documentElement.requestFullscreen?.().catch(() => say("Your browser refused full screen; press F11."));
+});
+document.addEventListener("fullscreenchange", () => {
+  log("fullscreen", { state: document.fullscreenElement ? "entered" : "exited" });
+  layout();
+  check();
+});
+
+function reportEnvironment() {
+  const body = {
+    screen: { width: screen.width, height: screen.height },
+    window: { width: innerWidth, height: innerHeight },
+    pixel_ratio: devicePixelRatio,
+    time_zone: Intl.DateTimeFormat().resolvedOptions().timeZone || null,
+    touch: navigator.maxTouchPoints > 0,
+  };
+  return api("POST", app.dataset.environmentUrl, body).catch(() => {}); // the session goes on without it
+}
+
+check();
 setInterval(tick, 200);
+reportEnvironment();
 refresh().catch((err) => say(err instanceof ApiError ? err.message : "The study could not be loaded. Please reload the page."));

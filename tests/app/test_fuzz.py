@@ -21,7 +21,8 @@ FIELDS = [
     "status", "kind", "instances", "comment", "events", "rt_ms", "name", "activities", "seed",
     "frames_per_activity", "time_limit_min", "sigma", "model", "epochs", "mask", "no_action_object",
     "time_spent_s", "decision", "window", "type", "t", "count", "code", "username", "password",
-    "frame_id", "instance", "box", "size", "counts",
+    "frame_id", "instance", "box", "size", "counts", "active", "q0", "PROLIFIC_PID", "workerId", "assignmentId",
+    "time_zone", "screen", "pixel_ratio", "definition", "display_mode", "conditions", "comprehension",
 ]
 HUGE = st.sampled_from([10**30, -(10**30), 1e308, -1e308, 10**400, 2**63, 2**31, -1, 0, 1e-300, 99999999])
 # A path id: the real one (None), or one that no row can have.
@@ -37,7 +38,7 @@ bodies = st.one_of(
     st.dictionaries(st.sampled_from(FIELDS), st.text(max_size=50), max_size=6).map(lambda d: ("form", d)),
     st.binary(max_size=200).map(lambda b: ("png", b)),
 )
-queries = st.dictionaries(st.sampled_from(FIELDS + ["page", "activity", "runs", "studies", "format", "after"]),
+queries = st.dictionaries(st.sampled_from(FIELDS + ["page", "activity", "runs", "studies", "format", "after", "STUDY_ID", "external_id"]),
                           st.text(max_size=20) | st.integers().map(str) | HUGE.map(str), max_size=3)
 
 

@@ -283,7 +283,7 @@ def test_exports_csv_json_and_mask_pngs(ctx, tmp_path):
     out = tmp_path / "export"
     written = studies.export_to_folder(study, out)
     assert (out / "trials.csv").read_text() == studies.export_csv(study, "trials")
-    assert (out / "masks" / "manifest.csv").exists() and len(written) == 4 + len(files)
+    assert (out / "masks" / "manifest.csv").exists() and len(written) == 6 + len(files)  # 4 tables, 2 JSON documents
 
 
 # --------------------------------------------------------------------------
@@ -300,8 +300,8 @@ def test_admin_creates_a_study_through_the_form(app, admin_client, tmp_path):
         "activities": [str(a) for a in ids["activities"]],
         "frames_per_activity": "2",
         "seed": "42",
-        "time_limit_min": "30",
-        "trial_limit_s": "",
+        "time_limit_minutes": "30",
+        "trial_limit_seconds": "",
         "multiple_clicks": "y",
         "sigma_px": "60",
         "superpixel_method": "slic",

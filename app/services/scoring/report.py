@@ -102,6 +102,8 @@ def build_report(
     use_cache: bool = True,
     on_start: Callable[[int], None] | None = None,
     on_progress: Callable[[int], None] | None = None,
+    exclude_failed_checks: bool = False,
+    by_condition: bool = False,
 ) -> Report:
     """Score the chosen runs, the baselines and the chosen studies' participants.
 
@@ -115,6 +117,10 @@ def build_report(
             same inputs (they are written either way).
         on_start: Called once with the number of frames to score.
         on_progress: Called with the number of frames just scored.
+        exclude_failed_checks: Leave out participants who failed a
+            comprehension or attention (catch trial) check.
+        by_condition: Split the human rows by the studies' conditions
+            (ordered and named by condition).
 
     Returns:
         The :class:`Report`. A source whose maps cannot be scored (say, a
@@ -140,7 +146,9 @@ def build_report(
     jobs = [_run_job(run, truth, thresholds) for run in runs]
     if baselines and truth.frames:
         jobs.append(_baseline_job(truth, thresholds))
-    jobs += _participant_jobs(chosen_studies, truth, thresholds, notes)
+    jobs += _participant_jobs(
+        chosen_studies, truth, thresholds, notes, exclude_failed_checks=exclude_failed_checks, by_condition=by_condition
+    )
     rows = _rows(
         jobs,
         thresholds=thresholds,
@@ -216,8 +224,15 @@ def _baseline_job(truth: Truth, thresholds: int) -> _Job:
     )
 
 
-def _participant_jobs(study_ids: list[int], truth: Truth, thresholds: int, notes: list[str]) -> list[_Job]:
-    participants = studies_service.study_participants(study_ids)
+def _participant_jobs(
+    study_ids: list[int], truth: Truth, thresholds: int, notes: list[str], *, exclude_failed_checks: bool, by_condition: bool
+) -> list[_Job]:
+    chosen = sources.human_participants(study_ids, exclude_failed_checks=exclude_failed_checks, by_condition=by_condition)
+    participants = [person for person, _ in chosen]
+    if exclude_failed_checks:
+        left_out = len(studies_service.study_participants(study_ids)) - len(participants)
+        if left_out:
+            notes.append(f"{left_out} participant{'s' if left_out != 1 else ''} who failed a check left out.")
     # Answers are never changed once given, so their number and the last
     # answered trial tell whether a participant's cached scores still hold.
     answered = {
@@ -229,9 +244,11 @@ def _participant_jobs(study_ids: list[int], truth: Truth, thresholds: int, notes
         ).all()
     }
     jobs = []
-    for person in participants:
+    for person, condition in chosen:
         n, last = answered.get(person.id, (0, None))
         name = person.label if len(study_ids) == 1 else f"{person.label} (study {person.study_id})"
+        if condition is not None:
+            name = f"{name} [{condition or 'no condition'}]"
         if n == 0:
             notes.append(f"{name} has no answered trials yet.")
             continue

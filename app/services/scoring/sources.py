@@ -114,8 +114,25 @@ def run_stats(run: TrainingRun, truth: Truth, thresholds: int, on_progress: Call
     return {"": stats}, notes
 
 
+def human_participants(
+    study_ids: Iterable[int], *, exclude_failed_checks: bool = False, by_condition: bool = False
+) -> list[tuple[Participant, str | None]]:
+    """The participants scored as human rows, each with the condition its row is split by (None when not split).
+
+    Only the timed part is scored (``participant_soft_masks`` leaves practice
+    and catch trials out); ``exclude_failed_checks`` leaves out whoever failed
+    a comprehension or attention check; ``by_condition`` orders the rows by
+    condition within each study and names it.
+    """
+    people = studies_service.study_participants(study_ids, exclude_failed_checks=exclude_failed_checks)
+    if not by_condition:
+        return [(p, None) for p in people]
+    rows = [(p, studies_service.condition_name(p) or "") for p in people]
+    return sorted(rows, key=lambda row: (row[0].study_id, row[1], row[0].number))
+
+
 def participant_stats(participant: Participant, truth: Truth, thresholds: int, on_progress: Callable[[int], None]) -> Scored:
-    """Score a participant's soft masks of the frames they answered."""
+    """Score a participant's soft masks of the frames they answered (the timed part's main trials)."""
     stats, missing = _accumulate(studies_service.participant_soft_masks(participant), truth, thresholds, on_progress)
     label = f"{participant.label} of study {participant.study_id}"
     notes = [f"{label}: {missing} answered frames no longer have a ground truth and were left out."] if missing else []

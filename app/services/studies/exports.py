@@ -2,7 +2,13 @@
 
 ``EXPORTS`` names what the admin pages offer; ``export_to_folder`` writes
 them all (the ``flask egonet study-export`` command). The masks' zip is
-produced piece by piece while it is sent.
+produced piece by piece while it is sent. Every table carries the
+participant's external id and condition; trials say whether they were
+practice or catch trials and whether a click hit the true action-object
+(its ground-truth mask, or a catch trial's answer region); participants.csv
+has one row per participant with their status, checks, completion code
+and browser, for approving payments. Sessions whose deadline passed while
+nobody was there are closed first, so no trial stays pending after time-up.
 """
 
 import csv
@@ -20,20 +26,76 @@ from sqlalchemy.orm import selectinload
 
 from app.extensions import db
 from app.models import Frame, Sequence
-from app.models.studies import ANSWERED, Participant, Study, StudyFrame, Trial
-from app.services import media
+from app.models.studies import ANSWERED, FrameKind, Participant, Study, StudyFrame, Trial
+from app.services import ground_truth, media
+from app.services.studies.building import sigma_for
+from app.services.studies.checks import checks_of, inside_box, inside_mask
 from app.services.studies.common import LATE_GRACE_S
-from app.services.studies.masks import mask_png, trial_soft_mask
+from app.services.studies.definition import definition_of
+from app.services.studies.masks import condition_name, mask_png, trial_soft_mask
+from app.services.studies.overview import progress
+from app.services.studies.session import close_overdue
 from egonet.clicks import MaskMean
 
 TRIAL_COLUMNS = [
-    "study_id", "participant", "participant_id", "trial_id", "position", "activity", "frame_id", "frame_source",
-    "frame_width", "frame_height", "outcome", "clicks", "rt_ms", "shown_at", "submitted_at", "server_ms",
-    "window_width", "window_height", "display_width", "display_height", "pixel_ratio", "events",
+    "study_id", "participant", "participant_id", "external_id", "condition", "trial_id", "position", "kind", "activity",
+    "frame_id", "frame_source", "frame_width", "frame_height", "outcome", "clicks", "hit", "rt_ms", "shown_at",
+    "submitted_at", "server_ms", "window_width", "window_height", "display_width", "display_height", "pixel_ratio",
+    "sigma_px", "events",
 ]  # fmt: skip
-CLICK_COLUMNS = ["study_id", "participant", "trial_id", "position", "frame_id", "click", "x", "y", "rt_ms", "received_at"]
-EVENT_COLUMNS = ["study_id", "participant", "trial_id", "position", "frame_id", "event", "kind", "client_ms", "server_at", "detail"]
-EXPORTS = ("trials.csv", "clicks.csv", "events.csv", "study.json", "masks.zip")
+CLICK_COLUMNS = [
+    "study_id", "participant", "external_id", "condition", "trial_id", "position", "kind", "frame_id", "click", "x", "y",
+    "inside", "rt_ms", "received_at",
+]  # fmt: skip
+EVENT_COLUMNS = [
+    "study_id", "participant", "external_id", "condition", "trial_id", "position", "frame_id", "event", "kind",
+    "client_ms", "server_at", "detail",
+]  # fmt: skip
+PARTICIPANT_COLUMNS = [
+    "study_id", "participant", "participant_id", "code", "entry", "platform", "external_id", "external", "condition",
+    "status", "active", "checks_passed", "comprehension", "catch_passed", "catch_total", "completion_code",
+    "consented_at", "started_at", "finished_at", "end_reason", "answered", "total", "user_agent", "screen_width",
+    "screen_height", "window_width", "window_height", "pixel_ratio", "time_zone", "touch",
+]  # fmt: skip
+EXPORTS = ("trials.csv", "clicks.csv", "events.csv", "participants.csv", "study.json", "definition.json", "masks.zip")
+
+
+class _Truth:
+    """Where clicks fall: each frame's ground-truth mask (decoded once per export) or a catch frame's box."""
+
+    def __init__(self, study: Study):
+        self.annotations = ground_truth.ground_truths([sf.frame_id for sf in study.frames])
+        self.masks: dict[int, Any] = {}
+
+    def inside(self, trial: Trial) -> list[bool] | None:
+        """For each click, whether it is in the answer region; None when there is none to compare with."""
+        points = [(c.x, c.y) for c in trial.clicks]
+        region = trial.study_frame.region
+        if trial.kind is FrameKind.CATCH and region and "box" in region:
+            return inside_box(region["box"], points)
+        frame_id = trial.study_frame.frame_id
+        if frame_id not in self.annotations:
+            return None
+        if frame_id not in self.masks:
+            self.masks[frame_id] = ground_truth.mask_of(self.annotations[frame_id])
+        return inside_mask(self.masks[frame_id], points)
+
+    def hit(self, trial: Trial) -> bool | None:
+        if trial.kind is FrameKind.CATCH and trial.hit is not None:
+            return trial.hit  # as judged when the answer came
+        if trial.outcome not in ANSWERED:
+            return None
+        inside = self.inside(trial)
+        return None if inside is None else any(inside)
+
+
+def _settle(study: Study) -> None:
+    close_overdue([p.id for p in study.participants])
+
+
+def _who(trial: Trial) -> dict[str, Any]:
+    participant = trial.participant
+    return {"participant": participant.label, "external_id": participant.external_id, "condition": condition_name(participant)}
 
 
 def _iso(value: datetime | None) -> str | None:
@@ -50,31 +112,33 @@ def _study_trials(study: Study) -> list[Trial]:
             .options(
                 selectinload(Trial.clicks),
                 selectinload(Trial.events),
-                selectinload(Trial.participant),
+                selectinload(Trial.participant).selectinload(Participant.condition),
                 selectinload(Trial.study_frame).selectinload(StudyFrame.frame).selectinload(Frame.sequence).selectinload(Sequence.activity),
             )
         ).scalars()
     )
 
 
-def _trial_row(study: Study, trial: Trial) -> dict[str, Any]:
+def _trial_row(study: Study, trial: Trial, truth: _Truth) -> dict[str, Any]:
     frame = trial.frame
     server_ms = None
     if trial.shown_at is not None and trial.submitted_at is not None:
         server_ms = round((trial.submitted_at - trial.shown_at).total_seconds() * 1000, 1)
     return {
         "study_id": study.id,
-        "participant": trial.participant.label,
+        **_who(trial),
         "participant_id": trial.participant_id,
         "trial_id": trial.id,
         "position": trial.position,
+        "kind": trial.kind.value,
         "activity": frame.sequence.activity.name,
         "frame_id": frame.id,
         "frame_source": frame.source_name,
         "frame_width": frame.width,
         "frame_height": frame.height,
-        "outcome": trial.outcome.value if trial.outcome else "pending",
+        "outcome": trial.outcome.value if trial.outcome else ("not_reached" if trial.participant.finished_at else "pending"),
         "clicks": len(trial.clicks),
+        "hit": truth.hit(trial),
         "rt_ms": trial.rt_ms,
         "shown_at": _iso(trial.shown_at),
         "submitted_at": _iso(trial.submitted_at),
@@ -84,19 +148,24 @@ def _trial_row(study: Study, trial: Trial) -> dict[str, Any]:
         "display_width": trial.display_width,
         "display_height": trial.display_height,
         "pixel_ratio": trial.pixel_ratio,
+        "sigma_px": sigma_for(study, frame),
         "events": len(trial.events),
     }
 
 
-def _click_rows(study: Study, trial: Trial) -> list[dict[str, Any]]:
-    base = {"study_id": study.id, "participant": trial.participant.label, "trial_id": trial.id, "position": trial.position, "frame_id": trial.frame.id}
+def _click_rows(study: Study, trial: Trial, truth: _Truth) -> list[dict[str, Any]]:
+    base = {"study_id": study.id, **_who(trial), "trial_id": trial.id, "position": trial.position, "kind": trial.kind.value,
+            "frame_id": trial.frame.id}  # fmt: skip
+    inside = truth.inside(trial) if trial.clicks else None
     return [
-        {**base, "click": c.position, "x": c.x, "y": c.y, "rt_ms": c.rt_ms, "received_at": _iso(c.received_at)} for c in trial.clicks
+        {**base, "click": c.position, "x": c.x, "y": c.y, "inside": inside[i] if inside is not None else None, "rt_ms": c.rt_ms,
+         "received_at": _iso(c.received_at)}  # fmt: skip
+        for i, c in enumerate(trial.clicks)
     ]
 
 
-def _event_rows(study: Study, trial: Trial) -> list[dict[str, Any]]:
-    base = {"study_id": study.id, "participant": trial.participant.label, "trial_id": trial.id, "position": trial.position, "frame_id": trial.frame.id}
+def _event_rows(study: Study, trial: Trial, truth: _Truth) -> list[dict[str, Any]]:
+    base = {"study_id": study.id, **_who(trial), "trial_id": trial.id, "position": trial.position, "frame_id": trial.frame.id}
     return [
         {**base, "event": e.position, "kind": e.kind.value, "client_ms": e.client_ms, "server_at": _iso(e.server_at), "detail": e.detail}
         for e in trial.events
@@ -104,13 +173,19 @@ def _event_rows(study: Study, trial: Trial) -> list[dict[str, Any]]:
 
 
 def export_csv(study: Study, table: str) -> str:
-    """One table of the study's results as CSV: ``trials``, ``clicks`` or ``events``."""
-    columns, rows_of = {
-        "trials": (TRIAL_COLUMNS, lambda t: [_trial_row(study, t)]),
-        "clicks": (CLICK_COLUMNS, lambda t: _click_rows(study, t)),
-        "events": (EVENT_COLUMNS, lambda t: _event_rows(study, t)),
-    }[table]
+    """One table of the study's results as CSV: ``trials``, ``clicks``, ``events`` or ``participants``."""
+    _settle(study)
     out = _io.StringIO()
+    if table == "participants":
+        writer = csv.DictWriter(out, fieldnames=PARTICIPANT_COLUMNS, lineterminator="\n")
+        writer.writeheader()
+        for row in participant_rows(study):
+            writer.writerow({**row, "external": json.dumps(row["external"], sort_keys=True) if row["external"] else ""})
+        return out.getvalue()
+    rows_of = {"trials": lambda t: [_trial_row(study, t, truth)], "clicks": lambda t: _click_rows(study, t, truth),
+               "events": lambda t: _event_rows(study, t, truth)}[table]  # fmt: skip
+    columns = {"trials": TRIAL_COLUMNS, "clicks": CLICK_COLUMNS, "events": EVENT_COLUMNS}[table]
+    truth = _Truth(study)
     writer = csv.DictWriter(out, fieldnames=columns, lineterminator="\n")
     writer.writeheader()
     for trial in _study_trials(study):
@@ -121,16 +196,46 @@ def export_csv(study: Study, table: str) -> str:
     return out.getvalue()
 
 
+def participant_rows(study: Study) -> list[dict[str, Any]]:
+    """One row per participant: who they are on their platform, their condition, status, checks and code, their browser."""
+    people = list(study.participants)
+    results = checks_of(people)
+    rows = []
+    for p in people:
+        state, checked, env = progress(p), results[p.id], p.environment or {}
+        screen, window = env.get("screen") or {}, env.get("window") or {}
+        rows.append({
+            "study_id": study.id, "participant": p.label, "participant_id": p.id, "code": p.code, "entry": p.entry.value,
+            "platform": p.platform, "external_id": p.external_id, "external": p.external or {}, "condition": condition_name(p),
+            "status": state.status, "active": p.user.active, "checks_passed": checked.passed,
+            "comprehension": checked.comprehension, "catch_passed": checked.catch_passed, "catch_total": checked.catch_total,
+            "completion_code": p.completion_code, "consented_at": _iso(p.consented_at), "started_at": _iso(p.started_at),
+            "finished_at": _iso(p.finished_at), "end_reason": p.end_reason.value if p.end_reason else None,
+            "answered": state.answered, "total": state.total, "user_agent": p.user_agent,
+            "screen_width": screen.get("width"), "screen_height": screen.get("height"), "window_width": window.get("width"),
+            "window_height": window.get("height"), "pixel_ratio": env.get("pixel_ratio"), "time_zone": env.get("time_zone"),
+            "touch": env.get("touch"),
+        })  # fmt: skip
+    return rows
+
+
 def export_json(study: Study) -> dict[str, Any]:
     """The whole study as one JSON document: settings, frames, participants with trials, clicks and events."""
+    _settle(study)
     by_participant: dict[int, list[Trial]] = defaultdict(list)
     for trial in _study_trials(study):
         by_participant[trial.participant_id].append(trial)
+    truth = _Truth(study)
+    rows = {row["participant_id"]: row for row in participant_rows(study)}
     return {
         "study": _study_json(study),
+        "definition": definition_of(study),
         "frames": [
             {
                 "position": sf.position,
+                "kind": sf.kind.value,
+                "catch_position": sf.catch_position,
+                "region": sf.region,
                 "frame_id": sf.frame_id,
                 "activity": sf.frame.sequence.activity.name,
                 "sequence": sf.frame.sequence.name,
@@ -141,7 +246,7 @@ def export_json(study: Study) -> dict[str, Any]:
             }
             for sf in study.frames
         ],
-        "participants": [_participant_json(study, p, by_participant[p.id]) for p in study.participants],
+        "participants": [_participant_json(study, p, by_participant[p.id], rows[p.id], truth) for p in study.participants],
     }
 
 
@@ -156,20 +261,35 @@ def _study_json(study: Study) -> dict[str, Any]:
         "late_grace_s": LATE_GRACE_S,
         "multiple_clicks": study.multiple_clicks,
         "sigma_px": study.sigma_px,
+        "sigma_scaled": study.sigma_scaled,
         "superpixels": study.superpixels,
+        "status": study.status.value,
+        "version": study.version,
         "instructions": study.instructions,
         "consent": study.consent,
         "created_at": _iso(study.created_at),
     }
 
 
-def _participant_json(study: Study, p: Participant, trials: list[Trial]) -> dict[str, Any]:
+def _participant_json(study: Study, p: Participant, trials: list[Trial], row: dict[str, Any], truth: _Truth) -> dict[str, Any]:
+    left_out = ("study_id", "participant", "participant_id", "external_id", "condition", "clicks", "events")
     return {
         "id": p.id,
         "label": p.label,
         "number": p.number,
         "entry": p.entry.value,
         "order_seed": p.order_seed,
+        "platform": p.platform,
+        "external_id": p.external_id,
+        "external": p.external or {},
+        "condition": condition_name(p),
+        "status": row["status"],
+        "active": row["active"],
+        "checks": checks_of([p])[p.id].as_dict(),
+        "completion_code": p.completion_code,
+        "user_agent": p.user_agent,
+        "environment": p.environment,
+        "comprehension_attempts": p.comprehension_attempts,
         "consented_at": _iso(p.consented_at),
         "started_at": _iso(p.started_at),
         "deadline": _iso(p.deadline),
@@ -177,7 +297,7 @@ def _participant_json(study: Study, p: Participant, trials: list[Trial]) -> dict
         "end_reason": p.end_reason.value if p.end_reason else None,
         "trials": [
             {
-                **{k: v for k, v in _trial_row(study, t).items() if k not in ("study_id", "participant", "participant_id", "clicks", "events")},
+                **{k: v for k, v in _trial_row(study, t, truth).items() if k not in left_out},
                 "clicks": [{"x": c.x, "y": c.y, "rt_ms": c.rt_ms, "received_at": _iso(c.received_at)} for c in t.clicks],
                 "events": [
                     {"kind": e.kind.value, "client_ms": e.client_ms, "server_at": _iso(e.server_at), "detail": e.detail}
@@ -197,7 +317,7 @@ def mask_files(study: Study) -> Iterator[tuple[str, bytes]]:
     """
     manifest = _io.StringIO()
     writer = csv.writer(manifest, lineterminator="\n")
-    writer.writerow(["file", "participant", "position", "frame_id", "activity", "frame_source", "outcome", "participants"])
+    writer.writerow(["file", "participant", "position", "kind", "frame_id", "activity", "frame_source", "outcome", "participants"])
     means: dict[int, MaskMean] = defaultdict(MaskMean)
     for trial in _study_trials(study):
         if trial.outcome not in ANSWERED:
@@ -205,14 +325,16 @@ def mask_files(study: Study) -> Iterator[tuple[str, bytes]]:
         frame = trial.frame
         mask = trial_soft_mask(trial)
         name = f"{trial.participant.label}/{trial.position:04d}-frame{frame.id}.png"
-        writer.writerow([name, trial.participant.label, trial.position, frame.id, frame.sequence.activity.name, frame.source_name, trial.outcome.value, ""])
+        writer.writerow([name, trial.participant.label, trial.position, trial.kind.value, frame.id, frame.sequence.activity.name,
+                         frame.source_name, trial.outcome.value, ""])  # fmt: skip
         yield name, mask_png(mask)
         means[frame.id].add(mask)
     for sf in study.frames:
         frame = sf.frame
         if frame.id in means:
             name = f"mean/frame{frame.id}.png"
-            writer.writerow([name, "mean", "", frame.id, frame.sequence.activity.name, frame.source_name, "", means[frame.id].count])
+            writer.writerow([name, "mean", "", sf.kind.value, frame.id, frame.sequence.activity.name, frame.source_name, "",
+                             means[frame.id].count])  # fmt: skip
             yield name, mask_png(means[frame.id].mean())
     yield "manifest.csv", manifest.getvalue().encode()
 
@@ -252,6 +374,7 @@ def export_to_folder(study: Study, out: Path, *, on_start=None, on_progress=None
     ``on_start(total)`` and ``on_progress(n)`` report the files written.
     """
     out = Path(out)
+    _settle(study)
     answered = db.session.execute(
         db.select(func.count(), func.count(func.distinct(Trial.study_frame_id)))
         .select_from(Trial)
@@ -259,7 +382,7 @@ def export_to_folder(study: Study, out: Path, *, on_start=None, on_progress=None
         .where(Participant.study_id == study.id, Trial.outcome.in_(ANSWERED))
     ).one()
     if on_start is not None:
-        on_start(4 + answered[0] + answered[1] + 1)  # tables, JSON, masks, means, manifest
+        on_start(6 + answered[0] + answered[1] + 1)  # tables, JSON documents, masks, means, manifest
     written = []
 
     def write(path: Path, data: bytes) -> None:
@@ -268,9 +391,10 @@ def export_to_folder(study: Study, out: Path, *, on_start=None, on_progress=None
         if on_progress is not None:
             on_progress(1)
 
-    for table in ("trials", "clicks", "events"):
+    for table in ("trials", "clicks", "events", "participants"):
         write(out / f"{table}.csv", export_csv(study, table).encode())
     write(out / "study.json", json.dumps(export_json(study), indent=1).encode())
+    write(out / "definition.json", json.dumps(definition_of(study), indent=1).encode())
     for name, data in mask_files(study):
         write(out / "masks" / name, data)
     return written

@@ -6,8 +6,9 @@ compressed ``.npz`` named by the frame's content hash, written atomically.
 The mean map of a frame and the overlays are ``egonet.clicks.MaskMean`` and
 ``egonet.overlay.overlay``; this module finds the trials and the files.
 
-For the scorer: ``study_participants(study_ids)`` and
-``participant_soft_masks(participant)``.
+For the scorer: ``study_participants(study_ids)`` (optionally without
+those who failed a check) and ``participant_soft_masks(participant)`` (the
+timed part only: practice and catch trials are never scored as data).
 """
 
 import hashlib
@@ -24,8 +25,10 @@ from sqlalchemy.orm import selectinload
 
 from app.extensions import db
 from app.models import Frame
-from app.models.studies import ANSWERED, Participant, Study, StudyFrame, Trial
+from app.models.studies import ANSWERED, FrameKind, Participant, Study, StudyFrame, Trial
 from app.services import media
+from app.services.studies.building import sigma_for
+from app.services.studies.checks import checks_of
 from egonet import clicks as egonet_clicks
 from egonet import io
 from egonet.overlay import overlay as egonet_overlay
@@ -91,7 +94,7 @@ def trial_soft_mask(trial: Trial) -> np.ndarray:
     if not points:  # an answer of none: no need for superpixels
         return np.zeros((frame.height, frame.width), np.float32)
     labels = superpixel_labels(frame, study.superpixels)
-    return egonet_clicks.soft_mask((frame.height, frame.width), points, sigma=study.sigma_px, labels=labels)
+    return egonet_clicks.soft_mask((frame.height, frame.width), points, sigma=sigma_for(study, frame), labels=labels)
 
 
 def answered_trials(study_frame: StudyFrame) -> list[Trial]:
@@ -115,27 +118,41 @@ def mean_soft_mask(study_frame: StudyFrame) -> tuple[np.ndarray | None, int]:
     return mean.mean(), mean.count
 
 
-def study_participants(study_ids: Iterable[int]) -> list[Participant]:
-    """The participants of these studies, by study and number (for the scorer)."""
-    return list(
+def study_participants(study_ids: Iterable[int], *, exclude_failed_checks: bool = False) -> list[Participant]:
+    """The participants of these studies, by study and number (for the scorer).
+
+    With ``exclude_failed_checks``, those who failed a comprehension or
+    attention check (``app.services.studies.checks``) are left out.
+    """
+    people = list(
         db.session.execute(
             db.select(Participant)
             .where(Participant.study_id.in_(list(study_ids)))
             .order_by(Participant.study_id, Participant.number)
         ).scalars()
     )
+    if not exclude_failed_checks:
+        return people
+    results = checks_of(people)
+    return [p for p in people if results[p.id].passed is not False]
+
+
+def condition_name(participant: Participant) -> str | None:
+    """The participant's between-subject condition (None in a study without conditions)."""
+    return participant.condition.name if participant.condition is not None else None
 
 
 def participant_soft_masks(participant: Participant) -> Iterator[tuple[Frame, np.ndarray]]:
-    """Each answered trial's frame and soft mask, float32 (H, W) in [0, 1], in trial order.
+    """Each answered trial of the timed part: its frame and soft mask, float32 (H, W) in [0, 1], in trial order.
 
     Answers of "none" give zeros; a time-out keeps the clicks made before it.
     Expired and unanswered trials are left out (the participant gave no
-    answer).
+    answer), and so are practice and catch trials (never data).
     """
     trials = db.session.execute(
         db.select(Trial)
-        .where(Trial.participant_id == participant.id, Trial.outcome.in_(ANSWERED))
+        .join(StudyFrame, Trial.study_frame)
+        .where(Trial.participant_id == participant.id, Trial.outcome.in_(ANSWERED), StudyFrame.kind == FrameKind.MAIN)
         .order_by(Trial.position)
         .options(selectinload(Trial.clicks), selectinload(Trial.study_frame).selectinload(StudyFrame.frame))
     ).scalars()

@@ -1,4 +1,4 @@
-"""The admin's overview of studies: participant progress, summaries, frames per activity, answers per frame."""
+"""The admin's overview of studies: participant progress, summaries, conditions, frames per activity, answers per frame."""
 
 from collections import defaultdict
 from collections.abc import Iterable
@@ -8,10 +8,12 @@ from typing import Any
 from sqlalchemy import func
 
 from app.extensions import db
-from app.models.studies import ANSWERED, Outcome, Participant, Study, StudyFrame, Trial
+from app.models.studies import ANSWERED, FrameKind, Outcome, Participant, Study, StudyFrame, Trial
 from app.services.studies.building import eligible_counts
 from app.services.studies.common import now
 from app.services.studies.masks import cached_superpixels
+from app.services.studies.recruiting import condition_places, places_taken
+from app.services.studies.session import has_pending
 
 
 @dataclass
@@ -25,10 +27,13 @@ class Progress:
 
 
 def progress(participant: Participant) -> Progress:
-    """Trials answered and closed, and time used, for the admin's table."""
+    """Trials of the timed part answered and closed, and time used, for the admin's table."""
     counts: dict[Outcome | None, int] = defaultdict(int)
     for outcome, n in db.session.execute(
-        db.select(Trial.outcome, func.count()).where(Trial.participant_id == participant.id).group_by(Trial.outcome)
+        db.select(Trial.outcome, func.count())
+        .join(StudyFrame, Trial.study_frame)
+        .where(Trial.participant_id == participant.id, StudyFrame.kind != FrameKind.PRACTICE)
+        .group_by(Trial.outcome)
     ):
         counts[outcome] += n
     total = sum(counts.values())
@@ -37,10 +42,14 @@ def progress(participant: Participant) -> Progress:
     if participant.started_at is not None:
         end = participant.finished_at or min(now(), participant.deadline)
         used = max(0.0, (end - participant.started_at).total_seconds())
-    if participant.finished_at is not None:
+    if not participant.user.active:
+        status = "deactivated"
+    elif participant.finished_at is not None:
         status = participant.end_reason.value.replace("_", " ")
     elif participant.started_at is not None:
         status = "time up" if now() >= participant.deadline else "running"
+    elif participant.instructions_done_at is not None:
+        status = "practice" if has_pending(participant, FrameKind.PRACTICE) else "ready"
     elif participant.consented_at is not None:
         status = "consented"
     else:
@@ -54,6 +63,7 @@ class StudySummary:
     frames: int
     participants: int
     finished: int
+    places: int
 
 
 def study_summaries() -> list[StudySummary]:
@@ -65,20 +75,26 @@ def study_summaries() -> list[StudySummary]:
     )
     rows = []
     for study in db.session.execute(db.select(Study).order_by(Study.created_at.desc(), Study.id.desc())).scalars():
-        rows.append(StudySummary(study, len(study.frames), len(study.participants), finished.get(study.id, 0)))
+        main = len(study.frames_of(FrameKind.MAIN))
+        rows.append(StudySummary(study, main, len(study.participants), finished.get(study.id, 0), places_taken(study)))
     return rows
+
+
+def condition_table(study: Study) -> list[dict[str, Any]]:
+    """Per condition: what it changes, its quota and the places taken (balanced assignment keeps these even)."""
+    places = condition_places(study)
+    return [{"condition": c, "places": places.get(c.id, 0)} for c in study.conditions]
 
 
 def activity_table(study: Study) -> tuple[list[dict[str, Any]], int]:
     """Per activity of a study: frames drawn and eligible now; and how many frames have cached superpixels."""
     eligible = {activity.id: n for activity, n in eligible_counts()}
     rows: dict[int, dict[str, Any]] = {}
-    cached = 0
-    for sf in study.frames:
+    for sf in study.frames_of(FrameKind.MAIN):
         activity = sf.frame.sequence.activity
         row = rows.setdefault(activity.id, {"activity": activity, "drawn": 0, "eligible": eligible.get(activity.id, 0)})
         row["drawn"] += 1
-        cached += cached_superpixels(sf.frame, study.superpixels)
+    cached = sum(cached_superpixels(sf.frame, study.superpixels) for sf in study.frames)
     return sorted(rows.values(), key=lambda r: r["activity"].name), cached
 
 
@@ -93,6 +109,3 @@ def answered_counts(study_frames: Iterable[StudyFrame]) -> dict[int, int]:
         ).all()
     )
 
-
-# --------------------------------------------------------------------------
-# Superpixels (cached) and soft masks

@@ -3,7 +3,9 @@
 Participant routes admit the participant role, then ``_participant`` /
 ``_owned_trial`` refuse anyone who is not enrolled (the matrix's participant
 user is not): 403. The link in ``url_values`` is already used: 410 for all,
-for the page (GET) and for its Start button (POST).
+for the page (GET) and for its Start button (POST); the open link is a
+closed study's: 410 too. The admin's study has a participant who entered:
+it can be neither edited (a redirect to the study) nor deleted (409).
 """
 
 from app.extensions import db
@@ -28,8 +30,19 @@ RULES = {
     "studies.trial_overlay": (ADMIN, 200),
     "studies.trial_mask": (ADMIN, 200),
     "studies.export": (ADMIN, 200),
+    "studies.create_from_file": (ADMIN, 400),
+    "studies.edit": (ADMIN, 302),
+    "studies.duplicate": (ADMIN, 302),
+    "studies.delete": (ADMIN, 409),
+    "studies.set_status": (ADMIN, 400),
+    "studies.set_active": (ADMIN, 400),
     "study.entry": (None, {"GET": 200, "POST": 400}),
     "study.link": (None, 410),
+    "study.open_link": (None, 410),
+    "study.comprehension": (PARTICIPANT, 403),
+    "study.practice": (PARTICIPANT, 403),
+    "study.ready": (PARTICIPANT, 403),
+    "study.environment": (PARTICIPANT, 403),
     "study.consent": (PARTICIPANT, 403),
     "study.instructions": (PARTICIPANT, 403),
     "study.start": (PARTICIPANT, 403),
@@ -69,6 +82,10 @@ def url_values(app, tmp_path) -> dict:
         ids = build_study(tmp_path / "studies", activities=("desk work",), participants=2, entry=EntryKind.LINK)
         first, second = (db.session.get(Participant, pid) for pid in ids["participants"])
         studies.use_link(second.link_token)
+        closed = studies.create_study(
+            name="closed", activity_ids=ids["activities"], frames_per_activity=1, seed=1, open_link={"cap": 5}
+        )
+        studies.set_status(closed, "closed")
         # The first participant answers a trial, so masks and overlays exist.
         studies.answer_consent(first, agree=True)
         studies.start_session(first)
@@ -82,4 +99,5 @@ def url_values(app, tmp_path) -> dict:
             "study_frame_id": trial.study_frame_id,
             "export_name": "trials.csv",
             "token": second.link_token,
+            "open_token": closed.open_link_token,
         }
