@@ -18,7 +18,9 @@ function draw() {
   const context = canvas.getContext("2d");
   const image = context.createImageData(canvas.width, canvas.height);
   const depth = new Float32Array(canvas.width * canvas.height);
-  const drawn = render(points, view, canvas.width, canvas.height, image.data, depth);
+  // Squares about as wide as the gaps between neighbouring points seen from the camera.
+  const size = Math.max(2, Math.min(6, Math.round(canvas.width / Math.sqrt((points.count * 4) / 3))));
+  const drawn = render(points, view, canvas.width, canvas.height, image.data, depth, { size });
   context.putImageData(image, 0, 0);
   canvas.dataset.drawn = String(drawn);
 }
@@ -48,7 +50,8 @@ async function load() {
     labelled += points.colors[4 * i + 3] & 1;
     predicted += (points.colors[4 * i + 3] >> 1) & 1;
   }
-  start = initialView(points.positions);
+  const width = Number(section.dataset.width), fx = Number(section.dataset.fx);
+  start = initialView(points.positions, width > 0 && fx > 0 ? 2 * Math.atan(width / (2 * fx)) : undefined);
   view = start;
   status.textContent = `${points.count.toLocaleString()} points (${labelled.toLocaleString()} labelled, ${predicted.toLocaleString()} predicted)`;
   canvas.dataset.points = String(points.count);

@@ -31,7 +31,8 @@ export function markColor(r, g, b, flags) {
 }
 
 // The orbit's centre (the median of each axis, robust to stray far points) and a start distance.
-export function initialView(positions) {
+// fov: the camera's horizontal field of view (2 atan(W / 2 fx)), so the start view frames the photograph.
+export function initialView(positions, fov = Math.PI / 3) {
   const n = positions.length / 3;
   const axis = (k) => {
     const values = new Float32Array(n);
@@ -41,7 +42,7 @@ export function initialView(positions) {
   };
   const centre = [axis(0), axis(1), axis(2)];
   // From the camera's own position: the start view looks like the photograph.
-  return { centre, yaw: 0, pitch: 0, distance: Math.max(Math.hypot(...centre), MIN_DISTANCE), fov: Math.PI / 3 };
+  return { centre, yaw: 0, pitch: 0, distance: Math.max(Math.hypot(...centre), MIN_DISTANCE), fov };
 }
 
 export function orbit(view, dx, dy, speed = 0.01) {
