@@ -259,3 +259,16 @@ def test_initialised_run_takes_the_papers_lr_converted_to_the_mean_loss():
     assert TrainConfig.from_dict(config.to_dict()).init == "vgg16.pth"
     with pytest.raises(ValueError, match="init must be a file name and excludes pretrained"):
         TrainConfig(model="egonet-lite", init="vgg16.pth", pretrained=True)
+
+
+def test_an_egonet_caffemodel_gives_the_dhg_stream_its_own_layers():
+    from egonet.init import InitWeights
+
+    layers = vgg16_to_deeplab(full_vgg16())
+    narrow = vgg16_to_deeplab(tiny_vgg16())  # the DHG stream's layers, of other shapes
+    weights = InitWeights("egonet.caffemodel", "0" * 64, "deeplab-caffemodel", layers, narrow)
+    with torch.device("meta"):
+        rgb_only, with_dhg = build_model("egonet-rgb"), build_model("egonet")
+    assert check_init(rgb_only, weights) == ["rgb_stream"]  # the RGB layers fit
+    with pytest.raises(ValueError, match=r"egonet's dhg_stream.conv1_1 needs \(64, 3, 3, 3\)"):
+        check_init(with_dhg, weights)  # the DHG stream reads the dhg_ layers

@@ -151,6 +151,11 @@ def ablation_table(name: str) -> AblationTable:
     if not done:
         raise TrainingProblem(f"no run of ablation set {name!r} has finished yet", field="name", status=409)
     scored = {run.id: _scores(run) for run in done}
+    for run in [r for r in done if not scored[r.id]]:  # every held-out frame lost its ground truth
+        notes.append(f"run {run.id} ({run.model_name}, seed {run.seed}) has no held-out frame with a ground truth: left out")
+        done.remove(run)
+    if not done:
+        raise TrainingProblem(f"no run of ablation set {name!r} has held-out frames to score", field="name", status=409)
     activities = sorted({a for s in scored.values() for a in s})
     rows = []
     for model in dict.fromkeys(r.model_name for r in done):
