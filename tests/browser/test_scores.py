@@ -70,9 +70,9 @@ def test_scores_page_shows_the_table_and_the_plots(live_app, live_server, page, 
     first = plots.first.locator("svg")
     assert first.is_visible()
     assert first.bounding_box()["width"] > 200
-    assert first.locator("polyline.curve").count() == 6
-    assert plots.nth(1).locator("polyline.curve").count() == 6  # cooking: the model, the baselines and both people
-    assert plots.nth(3).locator("polyline.curve").count() == 4  # dishwashing: no study frames there
+    assert first.locator("polyline.curve").count() == 8
+    assert plots.nth(1).locator("polyline.curve").count() == 8  # cooking: the model, the five baselines and both people
+    assert plots.nth(3).locator("polyline.curve").count() == 6  # dishwashing: no study frames there
     screenshot(page, "scores-page")
 
     # Only the study: untick the run and the baselines and score again.
