@@ -12,7 +12,13 @@ accept ``dhg=None``.
 * ``"center"``: :class:`CenterPrior`, an isotropic Gaussian at the image
   centre (first-person cameras tend to centre what the wearer attends to).
 * ``"saliency"``: :class:`SpectralResidualSaliency`, bottom-up saliency of
-  Hou & Zhang (CVPR 2007), standing in for the paper's GBVS / Judd saliency.
+  Hou & Zhang (CVPR 2007).
+* ``"gbvs"``: :class:`~egonet.saliency.GraphSaliency`, graph-based visual
+  saliency (Harel, Koch & Perona 2006), one of the paper's baselines.
+* ``"handled"``: :class:`HandledViewedObject`, the paper's "handled +
+  viewed object": the object region nearest the hands (given as a mask by
+  the caller: a hand detector's, or the labelled tactile objects), else
+  nearest the image centre.
 
 :data:`BASELINES` maps these names to constructors and :func:`build_baseline`
 builds one by name.
@@ -33,12 +39,15 @@ import cv2
 import numpy as np
 
 from egonet.errors import EgonetError
-from egonet.io import check_rgb
+from egonet.saliency import GraphSaliency
+from egonet.saliency import check_frame as _check_frame
 
 __all__ = [
     "BASELINES",
     "ActionObjectPrior",
     "CenterPrior",
+    "GraphSaliency",
+    "HandledViewedObject",
     "Predictor",
     "SpectralResidualSaliency",
     "aop_fold_priors",
@@ -62,16 +71,6 @@ class Predictor(Protocol):
             Probabilities in [0, 1], float32 (H, W).
         """
         ...
-
-
-def _check_frame(rgb: np.ndarray, dhg: np.ndarray | None) -> tuple[int, int]:
-    """Validate a predictor's inputs and return (H, W)."""
-    h, w = check_rgb(rgb, "rgb")
-    if dhg is not None:
-        if not isinstance(dhg, np.ndarray) or dhg.dtype != np.uint8 or dhg.shape != rgb.shape:
-            desc = f"{dhg.dtype} {dhg.shape}" if isinstance(dhg, np.ndarray) else type(dhg).__name__
-            raise EgonetError(f"dhg must be None or a uint8 array shaped like rgb {rgb.shape}, got {desc}", field="dhg")
-    return h, w
 
 
 def _check_positive(value: float, name: str) -> float:
@@ -272,6 +271,107 @@ class SpectralResidualSaliency:
         return np.clip(out, 0.0, 1.0, out=out).astype(np.float32, copy=False)
 
 
+class HandledViewedObject:
+    """"Handled + viewed object" (the paper's baseline): the object region nearest the hands, else nearest the centre.
+
+    Object regions are Felzenszwalb-Huttenlocher segments (scikit-image) of
+    a copy ``width`` pixels wide, kept when they cover between
+    ``min_area`` and ``max_area`` of the frame (smaller are specks, larger
+    are the floor, walls and tables). Each kept region scores
+    ``exp(-d^2 / (2 sigma^2))``, ``d`` being its nearest pixel's distance to
+    ``near`` (the hands, or what they hold) or, without it, to the image
+    centre, as a fraction of the diagonal: the nearest object scores about
+    1 and farther ones less, which gives a ranking for the PR curve.
+
+    Args:
+        width: Width of the working copy, pixels.
+        scale: Felzenszwalb's ``scale`` (larger: larger segments).
+        min_area: Smallest region kept, a fraction of the frame.
+        max_area: Largest region kept, a fraction of the frame.
+        sigma: Fall-off of the score with distance, a fraction of the diagonal.
+
+    Example:
+        >>> rgb = np.full((48, 64, 3), 200, np.uint8); rgb[18:30, 26:38] = (200, 40, 40)
+        >>> p = HandledViewedObject().predict(rgb)
+        >>> float(p[24, 32]), float(p[2, 2])
+        (1.0, 0.0)
+    """
+
+    def __init__(
+        self, *, width: int = 160, scale: float = 50.0, min_area: float = 0.002, max_area: float = 0.05, sigma: float = 0.1
+    ) -> None:
+        if isinstance(width, bool) or not isinstance(width, (int, np.integer)) or width < 16:
+            raise EgonetError(f"width must be an int >= 16, got {width!r}", field="width")
+        self.width = int(width)
+        self.scale = _check_positive(scale, "scale")
+        self.min_area, self.max_area = _check_positive(min_area, "min_area"), _check_positive(max_area, "max_area")
+        if not self.min_area < self.max_area <= 1:
+            raise EgonetError(f"need 0 < min_area < max_area <= 1, got {min_area}, {max_area}", field="max_area")
+        self.sigma = _check_positive(sigma, "sigma")
+
+    def regions(self, rgb: np.ndarray) -> np.ndarray:
+        """The object regions' labels on the working copy, int32 ``(h, w)``; -1 where no object region is."""
+        from skimage.segmentation import felzenszwalb
+
+        h, w = rgb.shape[:2]
+        ww = min(self.width, w)
+        small = cv2.resize(rgb, (ww, max(1, round(h * ww / w))), interpolation=cv2.INTER_AREA)
+        labels = felzenszwalb(small, scale=self.scale, sigma=0.8, min_size=max(4, round(self.min_area * small[..., 0].size)))
+        area = np.bincount(labels.ravel()) / labels.size
+        keep = (area >= self.min_area) & (area <= self.max_area)
+        return np.where(keep[labels], labels, -1).astype(np.int32)
+
+    def predict(
+        self, rgb: np.ndarray, dhg: np.ndarray | None = None, *, near: np.ndarray | None = None, exclude: np.ndarray | None = None
+    ) -> np.ndarray:
+        """Score every object region by its distance to ``near`` (or the centre), float32 ``(H, W)`` in [0, 1].
+
+        Args:
+            rgb: uint8 ``(H, W, 3)``.
+            dhg: Ignored; may be None.
+            near: bool ``(H, W)``: the hands (a detector's), or the handled
+                objects (labelled tactile objects); None or empty: the centre.
+            exclude: bool ``(H, W)`` of pixels that are no object (the hands
+                themselves): a region at least half inside it is dropped.
+
+        Raises:
+            EgonetError: A bad frame, or a mask not bool ``(H, W)``.
+        """
+        h, w = _check_frame(rgb, dhg)
+        for name, mask in (("near", near), ("exclude", exclude)):
+            if mask is not None and (not isinstance(mask, np.ndarray) or mask.dtype != np.bool_ or mask.shape != (h, w)):
+                raise EgonetError(f"{name} must be None or a bool ({h}, {w}) mask", field=name)
+        labels = self.regions(rgb)
+        sh, sw = labels.shape
+        shrink = lambda m: cv2.resize(m.astype(np.uint8), (sw, sh), interpolation=cv2.INTER_NEAREST).astype(bool)  # noqa: E731
+        target = np.zeros((sh, sw), bool)
+        if near is not None and near.any():
+            target = shrink(near) | _shrunk_points(near, (sh, sw))
+        else:
+            target[(sh - 1) // 2 : sh // 2 + 1, (sw - 1) // 2 : sw // 2 + 1] = True
+        distance = cv2.distanceTransform((~target).astype(np.uint8), cv2.DIST_L2, 5) / float(np.hypot(sh, sw))
+        n = int(labels.max()) + 1
+        if n == 0:
+            return np.zeros((h, w), np.float32)
+        inside = labels >= 0
+        nearest = np.full(n, np.inf)
+        np.minimum.at(nearest, labels[inside], distance[inside])
+        score = np.exp(-(nearest**2) / (2 * self.sigma**2))
+        if exclude is not None and exclude.any():
+            covered = np.bincount(labels[inside], weights=shrink(exclude)[inside], minlength=n)
+            score[covered >= 0.5 * np.bincount(labels[inside], minlength=n)] = 0.0
+        out = np.where(inside, score[np.maximum(labels, 0)], 0.0).astype(np.float32)
+        return cv2.resize(out, (w, h), interpolation=cv2.INTER_NEAREST)
+
+
+def _shrunk_points(mask: np.ndarray, size: tuple[int, int]) -> np.ndarray:
+    """A mask's pixels on a smaller grid (a thin mask can vanish under nearest-neighbour resizing)."""
+    ys, xs = np.nonzero(mask)
+    out = np.zeros(size, bool)
+    out[(ys * size[0]) // mask.shape[0], (xs * size[1]) // mask.shape[1]] = True
+    return out
+
+
 def aop_fold_priors(
     masks_by_activity: Mapping[str, Iterable[np.ndarray]], *, size: tuple[int, int] = (60, 80)
 ) -> dict[str, ActionObjectPrior | None]:
@@ -333,6 +433,8 @@ BASELINES: dict[str, Callable[..., Predictor]] = {
     "aop": ActionObjectPrior.fit,
     "center": CenterPrior,
     "saliency": SpectralResidualSaliency,
+    "gbvs": GraphSaliency,
+    "handled": HandledViewedObject,
 }
 """Baseline names and their constructors. ``"aop"`` is fitted: call it with
 the training masks of the fold (``BASELINES["aop"](masks, size=...)``); the
@@ -343,7 +445,7 @@ def build_baseline(name: str, *, masks: Iterable[np.ndarray] | None = None) -> P
     """Build a baseline by name with its default options.
 
     Args:
-        name: One of ``"aop"``, ``"center"``, ``"saliency"``.
+        name: A key of :data:`BASELINES` (``"aop"``, ``"center"``, ``"saliency"``, ``"gbvs"``, ``"handled"``).
         masks: Training masks, bool (H, W) each; required by ``"aop"`` (the
             fold's training masks), refused by the others.
 

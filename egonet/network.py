@@ -73,6 +73,8 @@ __all__ = [
     "build_no_coords",
     "build_no_embedding",
     "build_single_stream",
+    "build_deeplab_dhg",
+    "build_deeplab_rgb",
     "efficientnet_lite0_state_dict",
 ]
 
@@ -696,6 +698,7 @@ class EarlyFusionEgoNet(EgoNetModel):
 #               + fc9 (4096*1024+1024 = 4,195,328) + 2,050          = 69,254,786
 # no-coords:    130,109,056 + fc9 (8192*1024+1024 = 8,389,632) + 2,050 = 138,500,738
 # no-embedding: 130,109,056 + fc10 (8194*2+2 = 16,390)             = 130,125,446
+# deeplab-rgb/-dhg: 65,054,528 + fc10 (4096*2+2 = 8,194)           = 65,062,722
 #
 # egonet-lite. An MBConv block (in c, hidden h = e*c, out o, kernel k) holds
 # c*h + 2h (expand + BN, absent when e = 1) + h*k*k + 2h (depthwise + BN)
@@ -827,6 +830,29 @@ def build_single_stream(*, coords: CoordConvention = "normalized", dropout: floa
     )
 
 
+def build_deeplab_rgb(*, dropout: float = 0.5) -> TwoStreamEgoNet:
+    """Baseline: DeepLab on RGB, one VGG stream and a 1x1 classifier on fc7; 65,062,722 parameters.
+
+    The paper's "DeepLab on RGB": no DHG, no coordinate maps, no fc9
+    embedding; fc10 (DeepLab's fc8) reads the 4096 fc7 channels.
+
+    Args:
+        dropout: Dropout after fc6 and fc7.
+    """
+    return _two_stream_vgg("deeplab-rgb", rgb=True, dhg=False, coords=None, embed=False, dropout=dropout)
+
+
+def build_deeplab_dhg(*, dropout: float = 0.5) -> TwoStreamEgoNet:
+    """Baseline: DeepLab on DHG (the RGB stream's architecture on the DHG image); 65,062,722 parameters.
+
+    ``rgb`` is still required (it fixes the frame size) but its values are unused.
+
+    Args:
+        dropout: Dropout after fc6 and fc7.
+    """
+    return _two_stream_vgg("deeplab-dhg", rgb=False, dhg=True, coords=None, embed=False, dropout=dropout)
+
+
 def build_egonet_lite(
     *, coords: CoordConvention = "normalized", dropout: float = 0.5, pretrained: bool = False
 ) -> TwoStreamEgoNet:
@@ -914,6 +940,9 @@ MODELS: dict[str, Callable[..., EgoNetModel]] = {
     "no-coords": build_no_coords,
     "no-embedding": build_no_embedding,
     "egonet-lite": build_egonet_lite,
+    # The paper's DeepLab baselines: one stream, no coordinates, no embedding.
+    "deeplab-rgb": build_deeplab_rgb,
+    "deeplab-dhg": build_deeplab_dhg,
 }
 
 

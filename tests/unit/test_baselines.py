@@ -8,6 +8,8 @@ from egonet.baselines import (
     BASELINES,
     ActionObjectPrior,
     CenterPrior,
+    GraphSaliency,
+    HandledViewedObject,
     Predictor,
     SpectralResidualSaliency,
     aop_fold_priors,
@@ -21,7 +23,7 @@ def frame(h=48, w=64, value=90):
 
 def all_predictors():
     masks = [np.zeros((30, 40), bool), np.ones((60, 80), bool)]
-    return [ActionObjectPrior.fit(masks), CenterPrior(), SpectralResidualSaliency()]
+    return [ActionObjectPrior.fit(masks), CenterPrior(), SpectralResidualSaliency(), GraphSaliency(), HandledViewedObject()]
 
 
 # --------------------------------------------------------------------------
@@ -181,8 +183,10 @@ def test_saliency_validation():
 
 
 def test_registry_and_build():
-    assert set(BASELINES) == {"aop", "center", "saliency"}
+    assert set(BASELINES) == {"aop", "center", "saliency", "gbvs", "handled"}
     assert isinstance(build_baseline("center"), CenterPrior)
+    assert isinstance(build_baseline("gbvs"), GraphSaliency)
+    assert isinstance(build_baseline("handled"), HandledViewedObject)
     assert isinstance(build_baseline("saliency"), SpectralResidualSaliency)
     aop = build_baseline("aop", masks=[np.ones((6, 8), bool)])
     np.testing.assert_allclose(aop.prior, 1.0)
@@ -190,9 +194,117 @@ def test_registry_and_build():
 
 
 def test_build_rejects_unknown_and_misused():
-    with pytest.raises(ValueError, match="valid names: aop, center, saliency"):
-        build_baseline("gbvs")
+    with pytest.raises(ValueError, match="valid names: aop, center, gbvs, handled, saliency"):
+        build_baseline("judd")
     with pytest.raises(ValueError, match="masks"):
         build_baseline("aop")
     with pytest.raises(ValueError, match="masks"):
         build_baseline("center", masks=[np.ones((2, 2), bool)])
+
+
+# --------------------------------------------------------------------------
+# GBVS (Harel, Koch & Perona 2006).
+
+
+def test_gbvs_equilibria_match_power_iteration():
+    # The closed forms (reversible chains) against an independent computation:
+    # iterate the Markov matrix built from the paper's edge weights.
+    from egonet.saliency import _distance_kernel, activation_equilibrium, normalization_equilibrium
+
+    rng = np.random.default_rng(2)
+    kernel = _distance_kernel(4, 5, 0.15 * 5)
+    values = rng.random(20)
+
+    def power(weights):
+        markov = weights / weights.sum(axis=1, keepdims=True)  # row i: transitions out of node i
+        p = np.full(len(weights), 1.0 / len(weights))
+        for _ in range(5000):
+            p = p @ markov
+        return p
+
+    activation = activation_equilibrium(values, kernel)
+    np.testing.assert_allclose(activation, power(np.abs(values[:, None] - values[None, :]) * kernel), atol=1e-9)
+    np.testing.assert_allclose(normalization_equilibrium(activation, kernel), power(activation[None, :] * kernel), atol=1e-9)
+
+
+def test_gbvs_activation_by_hand():
+    # Three nodes in a row, one unlike the other two: weights |M_i - M_j| F, with F = 1 (huge sigma).
+    from egonet.saliency import activation_equilibrium
+
+    ones = np.ones((3, 3))
+    # node 2 differs by 1 from nodes 0 and 1: degrees (1, 1, 2) -> (0.25, 0.25, 0.5)
+    np.testing.assert_allclose(activation_equilibrium(np.array([0.0, 0.0, 1.0]), ones), [0.25, 0.25, 0.5])
+    np.testing.assert_allclose(activation_equilibrium(np.zeros(3), ones), [1 / 3] * 3)  # flat: uniform
+
+
+def test_gbvs_peaks_on_the_odd_one_out_and_is_symmetric():
+    rgb = frame(48, 64, 128)
+    rgb[20:28, 28:36] = (230, 30, 30)  # a red square in the middle of gray
+    s = GraphSaliency().predict(rgb)
+    assert s.max() == 1.0 and s.min() == 0.0
+    y, x = np.unravel_index(int(np.argmax(s)), s.shape)
+    assert 18 <= y <= 29 and 26 <= x <= 37
+    assert s[20:28, 28:36].mean() > 3 * s[:8].mean()
+    np.testing.assert_allclose(s, s[:, ::-1], atol=1e-4)  # a symmetric frame gives a symmetric map
+    assert not GraphSaliency().predict(frame()).any()  # a uniform frame: no saliency
+
+
+def test_gbvs_options_are_checked():
+    for options, field in [({"grid_width": 2}, "grid_width"), ({"levels": ()}, "levels"), ({"sigma_activation": 0}, "sigma_activation"),
+                           ({"blur": 2}, "blur")]:
+        with pytest.raises(ValueError, match=field):
+            GraphSaliency(**options)
+
+
+def test_gbvs_on_real_frames_finds_the_chair():
+    from egonet import io
+    from tests.realdata import EGONET_SAMPLES, PRIMESENSE, chair_truth
+
+    if not PRIMESENSE.exists():
+        pytest.skip("the shared real frames are absent")
+    chair = chair_truth()
+    s = GraphSaliency().predict(io.read_image(PRIMESENSE / "color" / "00001.jpg"))
+    assert s.shape == chair.shape
+    assert s[chair].mean() > 1.5 * s[~chair].mean()  # measured 0.55 against 0.32
+    for path in sorted((EGONET_SAMPLES / "rgb").iterdir())[:2]:
+        out = GraphSaliency().predict(io.read_image(path))
+        assert out.dtype == np.float32 and 0.1 < out.mean() < 0.6 and out.max() == 1.0
+
+
+# --------------------------------------------------------------------------
+# Handled + viewed object.
+
+
+def two_objects():
+    rgb = frame(96, 128, 200)
+    rgb[40:56, 56:72] = (200, 40, 40)  # at the centre
+    rgb[4:20, 4:20] = (40, 40, 200)  # top-left corner
+    return rgb
+
+
+def test_handled_viewed_takes_the_object_nearest_the_centre_without_hands():
+    p = HandledViewedObject().predict(two_objects())
+    assert p[48, 64] == pytest.approx(1.0)
+    assert 0 < p[12, 12] < 0.1  # the corner object: exp(-d^2 / 2 sigma^2), d ~ 0.35 of the diagonal
+    assert p[90, 120] == 0.0  # the background is no object region (too large)
+
+
+def test_handled_viewed_prefers_the_object_nearest_the_hands_and_skips_the_hands():
+    rgb = two_objects()
+    hand = np.zeros(rgb.shape[:2], bool)
+    hand[20:30, 4:20] = True  # just below the corner object
+    rgb[hand] = (230, 180, 150)  # skin
+    p = HandledViewedObject().predict(rgb, near=hand, exclude=hand)
+    assert p[12, 12] > 0.9 and p[12, 12] > p[48, 64]
+    assert p[25, 10] == 0.0  # the hand itself is not the object
+    # The labelled tactile object as "near" (no detector): that object wins.
+    tactile = np.zeros_like(hand)
+    tactile[40:56, 56:72] = True
+    assert HandledViewedObject().predict(rgb, near=tactile)[48, 64] == pytest.approx(1.0)
+
+
+def test_handled_viewed_checks_its_masks():
+    with pytest.raises(ValueError, match="near must be None or a bool"):
+        HandledViewedObject().predict(two_objects(), near=np.zeros((4, 4), bool))
+    with pytest.raises(ValueError, match="max_area"):
+        HandledViewedObject(min_area=0.5, max_area=0.1)

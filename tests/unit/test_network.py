@@ -30,6 +30,7 @@ from egonet.data import resize_frame, resize_probability
 from egonet.predictor import NetworkPredictor
 
 VGG_NAMES = ["egonet", "egonet-rgb", "egonet-dhg", "single-stream", "no-coords", "no-embedding"]
+DEEPLAB_NAMES = ["deeplab-rgb", "deeplab-dhg"]  # the paper's one-stream baselines
 
 # Hand counts are derived in the comment above the builders in egonet/network.py.
 EXPECTED_PARAMETERS = {
@@ -39,7 +40,9 @@ EXPECTED_PARAMETERS = {
     "single-stream": 69_254_786,  # 8-channel conv1_1 (+2,880) + fc9 (4096 -> 1024) 4,195,328 + 2,050
     "no-coords": 138_500_738,  # egonet minus the 2 coordinate rows of fc9 (2 x 1024)
     "no-embedding": 130_125_446,  # 2 streams + fc10 on 8194 channels (16,390)
-    "egonet-lite": 1_591_746,  # 2 x (EfficientNet-Lite0 700,768 + fc7 28,928) + fc9 131,840 + fc10 514
+    "egonet-lite": 1_591_746,
+    "deeplab-rgb": 65_062_722,  # 65,054,528 + fc10 on fc7 (4096 -> 2) 8,194
+    "deeplab-dhg": 65_062_722,  # 2 x (EfficientNet-Lite0 700,768 + fc7 28,928) + fc9 131,840 + fc10 514
 }
 
 
@@ -75,7 +78,19 @@ def lite_rgb_only() -> TwoStreamEgoNet:
 
 
 def test_models_registry_names():
-    assert set(MODELS) == set(VGG_NAMES) | {"egonet-lite"}
+    assert set(MODELS) == set(VGG_NAMES) | set(DEEPLAB_NAMES) | {"egonet-lite"}
+
+
+@pytest.mark.parametrize("name", DEEPLAB_NAMES)
+def test_deeplab_baselines_are_one_stream_without_coordinates_or_embedding(name):
+    with torch.device("meta"):
+        model = build_model(name)
+        assert model(torch.empty(1, 3, 33, 41), torch.empty(1, 3, 33, 41)).shape == (1, 2, 33, 41)
+    assert model.coords is None and model.head.fc9 is None
+    assert model.head.fc10.in_channels == 4096
+    assert (model.rgb_stream is None) == (name == "deeplab-dhg")
+    assert model.uses_dhg == (name == "deeplab-dhg")
+    assert model.config.options == {"dropout": 0.5}
 
 
 @pytest.mark.parametrize("name", sorted(EXPECTED_PARAMETERS))

@@ -215,7 +215,8 @@ def _baseline_job(truth: Truth, thresholds: int) -> _Job:
     return _Job(
         rows=[_RowSpec(f"baseline:{key}", key, name, BASELINE, "") for key, name in BASELINE_NAMES.items()],
         cache_key={
-            "baselines": {"aop_size": AOP_SIZE, "center_sigma": CENTER_SIGMA, "saliency": SALIENCY},
+            "baselines": {"aop_size": AOP_SIZE, "center_sigma": CENTER_SIGMA, "saliency": SALIENCY,
+                          "gbvs": sources.GBVS, "handled": sources.HANDLED},
             "truth": truth.fingerprint,
             "thresholds": thresholds,
         },

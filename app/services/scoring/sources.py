@@ -6,7 +6,8 @@ maps through one ``ScoreAccumulator`` per activity:
 
 * a completed training run: its held-out predictions (``app.services.training``);
 * the baselines (``egonet.baselines``) on every labelled frame: AOP fitted
-  inside each leave-one-activity-out fold, the centre prior and saliency;
+  inside each leave-one-activity-out fold, the centre prior, saliency, GBVS
+  and the handled + viewed object (its hands: the labelled tactile objects);
 * a participant: the click soft masks of the frames they answered
   (``app.services.studies``).
 
@@ -23,7 +24,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from app.extensions import db
-from app.models import Activity, Annotation, Frame
+from app.models import Activity, Annotation, Frame, InstanceKind
 from app.models import Sequence as FrameSequence
 from app.models.studies import Participant
 from app.models.training import TrainingRun
@@ -31,14 +32,21 @@ from app.services import ground_truth, media, training
 from app.services import studies as studies_service
 from app.services.scoring.cache import Stats
 from egonet import io
-from egonet.baselines import CenterPrior, SpectralResidualSaliency, aop_fold_priors
+from egonet.baselines import CenterPrior, GraphSaliency, HandledViewedObject, SpectralResidualSaliency, aop_fold_priors
 from egonet.metrics import ScoreAccumulator
 
 # Baseline keys, names and the predictors' settings (part of the cache key).
-BASELINE_NAMES = {"aop": "AOP", "center": "centre prior", "saliency": "saliency"}
+BASELINE_NAMES = {
+    "aop": "AOP", "center": "centre prior", "saliency": "saliency",
+    # The paper's GBVS, and its "handled + viewed object" with the hands taken from the
+    # labelled tactile objects (no hand detector is installed): an oracle for the hands.
+    "gbvs": "GBVS", "handled": "handled + viewed object (hands: labelled tactile objects)",
+}
 AOP_SIZE = (60, 80)
 CENTER_SIGMA = 0.25
 SALIENCY = {"width": 64, "blur_sigma": 2.5}
+GBVS = {"grid_width": 32, "work_width": 256}
+HANDLED = {"width": 160, "scale": 50.0, "max_area": 0.05, "near": "tactile instances"}
 
 Scored = tuple[dict[str, Stats], list[str]]
 """A source's statistics by name ("" for a single row, else the baseline's key) and its notes."""
@@ -153,18 +161,32 @@ def baseline_stats(truth: Truth, thresholds: int, on_progress: Callable[[int], N
     folds = aop_fold_priors({a: masks_of(frames) for a, frames in by_activity.items()}, size=AOP_SIZE)
     centre = CenterPrior(sigma=CENTER_SIGMA)
     saliency = SpectralResidualSaliency(**SALIENCY)
+    gbvs = GraphSaliency(**GBVS)
+    handled = HandledViewedObject(**{k: v for k, v in HANDLED.items() if k != "near"})
     stats: dict[str, Stats] = {key: {} for key in BASELINE_NAMES}
     notes = []
     for activity, frames in by_activity.items():
-        predictors = {"aop": folds[activity], "center": centre, "saliency": saliency}
+        predictors = {"aop": folds[activity], "center": centre, "saliency": saliency, "gbvs": gbvs}
         if folds[activity] is None:
             del predictors["aop"]
             notes.append(f"AOP: no other activity has labelled frames to fit the prior for {activity}.")
         for frame in frames:
             mask = truth.mask(frame.id)
             rgb = io.read_image(media.absolute_path(frame.rgb_path))
-            for key, predictor in predictors.items():
+            maps = {key: predictor.predict(rgb, None) for key, predictor in predictors.items()}
+            maps["handled"] = handled.predict(rgb, near=_tactile_mask(truth.annotations[frame.id], rgb.shape[:2]))
+            for key, prob in maps.items():
                 acc = stats[key].setdefault(activity, ScoreAccumulator(thresholds=thresholds))
-                acc.add(predictor.predict(rgb, None), mask, name=f"prob of frame {frame.id}")
+                acc.add(prob, mask, name=f"prob of frame {frame.id}")
             on_progress(1)
     return stats, notes
+
+
+def _tactile_mask(annotation: Annotation, shape: tuple[int, int]) -> np.ndarray | None:
+    """The union of the annotation's tactile objects (the "handled" ones), or None when it has none."""
+    union = None
+    for instance in annotation.instances:
+        if instance.kind == InstanceKind.TACTILE:
+            mask = io.read_mask(media.absolute_path(instance.mask_path))
+            union = mask if union is None else union | mask
+    return union if union is not None and union.shape == shape else None

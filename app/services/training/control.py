@@ -12,6 +12,7 @@ Checkpoint files live under ``CHECKPOINT_ROOT`` (default
 ``config.json``.
 """
 
+import dataclasses
 from collections.abc import Iterable
 from dataclasses import dataclass
 from pathlib import Path
@@ -66,9 +67,11 @@ class RunRequest:
     batch_size: int = 4
     seed: int = 0
     pretrained: bool = False
+    init: str | None = None  # a torchvision VGG16 .pth or DeepLab .caffemodel (egonet.init)
     activity_ids: tuple[int, ...] | None = None
     name: str | None = None
     resume_from: Checkpoint | None = None
+    ablation: str | None = None  # the ablation set the run belongs to (app.services.training.ablations)
 
 
 def start_run(request: RunRequest, *, created_by: User | None = None) -> TrainingRun:
@@ -90,6 +93,9 @@ def create_run(request: RunRequest, *, created_by: User | None = None) -> Traini
     config = _train_config(request)
     if config.pretrained:
         _check_pretrained(config.model)
+    init = _check_init(config) if config.init is not None else None
+    if init is not None:
+        config = dataclasses.replace(config, init_sha256=init["sha256"])
     activities = _activities(request.activity_ids)
     frames = ground_truth.labelled_frames([a.id for a in activities] if request.activity_ids is not None else None)
     _check_data(frames, config)
@@ -109,12 +115,30 @@ def create_run(request: RunRequest, *, created_by: User | None = None) -> Traini
             "activity_ids": None if request.activity_ids is None else [a.id for a in activities],
             "activities": sorted({f.sequence.activity.name for f in frames}),
             "frames": len(frames),
-        },
+        }
+        | ({"init": init} if init is not None else {})
+        | ({"ablation": request.ablation} if request.ablation else {}),
         created_by=created_by,
     )
     db.session.add(run)
     db.session.commit()
     return run
+
+
+def _check_init(config) -> dict[str, str]:
+    """Read the initialisation file now and check it fits the model: a bad file never reaches the worker."""
+    import torch
+
+    from egonet.init import check_init, load_init
+    from egonet.network import build_model
+
+    try:
+        weights = load_init(config.init)
+        with torch.device("meta"):  # shapes only
+            check_init(build_model(config.model, **config.model_options), weights)
+    except EgonetError as exc:
+        raise TrainingProblem(exc.message, field="init") from None
+    return weights.record() | {"path": config.init}
 
 
 def _train_config(request: RunRequest):
@@ -133,6 +157,7 @@ def _train_config(request: RunRequest):
             batch_size=request.batch_size,
             seed=request.seed,
             pretrained=request.pretrained,
+            init=str(Path(request.init).resolve()) if request.init else None,
         )
     except EgonetError as exc:
         raise TrainingProblem(exc.message, field=REQUEST_FIELDS.get(exc.field, exc.field)) from None

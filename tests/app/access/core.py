@@ -23,6 +23,7 @@ RULES = {
     "frames.frame": (STAFF, 200),
     "frames.thumbnail": (STAFF, 200),
     "frames.depth": (STAFF, 200),
+    "frames.points": (STAFF, 200),
     "frames.media_file": (STAFF, 200),
     "frames.normalised_prediction": (STAFF, 200),
     "frames.colour_bar": (STAFF, 200),
@@ -35,7 +36,7 @@ RULES = {
 
 def url_values(app, tmp_path) -> dict:
     with app.app_context():
-        import_path(image_folder(tmp_path / "rec", n=2, depth=True), activity="cooking")
+        import_path(image_folder(tmp_path / "rec", n=2, depth=True, intrinsics=True), activity="cooking")
         frame = db.session.execute(db.select(Frame)).scalars().first()
         activity = db.session.execute(db.select(Activity)).scalar_one()
         account, _ = create_user("access-account", "annotator")
