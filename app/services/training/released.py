@@ -63,7 +63,7 @@ def max_bytes() -> int:
 
 def register_release(
     path: Path, *, name: str | None = None, size: tuple[int, int] | None = None, created_by: User | None = None,
-    releases=None,
+    filename: str | None = None, releases=None,
 ) -> TrainingRun:
     """Check that ``path`` is one of the authors' releases and record its run, queued for conversion.
 
@@ -72,6 +72,7 @@ def register_release(
         name: The run's name (default: the release and the file's name).
         size: ``(H, W)`` frames are run at; the release's deploy size 481x641 by default.
         created_by: Who imports it.
+        filename: The file's name as the user knows it (an upload's), for messages and the record.
         releases: The releases to accept (``egonet.caffe.RELEASES``; tests pass small ones).
 
     Raises:
@@ -81,22 +82,23 @@ def register_release(
 
     from egonet.caffe import DEPLOY_SIZE, RELEASES, identify_release, read_caffemodel
 
+    filename = filename or path.name
     size = DEPLOY_SIZE if size is None else tuple(size)
     if len(size) != 2 or not all(isinstance(s, int) and 8 <= s <= 4096 for s in size):
         raise TrainingProblem(f"size must be two sides of 8-4096 pixels, got {size!r}", field="size")
     try:
-        release = identify_release(read_caffemodel(path), releases=releases or RELEASES, path=path.name)
+        release = identify_release(read_caffemodel(path), releases=releases or RELEASES, path=filename)
     except EgonetError as exc:
         raise TrainingProblem(exc.message, field="file") from None
-    name = (name or "").strip() or f"released {release.key.upper()} model ({path.name})"
+    name = (name or "").strip() or f"released {release.key.upper()} model ({filename})"
     if len(name) > 200:
         raise TrainingProblem("name must have at most 200 characters", field="name")
     with torch.device("meta"):  # the options only: instant
         options = dict(release.build().config.options)
     run = TrainingRun(
         name=name, model_name=release.model, model_options=options, folds=FoldsMode.RELEASED, epochs=0,
-        device="cpu", seed=0, status=RunStatus.QUEUED, message=f"queued: reading {path.name}",
-        config={"released": {"release": release.key, "title": release.title, "file": path.name,
+        device="cpu", seed=0, status=RunStatus.QUEUED, message=f"queued: reading {filename}",
+        config={"released": {"release": release.key, "title": release.title, "file": filename,
                              "bytes": path.stat().st_size, "height": size[0], "width": size[1]}},
         created_by=created_by,
     )
@@ -288,7 +290,7 @@ def finish_upload(token: str, *, name: str | None, size: tuple[int, int] | None,
     part.rename(path)
     (part.with_suffix(".json")).unlink(missing_ok=True)
     try:
-        run = register_release(path, name=name, size=size, created_by=user)
+        run = register_release(path, name=name, size=size, created_by=user, filename=meta["filename"])
     except TrainingProblem:
         path.unlink(missing_ok=True)
         raise
