@@ -5,12 +5,14 @@ Services queue a job by name (``app.queue.enqueue("train_run", run_id)``);
 calling a job here queues it too. Importing this module creates no queue.
 """
 
+from pathlib import Path
+
 from app.extensions import db
 from app.models import User
 from app.models.training import Checkpoint, TrainingRun
 from app.queue import job
 from app.services import exchange, labelling
-from app.services.training import TrainingProblem, execute_run, frames_for_prediction, predict
+from app.services.training import TrainingProblem, convert_release, execute_run, frames_for_prediction, predict
 
 
 @job
@@ -23,6 +25,12 @@ def ping(value: int) -> int:
 def train_run(run_id: int) -> None:
     """Train a queued run (see app.services.training.execute_run)."""
     execute_run(run_id)
+
+
+@job
+def import_weights(run_id: int, path: str) -> None:
+    """Convert an uploaded release into its run's checkpoint; the upload is removed afterwards."""
+    convert_release(run_id, Path(path), delete=True)
 
 
 @job

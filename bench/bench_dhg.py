@@ -120,7 +120,7 @@ def main() -> int:
         )
         rgb = cv2.cvtColor(bgr, cv2.COLOR_BGR2RGB)
         image = dhg.dhg_from_depth(depth, K, rgb)
-        # Stored as an RGB PNG whose red, green, blue are depth, height, gray.
+        # Stored as an RGB PNG whose red, green, blue are gray, height, depth (the authors' order).
         cv2.imwrite(str(OUT / f"dhg_{depth_path.stem}.png"), cv2.cvtColor(image, cv2.COLOR_RGB2BGR))
         cv2.imwrite(str(OUT / f"height_{depth_path.stem}.png"), image[:, :, 1])
     print(f"DHG images written to {OUT}")

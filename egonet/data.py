@@ -63,7 +63,7 @@ class Sample:
 
     Attributes:
         rgb: uint8 ``(H, W, 3)`` RGB, or the path of a JPEG/PNG file.
-        dhg: uint8 ``(H, W, 3)`` DHG (depth, height, gray), or the path of its
+        dhg: uint8 ``(H, W, 3)`` DHG (gray, height, depth), or the path of its
             PNG; ``None`` for models that do not read DHG (zeros are given).
         mask: bool ``(H, W)`` action-object mask, or the path of a mask PNG;
             ``None`` means the frame has no action-object (all false).

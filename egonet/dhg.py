@@ -88,23 +88,29 @@ How height is found:
     the heights of all valid pixels) if that is lower still, so that heights
     are never far below 0.
 
-DHG encoding (``encode_dhg`` / ``decode_dhg``), uint8 (H, W, 3):
-    * channel 0, depth: code ``1 + round(254 * d / DEPTH_MAX_M)``, d clipped
-      to [0, DEPTH_MAX_M] = [0, 7.62] m: 3 cm a code, near enough for the
-      arm's-reach objects, and far enough for rooms (stereo depth from a
-      10 cm baseline is unreliable beyond that anyway);
-    * channel 1, height: code ``1 + round(254 * (h - HEIGHT_MIN_M) /
+DHG encoding (``encode_dhg`` / ``decode_dhg``), uint8 (H, W, 3), in the
+channel order of the authors' DHG files (read as RGB: gray, height, depth;
+their released ``predict.py`` flips it so the network sees depth first):
+    * channel 0 (``GRAY``): the grayscale image, unchanged;
+    * channel 1 (``HEIGHT``), height: code ``1 + round(254 * (h - HEIGHT_MIN_M) /
       (HEIGHT_MAX_M - HEIGHT_MIN_M))``, h clipped to [HEIGHT_MIN_M,
       HEIGHT_MAX_M] = [-0.2, 2.34] m: 1 cm a code; the floor is code 21, so
       the floor is dark and things get brighter with height up to above head
       height (ceilings saturate at 255);
-    * channel 2: the grayscale image, unchanged.
+    * channel 2 (``DEPTH``), depth: code ``1 + round(254 * d / DEPTH_MAX_M)``,
+      d clipped to [0, DEPTH_MAX_M] = [0, 7.62] m: 3 cm a code, near enough
+      for the arm's-reach objects, and far enough for rooms (stereo depth from
+      a 10 cm baseline is unreliable beyond that anyway).
     Code 0 is reserved for missing depth or height, so missing stays missing:
-    the decoder returns NaN there.
+    the decoder returns NaN there. The authors' own depth and height scales
+    are not published; their files decode with ours into the right channels.
+    Before issue 16 our DHG images were stored the other way round (depth,
+    height, gray); migration 0007 rewrote stored ones.
 """
 
 import numbers
 from dataclasses import dataclass
+from typing import NamedTuple
 
 import cv2
 import numpy as np
@@ -123,7 +129,10 @@ HEIGHT_MAX_M = 2.34
 """Highest height encoded (code 255): above head height. With HEIGHT_MIN_M, 1 cm a code."""
 
 MISSING_CODE = 0
-"""The code of a missing depth or height in channels 0 and 1."""
+"""The code of a missing depth or height."""
+
+GRAY, HEIGHT, DEPTH = 0, 1, 2
+"""Channel indices of a DHG image (the authors' file order)."""
 
 # --- gravity and height -----------------------------------------------------
 
@@ -608,7 +617,7 @@ def _decode_linear(codes: np.ndarray, lo: float, hi: float) -> np.ndarray:
 
 
 def encode_dhg(depth_m: np.ndarray, height_m: np.ndarray, gray: np.ndarray) -> np.ndarray:
-    """Encode depth, height and grayscale as a DHG image.
+    """Encode depth, height and grayscale as a DHG image, in the authors' channel order.
 
     Scaling (module constants): depth linear over [0, ``DEPTH_MAX_M``] onto codes
     1..255, height linear over [``HEIGHT_MIN_M``, ``HEIGHT_MAX_M``] onto codes
@@ -622,7 +631,8 @@ def encode_dhg(depth_m: np.ndarray, height_m: np.ndarray, gray: np.ndarray) -> n
         gray: (H, W) uint8 grayscale image.
 
     Returns:
-        (H, W, 3) uint8: channel 0 depth, 1 height, 2 grayscale.
+        (H, W, 3) uint8: channel 0 grayscale, 1 height, 2 depth (``GRAY``,
+        ``HEIGHT``, ``DEPTH``), as the authors' DHG files.
 
     Raises:
         ValueError: on wrong shapes or dtypes.
@@ -630,8 +640,8 @@ def encode_dhg(depth_m: np.ndarray, height_m: np.ndarray, gray: np.ndarray) -> n
     Example:
         >>> import numpy as np
         >>> image = encode_dhg(np.full((2, 2), 4.0), np.zeros((2, 2)), np.full((2, 2), 7, np.uint8))
-        >>> image[0, 0].tolist()
-        [134, 21, 7]
+        >>> image[0, 0].tolist()  # gray, height (the floor), depth (4 m)
+        [7, 21, 134]
     """
     depth = _check_depth(depth_m)
     height = _check_depth(height_m, "height_m")
@@ -652,18 +662,27 @@ def encode_dhg(depth_m: np.ndarray, height_m: np.ndarray, gray: np.ndarray) -> n
         depth_missing = ~(np.isfinite(depth) & (depth > 0))
     depth_f = np.where(depth_missing, np.nan, depth)
     height_f = np.where(depth_missing, np.nan, height)
-    return np.stack(
-        [
-            _encode_linear(depth_f, 0.0, DEPTH_MAX_M),
-            _encode_linear(height_f, HEIGHT_MIN_M, HEIGHT_MAX_M),
-            gray_arr,
-        ],
-        axis=-1,
-    )
+    channels = {
+        GRAY: gray_arr,
+        HEIGHT: _encode_linear(height_f, HEIGHT_MIN_M, HEIGHT_MAX_M),
+        DEPTH: _encode_linear(depth_f, 0.0, DEPTH_MAX_M),
+    }
+    return np.stack([channels[c] for c in (0, 1, 2)], axis=-1)
 
 
-def decode_dhg(dhg: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-    """Decode a DHG image made by :func:`encode_dhg`.
+class DecodedDHG(NamedTuple):
+    """A decoded DHG image, by name (and in this order when unpacked)."""
+
+    depth: np.ndarray
+    """(H, W) float32 metres, NaN where missing."""
+    height: np.ndarray
+    """(H, W) float32 metres above the floor, NaN where missing."""
+    gray: np.ndarray
+    """(H, W) uint8."""
+
+
+def decode_dhg(dhg: np.ndarray) -> DecodedDHG:
+    """Decode a DHG image made by :func:`encode_dhg` (or an authors' DHG file, read as RGB).
 
     Exact up to quantisation for values inside the encoded ranges: the error
     is at most half a code, ``DEPTH_MAX_M / 254`` = 3 cm for depth and
@@ -672,28 +691,33 @@ def decode_dhg(dhg: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     back as NaN.
 
     Args:
-        dhg: (H, W, 3) uint8 image.
+        dhg: (H, W, 3) uint8 image: gray, height, depth.
 
     Returns:
-        ``(depth_m, height_m, gray)``: (H, W) float32, (H, W) float32, (H, W) uint8.
+        ``DecodedDHG(depth, height, gray)``: (H, W) float32 metres, (H, W)
+        float32 metres, (H, W) uint8.
 
     Raises:
         ValueError: on a wrong shape or dtype.
 
     Example:
         >>> import numpy as np
-        >>> d, h, g = decode_dhg(np.array([[[134, 21, 7], [0, 0, 9]]], np.uint8))
-        >>> round(float(d[0, 0]), 2), float(h[0, 0]), bool(np.isnan(d[0, 1]) and np.isnan(h[0, 1])), g.tolist()
-        (3.99, 0.0, True, [[7, 9]])
+        >>> decoded = decode_dhg(np.array([[[7, 21, 134], [9, 0, 0]]], np.uint8))
+        >>> round(float(decoded.depth[0, 0]), 2), float(decoded.height[0, 0]), decoded.gray.tolist()
+        (3.99, 0.0, [[7, 9]])
+        >>> bool(np.isnan(decoded.depth[0, 1]) and np.isnan(decoded.height[0, 1]))
+        True
     """
     arr = np.asarray(dhg)
     if arr.ndim != 3 or arr.shape[2] != 3:
-        raise EgonetError(f"dhg must be a (H, W, 3) image (depth, height, gray), got shape {arr.shape}", field="dhg")
+        raise EgonetError(f"dhg must be a (H, W, 3) image (gray, height, depth), got shape {arr.shape}", field="dhg")
     if arr.dtype != np.uint8:
         raise EgonetError(f"dhg must be uint8, got dtype {arr.dtype}", field="dhg")
-    depth = _decode_linear(arr[:, :, 0], 0.0, DEPTH_MAX_M)
-    height = _decode_linear(arr[:, :, 1], HEIGHT_MIN_M, HEIGHT_MAX_M)
-    return depth, height, arr[:, :, 2].copy()
+    return DecodedDHG(
+        depth=_decode_linear(arr[:, :, DEPTH], 0.0, DEPTH_MAX_M),
+        height=_decode_linear(arr[:, :, HEIGHT], HEIGHT_MIN_M, HEIGHT_MAX_M),
+        gray=arr[:, :, GRAY].copy(),
+    )
 
 
 def dhg_from_depth(depth_m: np.ndarray, K: np.ndarray, rgb: np.ndarray) -> np.ndarray:
@@ -708,7 +732,7 @@ def dhg_from_depth(depth_m: np.ndarray, K: np.ndarray, rgb: np.ndarray) -> np.nd
         rgb: (H, W, 3) uint8 image in RGB order, the same size as the depth.
 
     Returns:
-        (H, W, 3) uint8 DHG image.
+        (H, W, 3) uint8 DHG image: gray, height, depth (the authors' order).
 
     Raises:
         ValueError: on bad input or when no pixel has a valid depth.

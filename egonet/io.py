@@ -8,7 +8,8 @@ Conventions:
     * RGB images are uint8 (H, W, 3) in RGB order.
     * Depth is float32 (H, W) metres along the optical axis, 0 where missing.
       On disk: 16-bit PNG in millimetres, or ``.npy`` / ``.npz`` in metres.
-    * DHG images are uint8 (H, W, 3): depth, height, grayscale.
+    * DHG images are uint8 (H, W, 3) in the authors' file order: gray,
+      height, depth (``egonet.dhg.GRAY``, ``HEIGHT``, ``DEPTH``).
     * Masks are bool (H, W). On disk: a PNG whose pixels are 0 or one other
       value (0/1 or 0/255).
     * Intrinsics are the 3x3 camera matrix K (float64).
@@ -226,9 +227,11 @@ def encode_depth_png(depth_m: np.ndarray) -> bytes:
 
 
 def read_dhg(path: str | Path) -> np.ndarray:
-    """Read a DHG image as uint8 (H, W, 3) in (depth, height, gray) channel order.
+    """Read a DHG image as uint8 (H, W, 3) in (gray, height, depth) channel order.
 
-    The file stores the channels in that order as an ordinary RGB image.
+    The file stores the channels in that order as an ordinary RGB image (the
+    authors' DHG JPEGs and ours alike), so it is read as RGB, unchanged:
+    ``egonet.dhg.decode_dhg`` turns it into depth and height.
     """
     data = read_bytes(Path(path))
     image_size(data, path=path)

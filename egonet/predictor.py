@@ -92,8 +92,10 @@ class NetworkPredictor:
 
         Args:
             rgb: ``(H, W, 3)`` uint8 RGB frame, ``H, W >= 8``.
-            dhg: ``(H, W, 3)`` uint8 DHG image (depth, height, grey) of the same
-                frame; may be ``None`` for models that do not read DHG.
+            dhg: ``(H, W, 3)`` uint8 DHG image of the same frame, channels as
+                the authors' files and our media store them (gray, height,
+                depth: ``egonet.io.read_dhg``); may be ``None`` for models that
+                do not read DHG.
 
         Returns:
             ``(H, W)`` float32 probabilities in ``[0, 1]`` (no gradients; the

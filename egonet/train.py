@@ -74,7 +74,7 @@ from egonet.data import MIN_SIDE, Augment, FrameDataset, Sample, resize_probabil
 from egonet.errors import EgonetError
 from egonet.io import write_atomic
 from egonet.metrics import ScoreAccumulator
-from egonet.network import MODELS, EgoNetModel, build_model
+from egonet.network import MODELS, EgoNetModel, build_model, saved_options
 
 __all__ = [
     "CHECKPOINT_FORMAT",
@@ -578,8 +578,13 @@ def load_checkpoint(path: str | Path) -> dict:
 
 
 def model_from_checkpoint(state: Mapping, *, device: str | torch.device = "cpu") -> EgoNetModel:
-    """The checkpoint's model with its weights, in eval mode, on ``device``."""
-    model = build_model(state["model"]["name"], **state["model"]["options"])
+    """The checkpoint's model with its weights, in eval mode, on ``device``.
+
+    A checkpoint that does not record its coordinate and DHG channel orders
+    predates them and gets the ones it was trained with
+    (:func:`egonet.network.saved_options`).
+    """
+    model = build_model(state["model"]["name"], **saved_options(state["model"]["name"], state["model"]["options"]))
     model.load_state_dict(state["state_dict"])
     return model.to(device).eval()
 
@@ -661,7 +666,7 @@ def fit(
     device = resolve_device(config.device)
     rank, world_size = setup_distributed(device)
     tracker = tracker or _Tracker(steps=0, folds=1, epochs=config.epochs, callback=None)
-    model = _initial_model(config, device=device, world_size=world_size, from_checkpoint=start is not None)
+    model = _initial_model(config, device=device, world_size=world_size, start=start)
     optimizer = torch.optim.SGD(
         model.parameters(), lr=config.learning_rate, momentum=config.momentum, weight_decay=config.weight_decay
     )
@@ -743,14 +748,20 @@ def _fold_state(
     }
 
 
-def _initial_model(config: TrainConfig, *, device: torch.device, world_size: int, from_checkpoint: bool) -> EgoNetModel:
-    """The fold's model before training: seeded, so every fold and process starts from the same weights."""
+def _initial_model(config: TrainConfig, *, device: torch.device, world_size: int, start: Mapping | None) -> EgoNetModel:
+    """The fold's model before training: seeded, so every fold and process starts from the same weights.
+
+    A fold that continues a checkpoint is built as that checkpoint's model
+    (its options, with the conventions it was trained in), whose weights
+    :func:`_restore` then loads.
+    """
     torch.manual_seed(config.seed)
-    options = dict(config.model_options)
-    if config.pretrained and not from_checkpoint:  # a checkpoint brings its own weights
-        options["pretrained"] = True
+    if start is not None:  # a checkpoint brings its own weights and conventions
+        options = saved_options(start["model"]["name"], start["model"]["options"])
+    else:
+        options = dict(config.model_options) | ({"pretrained": True} if config.pretrained else {})
     model = build_model(config.model, **options)
-    if config.init is not None and not from_checkpoint:
+    if config.init is not None and start is None:
         from egonet.init import initialise  # ImageNet VGG16 / DeepLab into every VGG stream
 
         initialise(model, config.init, sha256=config.init_sha256)

@@ -32,3 +32,20 @@ def pytest_collection_modifyitems(config, items):
     for item in items:
         if "slow" in item.keywords or "browser" in item.keywords:
             item.add_marker(skip)
+
+
+@pytest.fixture(scope="session")
+def full_rgb_caffemodel(tmp_path_factory):
+    """A full-size file of the authors' RGB release (270 MB, zeros but fc9's bias), written once a session.
+
+    Returns ``(path, fc9 bias)``. For slow tests only (tests/caffe_files.py writes it).
+    """
+    import numpy as np
+
+    from tests.caffe_files import FULL, release_layers, write_caffemodel
+
+    marker = np.arange(512, dtype=np.float32) / 512
+    fc9 = [np.zeros((512, 4098, 1, 1), np.float32), marker]
+    path = write_caffemodel(tmp_path_factory.mktemp("caffe") / "EgoNet_rgb.caffemodel",
+                            release_layers(FULL["rgb"], {"fc9": fc9}))
+    return path, marker

@@ -35,6 +35,7 @@ from app.models import Activity, Role
 from app.models.training import Prediction, TrainingRun
 from app.security import current_role, roles
 from app.services import training
+from app.validation import Int, Str, json_body, query_int
 
 bp = Blueprint("training", __name__, url_prefix="/training")
 
@@ -185,6 +186,52 @@ def resume(run_id: int):
     run = training.resume_run(_run(run_id))
     flash(f"Run {run.id} queued again: finished folds are kept.")
     return redirect(url_for("training.detail", run_id=run.id))
+
+
+# --------------------------------------------------------------------------- the authors' released weights
+# The page sends a .caffemodel in chunks (each under MAX_CONTENT_LENGTH); the worker converts it.
+
+UPLOAD = {"filename": Str(min_len=1, max_len=255), "size": Int(min=1)}
+FINISH = {
+    "name": Str(max_len=200, nullable=True, default=None),
+    "width": Int(min=8, max=4096, default=641),
+    "height": Int(min=8, max=4096, default=481),
+}
+
+
+@bp.post("/weights/uploads")
+@roles(Role.ADMIN)
+def weights_upload_start():
+    data = json_body(UPLOAD)
+    return training.start_upload(filename=data["filename"], size=data["size"], user=current_user._get_current_object()), 201
+
+
+@bp.put("/weights/uploads/<upload>")
+@roles(Role.ADMIN)
+def weights_upload_chunk(upload: str):
+    offset = query_int("offset", min=0)
+    if offset is None:
+        raise training.TrainingProblem("give the chunk's offset (?offset=N)", field="offset")
+    received = training.write_chunk(upload, offset=offset, stream=request.stream, length=request.content_length,
+                                    user=current_user._get_current_object())
+    return {"received": received}
+
+
+@bp.post("/weights/uploads/<upload>/finish")
+@roles(Role.ADMIN)
+def weights_upload_finish(upload: str):
+    data = json_body(FINISH)
+    run = training.finish_upload(upload, name=data["name"], size=(data["height"], data["width"]),
+                                 user=current_user._get_current_object())
+    message = f"Run {run.id}: {run.config['released']['title']}, queued: the worker (flask egonet worker) converts it."
+    return {"run_id": run.id, "release": run.config["released"]["release"], "message": message}, 201
+
+
+@bp.delete("/weights/uploads/<upload>")
+@roles(Role.ADMIN)
+def weights_upload_cancel(upload: str):
+    training.cancel_upload(upload, user=current_user._get_current_object())
+    return "", 204
 
 
 @bp.get("/predictions/<int:prediction_id>.png")

@@ -14,7 +14,7 @@ from app.models import Role, Status
 @click.option("--sequence", help="Recording name within the activity [default: the folder or video name].")
 @click.option("--stride", type=click.IntRange(min=1), default=1, show_default=True, help="Keep every N-th frame.")
 @click.option("--depth", "depth_dir", type=click.Path(path_type=Path), help="Folder of depth maps (16-bit PNG mm, .npy/.npz m).")
-@click.option("--dhg", "dhg_dir", type=click.Path(path_type=Path), help="Folder of DHG images (3-channel 8-bit).")
+@click.option("--dhg", "dhg_dir", type=click.Path(path_type=Path), help="Folder of DHG images (3-channel 8-bit: gray, height, depth, as the authors' files).")
 @click.option("--masks", "masks_dir", type=click.Path(path_type=Path), help="Folder of binary mask PNGs (initial annotations).")
 @click.option("--intrinsics", type=click.Path(path_type=Path), help="Camera intrinsics JSON (fx, fy, cx, cy or a 3x3 matrix).")
 @click.option("--mask-author", default="import", show_default=True, help="Author of imported masks.")

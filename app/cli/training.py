@@ -161,6 +161,41 @@ def predict_command(checkpoint_id, activities, frames, device, queue):
     click.echo(f"checkpoint {checkpoint.id} ({checkpoint.fold}): {len(made)} predictions stored, {held_out} of held-out frames")
 
 
+@bp.cli.command("import-weights")
+@click.argument("file", type=click.Path(exists=True, dir_okay=False, path_type=Path))
+@click.option("--name", help="Name of the run [default: the release and the file's name].")
+@click.option("--size", default="641x481", show_default=True, callback=_size,
+              help="Frames are run at WIDTHxHEIGHT (the release's deploy size by default).")
+def import_weights_command(file, name, size):
+    """Register the authors' released EgoNet weights (FILE.caffemodel) as a model with a checkpoint.
+
+    RGB+DHG or RGB only, recognised from the file; no Caffe needed. The
+    run then predicts (`flask egonet predict CHECKPOINT_ID`), shows in the
+    frame viewer, on the Scores page ("released model", every frame held
+    out) and proposes objects (Suggest) like a trained one.
+    """
+    from app.services.training import import_in_foreground
+
+    with progress_bar("Reading weights") as (on_start, on_progress):
+        state = {"done": 0, "started": False}
+
+        def progress(done: int, total: int) -> None:
+            if not state["started"]:
+                on_start(total)
+                state["started"] = True
+            on_progress(done - state["done"])
+            state["done"] = done
+
+        run = import_in_foreground(file, name=name, size=(size[1], size[0]), on_progress=progress)
+    if run.status.value != "done":
+        raise click.ClickException(run.message or f"run {run.id} {run.status.value}")
+    checkpoint = run.checkpoints[0]
+    click.echo(f"run {run.id} ({run.name}): {run.config['released']['title']}, model {run.model_name}, "
+               f"checkpoint {checkpoint.id} ({checkpoint.path})")
+    click.echo(f"next: flask --app app egonet predict {checkpoint.id} [--activity NAME] [--queue]"
+               " (the Scores page scores it on every frame it has predicted)")
+
+
 @bp.cli.command("worker")
 @click.option("--workers", type=click.IntRange(min=1, max=16), default=1, show_default=True)
 def worker_command(workers):

@@ -46,6 +46,7 @@ FINAL_STATUSES = (RunStatus.DONE, RunStatus.FAILED, RunStatus.CANCELLED)
 class FoldsMode(enum.StrEnum):
     LOAO = "loao"  # leave one activity out: one model per held-out activity
     SINGLE = "single"  # one model, tested on the last part of every activity
+    RELEASED = "released"  # the authors' released model, imported: not trained here, every frame held out
 
 
 class TrainingRun(Base):

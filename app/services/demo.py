@@ -57,8 +57,8 @@ def create_demo(
     exactly, when a test or a score of a labeller's work needs it. Training,
     studies and scoring use the labelled frames only.
 
-    The DHG image uses the renderer's true height above the floor, as a rig
-    with an IMU would know it; imported frames without DHG get the height
+    The DHG image (gray, height, depth, the authors' channel order) uses the
+    renderer's true height above the floor, as a rig with an IMU would know it; imported frames without DHG get the height
     estimated from depth (egonet.dhg.height_map), which needs the floor in
     view. Frames are rendered deterministically from ``seed``, so running
     this twice with the same arguments adds nothing (and frames already

@@ -6,6 +6,11 @@ header before decoding); media are written atomically under their content
 hash; if anything fails, the transaction is rolled back and the media files
 this run created are removed, so nothing is half-imported. Re-importing the same
 files adds nothing (the RGB file's hash is unique within a sequence).
+
+DHG images are read and stored in the authors' channel order (gray, height,
+depth: ``egonet.io.read_dhg``), so the authors' own DHG files import as they
+are and decode to the right depth and height; a frame with depth and
+intrinsics but no DHG image gets one computed in that order.
 """
 
 import contextlib

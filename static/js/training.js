@@ -1,6 +1,7 @@
 // Training pages: while a run is queued or running, poll its progress and
 // update its row; when one finishes, reload to show its scores and checkpoints.
 import { api } from "./api.js";
+import { formatBytes, uploadWeights } from "./weights_upload.js";
 
 const ACTIVE = new Set(["queued", "running"]);
 const POLL_MS = 2000;
@@ -50,7 +51,45 @@ async function poll(table) {
   setTimeout(() => poll(table), POLL_MS);
 }
 
+// The released-weights form: upload in chunks with a progress bar, then show the new run.
+function wireWeightsForm(form) {
+  const bar = document.getElementById("weights-progress");
+  const status = document.getElementById("weights-status");
+  const button = form.querySelector("button[type=submit]");
+  form.addEventListener("submit", async (event) => {
+    event.preventDefault();
+    const file = form.elements.file.files[0];
+    if (!file) {
+      status.textContent = "Choose a .caffemodel file first.";
+      return;
+    }
+    button.disabled = true;
+    bar.hidden = false;
+    bar.value = 0;
+    try {
+      const answer = await uploadWeights(file, {
+        base: form.dataset.startUrl.replace(/\/uploads$/, ""),
+        name: form.elements.name.value.trim() || null,
+        width: Number(form.elements.width.value),
+        height: Number(form.elements.height.value),
+        onProgress: (sent, total) => {
+          bar.value = sent / total;
+          status.textContent = `Sending ${formatBytes(sent, total)}…`;
+        },
+      });
+      status.textContent = answer.message;
+      setTimeout(() => window.location.reload(), 1500);
+    } catch (error) {
+      status.textContent = `Not imported: ${error.message}`;
+      bar.hidden = true;
+      button.disabled = false;
+    }
+  });
+}
+
 if (typeof document !== "undefined") {
   const table = document.getElementById("runs");
   if (table) setTimeout(() => poll(table), POLL_MS);
+  const weights = document.getElementById("weights-form");
+  if (weights) wireWeightsForm(weights);
 }

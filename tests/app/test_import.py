@@ -1,6 +1,7 @@
 import json
 from pathlib import Path
 
+import cv2
 import numpy as np
 import pytest
 
@@ -9,6 +10,7 @@ from app.models import Activity, Annotation, Frame, Status
 from app.services import media
 from app.services.importing import ImportProblem, import_path
 from egonet import io
+from egonet.dhg import GRAY, decode_dhg
 from tests.app.factories import image_folder, rgb_image, video_file
 from tests.realdata import EGONET_SAMPLES, PRIMESENSE
 
@@ -72,6 +74,12 @@ def test_depth_is_paired_by_stem_and_dhg_computed_with_intrinsics(ctx, tmp_path)
         assert depth[5, 5] == pytest.approx(1.0 + 0.25 * i, abs=1e-3)
         dhg = io.read_dhg(media.absolute_path(f.dhg_path))
         assert dhg.shape == (48, 64, 3)
+        # Stored in the authors' order: the computed DHG decodes to the depth it came from.
+        rgb = io.read_image(media.absolute_path(f.rgb_path))
+        np.testing.assert_array_equal(dhg[..., GRAY], cv2.cvtColor(rgb, cv2.COLOR_RGB2GRAY))
+        decoded = decode_dhg(dhg)
+        assert np.isnan(decoded.depth[0, 0])
+        assert decoded.depth[5, 5] == pytest.approx(1.0 + 0.25 * i, abs=0.016)
 
 
 def test_npy_depth_and_given_dhg(ctx, tmp_path):
@@ -184,3 +192,10 @@ def test_real_egonet_samples_pair_rgb_and_dhg(ctx):
     for f in frames():
         assert f.dhg_path is not None and f.depth_path is None
         assert (f.width, f.height) == (514, 386)
+        # The authors' files import as they are, and their gray channel decodes as gray, not as depth.
+        stored = io.read_dhg(media.absolute_path(f.dhg_path))
+        np.testing.assert_array_equal(stored, io.read_dhg(next((EGONET_SAMPLES / "dhg").glob(f"{f.source_name}.*"))))
+        gray = cv2.cvtColor(io.read_image(media.absolute_path(f.rgb_path)), cv2.COLOR_RGB2GRAY).ravel()
+        decoded = decode_dhg(stored)
+        assert np.corrcoef(decoded.gray.ravel(), gray)[0, 1] > 0.95
+        assert abs(np.corrcoef(np.nan_to_num(decoded.depth).ravel(), gray)[0, 1]) < 0.5

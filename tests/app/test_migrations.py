@@ -39,3 +39,59 @@ def test_create_app_never_creates_tables(tmp_path):
     with app.app_context():
         app.test_client().get("/api/activities")
         assert inspect(db.engine).get_table_names() == []
+
+
+def test_0007_gives_stored_dhg_images_the_authors_order(ctx):
+    """On a database at 0006 holding what the code before it stored, and back."""
+    import cv2
+    import numpy as np
+
+    from app.models import Activity, Frame, Sequence
+    from app.services import media
+    from egonet import io
+    from egonet.dhg import decode_dhg, encode_dhg
+
+    downgrade(revision="0006")
+    try:
+        rng = np.random.default_rng(0)
+        rgb = np.clip(np.linspace(0, 255, 48 * 64).reshape(48, 64, 1) + rng.normal(0, 20, (48, 64, 3)), 0, 255)
+        rgb = rgb.astype(np.uint8)
+        gray = cv2.cvtColor(rgb, cv2.COLOR_RGB2GRAY)
+        depth = np.tile(np.linspace(0.5, 3.0, 64, dtype=np.float32), (48, 1))
+        height = np.tile(np.linspace(0.0, 1.5, 48, dtype=np.float32)[:, None], (1, 64))
+        # Ours before issue 16: depth, height, gray. An authors' file: gray first, with JPEG-like noise.
+        ours_before = np.ascontiguousarray(encode_dhg(depth, height, gray)[..., ::-1])
+        authors = np.clip(encode_dhg(depth, height, gray) + rng.integers(-3, 4, (48, 64, 3)), 0, 255).astype(np.uint8)
+        flat = np.zeros((48, 64, 3), np.uint8) + np.array([7, 20, 40], np.uint8)  # nothing tells its order: ours
+        sequence = Sequence(activity=Activity(name="old"), name="s")
+        paths = {}
+        for i, (name, dhg) in enumerate((("ours", ours_before), ("authors", authors), ("flat", flat))):
+            rgb_i = rgb if name != "flat" else np.full_like(rgb, 50)
+            paths[name] = media.store(io.encode_png(dhg), ".png")
+            db.session.add(Frame(sequence=sequence, index=i, source_name=f"{name}.png", width=64, height=48,
+                                 content_hash=f"h{i}", rgb_path=media.store(io.encode_png(rgb_i), ".png"),
+                                 dhg_path=paths[name], meta={}))
+        db.session.commit()
+
+        def stored() -> dict[str, str]:
+            db.session.expire_all()
+            rows = db.session.execute(db.select(Frame.source_name, Frame.dhg_path)).all()
+            return {source.removesuffix(".png"): path for source, path in rows}
+
+        upgrade()
+        after = stored()
+        assert after["authors"] == paths["authors"]  # already the authors' order
+        assert after["ours"] != paths["ours"] and after["flat"] != paths["flat"]
+        decoded = decode_dhg(io.read_dhg(media.absolute_path(after["ours"])))
+        np.testing.assert_array_equal(decoded.gray, gray)
+        np.testing.assert_allclose(decoded.depth, depth, atol=0.016)
+        np.testing.assert_allclose(decoded.height, height, atol=0.006)
+        assert media.absolute_path(paths["ours"]).exists()  # left for media-check: another row may share it
+
+        downgrade(revision="0006")
+        back = stored()
+        assert back["ours"] == paths["ours"] and back["flat"] == paths["flat"]  # the same bytes again
+        assert back["authors"] != paths["authors"]  # every image in the old order, as that code read them
+    finally:
+        upgrade()
+    assert stored()["authors"] == paths["authors"]

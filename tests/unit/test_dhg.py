@@ -244,9 +244,24 @@ def test_encode_hand_checked_codes():
     gray = np.array([[0, 1, 2, 3, 4, 255]], np.uint8)
     out = dhg.encode_dhg(depth, height, gray)
     assert out.dtype == np.uint8 and out.shape == (1, 6, 3)
-    assert out[0, :, 0].tolist() == [0, 2, 101, 255, 255, 0]  # depth 0 is missing; 20 m clips
+    # The authors' file order: gray, height, depth.
+    assert (dhg.GRAY, dhg.HEIGHT, dhg.DEPTH) == (0, 1, 2)
+    assert out[0, :, 0].tolist() == gray[0].tolist()
     assert out[0, :, 1].tolist() == [0, 21, 1, 255, 255, 0]  # missing depth -> missing height
-    assert out[0, :, 2].tolist() == gray[0].tolist()
+    assert out[0, :, 2].tolist() == [0, 2, 101, 255, 255, 0]  # depth 0 is missing; 20 m clips
+
+
+def test_decode_by_name_reads_depth_from_the_last_channel():
+    image = np.zeros((1, 2, 3), np.uint8)
+    image[0, :, 0] = [7, 9]  # gray
+    image[0, :, 1] = [21, 121]  # height: the floor, then 1 m
+    image[0, :, 2] = [134, 0]  # depth: 4 m (3.99 after quantisation), then missing
+    decoded = dhg.decode_dhg(image)
+    assert decoded.gray.tolist() == [[7, 9]]
+    np.testing.assert_allclose(decoded.height, [[0.0, 1.0]], atol=1e-6)
+    assert decoded.depth[0, 0] == pytest.approx(4.0, abs=0.015) and np.isnan(decoded.depth[0, 1])
+    depth, height, gray = decoded  # unpacks in the same order as the names
+    assert depth is decoded.depth and height is decoded.height and gray is decoded.gray
 
 
 def test_encode_decode_round_trip_within_quantisation():
@@ -313,7 +328,8 @@ def test_dhg_from_depth_floor_dark_and_brighter_with_height():
     rgb[..., 0] = 200  # pure red: gray is 0.299 * 200 = 60
     out = dhg.dhg_from_depth(depth, K, rgb)
     assert out.shape == depth.shape + (3,) and out.dtype == np.uint8
-    assert np.all(out[..., 2] == 60)
+    assert np.all(out[..., dhg.GRAY] == 60)
+    np.testing.assert_allclose(dhg.decode_dhg(out).depth, np.where(depth > 0, depth, np.nan), atol=0.016)
     floor = np.abs(true_h) < 1e-6
     table = np.abs(true_h - TABLE[2][1]) < 1e-6
     assert abs(np.median(out[..., 1][floor].astype(int)) - 21) <= 1  # height 0 m is code 21

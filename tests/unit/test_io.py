@@ -5,6 +5,7 @@ import numpy as np
 import pytest
 
 from egonet import io
+from tests.realdata import EGONET_SAMPLES
 
 
 def test_intrinsics_forms_agree(tmp_path):
@@ -99,3 +100,31 @@ def test_write_atomic_writes_bytes_or_through_a_function_and_leaves_nothing_on_f
         io.write_atomic(target, fail)
     assert target.read_bytes() == b"second"
     assert sorted(p.name for p in target.parent.iterdir()) == ["a.bin"]
+
+
+def test_dhg_is_read_in_the_authors_file_order(tmp_path):
+    """A DHG file is an RGB image whose channels are gray, height, depth; read_dhg keeps that order."""
+    from egonet.dhg import DEPTH, GRAY, HEIGHT
+
+    image = np.zeros((8, 10, 3), np.uint8)
+    image[..., GRAY], image[..., HEIGHT], image[..., DEPTH] = 11, 22, 33
+    path = tmp_path / "dhg.png"
+    # As any image program writes an RGB file (OpenCV's own order is BGR).
+    cv2.imwrite(str(path), image[..., ::-1])
+    read = io.read_dhg(path)
+    assert read[0, 0].tolist() == [11, 22, 33]
+    with pytest.raises(io.MediaError, match="3-channel"):
+        cv2.imwrite(str(tmp_path / "gray.png"), image[..., 0])
+        io.read_dhg(tmp_path / "gray.png")
+
+
+@pytest.mark.skipif(not EGONET_SAMPLES.exists(), reason="shared data not present")
+def test_authors_dhg_files_decode_gray_from_channel_0():
+    from egonet.dhg import decode_dhg
+
+    for path in sorted((EGONET_SAMPLES / "dhg").glob("*.jpg")):
+        decoded = decode_dhg(io.read_dhg(path))
+        gray = cv2.cvtColor(io.read_image(EGONET_SAMPLES / "rgb" / path.name), cv2.COLOR_RGB2GRAY)
+        assert np.corrcoef(decoded.gray.ravel(), gray.ravel())[0, 1] > 0.95
+        # Depth is not the frame's brightness (the old order decoded the gray channel as depth).
+        assert abs(np.corrcoef(np.nan_to_num(decoded.depth).ravel(), gray.ravel())[0, 1]) < 0.5

@@ -25,6 +25,7 @@ from egonet.network import (
     TwoStreamEgoNet,
     VGGDeepLabStream,
     build_model,
+    saved_options,
 )
 from egonet.data import resize_frame, resize_probability
 from egonet.predictor import NetworkPredictor
@@ -118,7 +119,7 @@ def test_unknown_name_lists_valid_names():
 
 
 def test_unknown_option_is_rejected_not_ignored():
-    with pytest.raises(ValueError, match="'coord'.*coords, dropout, pretrained"):
+    with pytest.raises(ValueError, match="'coord'.*coords, coord_order, dhg_order, dropout, pretrained"):
         build_model("egonet-lite", coord="released")
     with pytest.raises(ValueError, match="no-coords.*'coords'"):
         build_model("no-coords", coords="normalized")
@@ -229,7 +230,10 @@ def test_determinism_with_fixed_seed():
 
 def test_config_rebuilds_the_same_model(lite):
     config = lite.config
-    assert config == ModelConfig("egonet-lite", {"coords": "normalized", "dropout": 0.5})
+    assert config == ModelConfig(
+        "egonet-lite",
+        {"coords": "normalized", "coord_order": "rows-first", "dhg_order": "gray-height-depth", "dropout": 0.5},
+    )
     with pytest.raises(AttributeError):
         config.name = "egonet"  # frozen
     rebuilt = build_model(config.name, **config.options)
@@ -245,8 +249,56 @@ def test_config_rebuilds_the_same_model(lite):
 def test_config_holds_architecture_options_only():
     with torch.device("meta"):
         released = build_model("egonet", coords="released")
-        assert released.config.options == {"coords": "released", "dropout": 0.5}
-        assert build_model("no-coords").config.options == {"dropout": 0.5}
+        assert released.config.options == {
+            "coords": "released", "coord_order": "rows-first", "dhg_order": "gray-height-depth", "dropout": 0.5,
+            "width_divisor": 1,
+        }
+        assert build_model("no-coords").config.options == {"dhg_order": "gray-height-depth", "dropout": 0.5, "width_divisor": 1}
+        assert build_model("egonet-rgb").config.options == {
+            "coords": "normalized", "coord_order": "rows-first", "fc9_width": 1024, "dropout": 0.5, "width_divisor": 1,
+        }
+
+
+@pytest.mark.parametrize("name", sorted(MODELS))
+def test_every_model_takes_the_released_orders_by_default(name):
+    with torch.device("meta"):
+        model = build_model(name)
+    options = model.config.options
+    if name != "no-coords":
+        assert options["coord_order"] == "rows-first"
+    if model.uses_dhg:
+        assert options["dhg_order"] == "gray-height-depth" and model.dhg_order == "gray-height-depth"
+
+
+def test_saved_options_give_old_checkpoints_their_orders():
+    assert saved_options("egonet", {"coords": "normalized", "dropout": 0.5}) == {
+        "coords": "normalized", "dropout": 0.5, "coord_order": "cols-first", "dhg_order": "depth-height-gray",
+    }
+    assert saved_options("no-coords", {"dropout": 0.5}) == {"dropout": 0.5, "dhg_order": "depth-height-gray"}
+    assert saved_options("egonet-rgb", {"dropout": 0.5}) == {"dropout": 0.5, "coord_order": "cols-first"}
+    recorded = {"coords": "normalized", "coord_order": "rows-first", "dhg_order": "gray-height-depth"}
+    assert saved_options("egonet-lite", recorded) == recorded
+
+
+def test_the_rgb_release_preset_and_the_paper_width():
+    with torch.device("meta"):
+        paper, released = build_model("egonet-rgb"), build_model("egonet-rgb", fc9_width=512)
+    assert (count(paper), count(released)) == (69_253_954, 67_154_242)
+    assert tuple(released.head.fc9.weight.shape) == (512, 4098, 1, 1)
+    with pytest.raises(ValueError, match=r"fc9_width must be one of 1024 \(paper\), 512 \(released\)"):
+        build_model("egonet-rgb", fc9_width=256)
+
+
+def test_width_divisor_keeps_the_names_and_the_grid():
+    with torch.device("meta"):
+        full, small = build_model("egonet"), build_model("egonet", width_divisor=64)
+        assert list(full.state_dict()) == list(small.state_dict())
+        assert small.rgb_stream.layers.fc7.weight.shape == (64, 64, 1, 1)
+        assert small.head.fc9.weight.shape == (16, 130, 1, 1)
+        x = torch.empty(1, 3, 481, 641)
+        assert small.rgb_stream(x).shape[-2:] == full.rgb_stream(x).shape[-2:] == (60, 80)
+    with pytest.raises(ValueError, match="width_divisor must be one of 1, 2, 4"):
+        build_model("egonet", width_divisor=3)
 
 
 def test_models_without_dhg_accept_none():
@@ -277,8 +329,8 @@ def test_dhg_normalization_values():
     torch.manual_seed(0)
     model = lite_rgb_only()
     dhg_norm = InputNormalization(mean=(54.21, 82.37, 92.07), std=(1, 1, 1), channel_order=(2, 1, 0))
-    pixel = torch.tensor([0.2, 0.4, 0.6]).view(1, 3, 1, 1)  # depth, height, grey
-    expected = torch.tensor([153 - 54.21, 102 - 82.37, 51 - 92.07])  # grey, height, depth
+    pixel = torch.tensor([0.2, 0.4, 0.6]).view(1, 3, 1, 1)  # gray, height, depth (the authors' file order)
+    expected = torch.tensor([153 - 54.21, 102 - 82.37, 51 - 92.07])  # depth, height, gray: the release's input
     torch.testing.assert_close(dhg_norm(pixel).flatten(), expected)
     assert model.rgb_norm(torch.full((1, 3, 1, 1), 127 / 255)).abs().max() < 1e-6  # lite: (x*255-127)/128
 
@@ -287,15 +339,32 @@ def test_coordinate_maps_by_hand():
     like = torch.empty(0)
     normalized = CoordinateMaps(convention="normalized")(batch=2, grid=(3, 5), image=(9, 17), like=like)
     assert normalized.shape == (2, 2, 3, 5)
-    torch.testing.assert_close(normalized[0, 0, 0], torch.tensor([-1.0, -0.5, 0.0, 0.5, 1.0]))
-    torch.testing.assert_close(normalized[1, 1, :, 2], torch.tensor([-1.0, 0.0, 1.0]))
+    # Rows first (the release's order), then columns.
+    torch.testing.assert_close(normalized[1, 0, :, 2], torch.tensor([-1.0, 0.0, 1.0]))
+    torch.testing.assert_close(normalized[0, 1, 0], torch.tensor([-1.0, -0.5, 0.0, 0.5, 1.0]))
+    old = CoordinateMaps(convention="normalized", order="cols-first")(batch=2, grid=(3, 5), image=(9, 17), like=like)
+    torch.testing.assert_close(old, normalized.flip(1))
     released = CoordinateMaps(convention="released")(batch=1, grid=(3, 5), image=(9, 17), like=like)
-    # Grid columns sit on image columns 0, 4, 8, 12, 16; rows on 0, 4, 8.
-    expected_x = torch.tensor([c / 17 * 255 - 127.25 for c in (0, 4, 8, 12, 16)])
-    torch.testing.assert_close(released[0, 0, 1], expected_x)
-    torch.testing.assert_close(released[0, 1, :, 0], torch.tensor([r / 9 * 255 - 127.16 for r in (0, 4, 8)]))
+    # Caffe's Interp (shrink 8, pad_beg -1) drops row and column 0 and spreads the cells over the rest:
+    # rows 1, 4.5, 8 (1 + i * 7 / 2) of 9, columns 1, 4.75, 8.5, 12.25, 16 (1 + j * 15 / 4) of 17.
+    torch.testing.assert_close(released[0, 0, :, 0], torch.tensor([r / 9 * 255 - 127.16 for r in (1, 4.5, 8)]))
+    expected_cols = torch.tensor([c / 17 * 255 - 127.25 for c in (1, 4.75, 8.5, 12.25, 16)])
+    torch.testing.assert_close(released[0, 1, 1], expected_cols)
     one = CoordinateMaps()(batch=1, grid=(1, 1), image=(9, 17), like=like)
     torch.testing.assert_close(one.flatten(), torch.tensor([0.0, 0.0]))  # a single cell is the centre
+    full = CoordinateMaps(convention="released")(batch=1, grid=(9, 17), image=(9, 17), like=like)
+    torch.testing.assert_close(full[0, 0, :, 0], torch.arange(9) / 9 * 255 - 127.16)  # not shrunk: pixel i
+    with pytest.raises(ValueError, match="coord_order must be one of 'rows-first', 'cols-first'"):
+        CoordinateMaps(order="xy")
+
+
+def test_old_dhg_order_reverses_the_input_first():
+    torch.manual_seed(0)
+    new = build_model("egonet-lite").eval()
+    old = build_model("egonet-lite", dhg_order="depth-height-gray").eval()
+    old.load_state_dict(new.state_dict())
+    rgb, dhg = frames(1, 24, 32)
+    torch.testing.assert_close(old.predict(rgb, dhg.flip(1)), new.predict(rgb, dhg))
 
 
 # --------------------------------------------------------------------------- input checks

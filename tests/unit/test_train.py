@@ -199,6 +199,52 @@ def test_a_finished_fold_continues_for_more_epochs_from_its_checkpoint(tmp_path)
     assert state["history"][0] == start["history"][0]
 
 
+def old_forward(model, rgb: torch.Tensor, dhg_old: torch.Tensor) -> torch.Tensor:
+    """The lite model's probability as the code before issue 16 computed it, written out by hand.
+
+    DHG reached the network in the order it was stored then (depth, height,
+    gray), and the coordinate maps came columns first: 2 col / (W - 1) - 1,
+    then 2 row / (H - 1) - 1, at the pixels the final resize maps each grid cell to.
+    """
+    with torch.no_grad():
+        features = [model.rgb_stream(model.rgb_norm(rgb)), model.dhg_stream(model.dhg_norm(dhg_old))]
+        n, _, h, w = features[0].shape
+        height, width = rgb.shape[-2:]
+        cols = torch.arange(w) * ((width - 1) / (w - 1)) / (width - 1) * 2 - 1
+        rows = torch.arange(h) * ((height - 1) / (h - 1)) / (height - 1) * 2 - 1
+        x = cols.view(1, 1, 1, w).expand(n, 1, h, w)
+        y = rows.view(1, 1, h, 1).expand(n, 1, h, w)
+        logits = model.head(torch.cat([*features, x, y], dim=1))
+        logits = torch.nn.functional.interpolate(logits, size=(height, width), mode="bilinear", align_corners=True)
+    return logits.softmax(1)[:, 1]
+
+
+def test_an_old_checkpoint_keeps_the_conventions_it_was_trained_with(tmp_path):
+    samples = tiny_samples()
+    fold = [Fold("x", [0, 1, 2], [3])]
+    (result,) = cross_validate(samples, TrainConfig(**TINY, epochs=1), out_dir=tmp_path / "new", folds=fold)
+    state = load_checkpoint(result.checkpoint)
+    assert state["model"]["options"]["coord_order"] == "rows-first"
+    assert state["model"]["options"]["dhg_order"] == "gray-height-depth"
+    # A checkpoint written before issue 16 records neither order.
+    old = dict(state, model={"name": "egonet-lite", "options": {"coords": "normalized", "dropout": 0.5}})
+    model = model_from_checkpoint(old)
+    assert (model.config.options["coord_order"], model.dhg_order) == ("cols-first", "depth-height-gray")
+    # Its frames' DHG images are now stored gray first (migration 0007 reversed them): it still sees what it learnt on.
+    rgb, dhg_old = samples[3].rgb, samples[3].dhg
+    dhg_now = np.ascontiguousarray(dhg_old[..., ::-1])
+    predicted = NetworkPredictor.from_checkpoint(old).predict(rgb, dhg_now)
+    to_tensor = lambda a: torch.from_numpy(np.ascontiguousarray(a.transpose(2, 0, 1)))[None].float() / 255  # noqa: E731
+    expected = old_forward(model, to_tensor(rgb), to_tensor(dhg_old))[0].numpy()
+    np.testing.assert_allclose(predicted, expected, atol=1e-5)
+    # Read with today's conventions, the same weights would answer differently.
+    assert not np.allclose(NetworkPredictor.from_checkpoint(state).predict(rgb, dhg_now), expected, atol=1e-3)
+    # Training it on keeps its conventions, and the new checkpoint records them.
+    (more,) = cross_validate(samples, TrainConfig(**TINY, epochs=2), out_dir=tmp_path / "more", folds=fold, start=old)
+    options = load_checkpoint(more.checkpoint)["model"]["options"]
+    assert (options["coord_order"], options["dhg_order"]) == ("cols-first", "depth-height-gray")
+
+
 def test_asking_for_fewer_epochs_than_a_checkpoint_has_is_an_error(tmp_path):
     samples = tiny_samples()
     fold = [Fold("x", [0, 1, 2], [3])]

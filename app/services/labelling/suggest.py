@@ -242,6 +242,8 @@ def choose_checkpoint(run: TrainingRun, frame: Frame) -> tuple[Checkpoint, bool,
     """
     usable = _usable_checkpoints(run, frame)
     activity = frame.sequence.activity.name
+    if run.folds is FoldsMode.RELEASED:
+        return usable[-1], True, "the authors' released model was not trained on this project's frames"
     for checkpoint in usable:
         if run.folds is FoldsMode.LOAO and checkpoint.fold == activity:
             return checkpoint, True, f"its fold held the activity {activity!r} out"

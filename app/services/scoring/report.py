@@ -203,7 +203,7 @@ def _run_job(run: TrainingRun, truth: Truth, thresholds: int) -> _Job:
         db.select(func.count(), func.max(Prediction.id)).where(Prediction.run_id == run.id, Prediction.held_out.is_(True))
     ).one()
     return _Job(
-        rows=[_RowSpec(f"run:{run.id}", "", f"{run.model_name} (run {run.id})", MODEL, f"{run.name}, {run.folds} folds")],
+        rows=[_RowSpec(f"run:{run.id}", "", sources.run_row_name(run), MODEL, f"{run.name}, {run.folds} folds")],
         cache_key={"run": run.id, "predictions": list(predictions), "truth": truth.fingerprint, "thresholds": thresholds},
         # Leave-one-activity-out holds every labelled frame out once.
         frames=len(truth.frames) if run.folds == "loao" else 0,

@@ -5,6 +5,7 @@ loaded once per report as a :class:`Truth`. The three sources stream their
 maps through one ``ScoreAccumulator`` per activity:
 
 * a completed training run: its held-out predictions (``app.services.training``);
+  the authors' released model, never trained on ours, holds every frame out;
 * the baselines (``egonet.baselines``) on every labelled frame: AOP fitted
   inside each leave-one-activity-out fold, the centre prior, saliency, GBVS
   and the handled + viewed object (its hands: the labelled tactile objects);
@@ -113,6 +114,13 @@ def _accumulate(
         acc.add(prob, mask, name=f"prob of frame {frame.id}")
         on_progress(1)
     return stats, missing
+
+
+def run_row_name(run: TrainingRun) -> str:
+    """A run's row: its model, or "released model" for the authors' weights (scored on every frame it predicted)."""
+    if run.folds == "released":
+        return f"released model, {run.config.get('released', {}).get('release', '').upper()} (run {run.id})"
+    return f"{run.model_name} (run {run.id})"
 
 
 def run_stats(run: TrainingRun, truth: Truth, thresholds: int, on_progress: Callable[[int], None]) -> Scored:

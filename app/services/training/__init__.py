@@ -11,6 +11,8 @@ A run is a ``TrainingRun`` row first, then a job that trains it with
   ``app.tasks``) or ``flask egonet train`` runs, and its bookkeeping.
 * ``predictions``: run a checkpoint on frames (``predict``) and read stored
   maps; for the scorer, ``completed_runs()`` and ``held_out_predictions(run)``.
+* ``released``: the authors' released ``.caffemodel`` as a run with one
+  checkpoint (``register_release``, ``convert_release``, the page's chunked upload).
 
 Callers import from here: ``from app.services import training``.
 """
@@ -29,6 +31,16 @@ from app.services.training.control import (
     start_run,
 )
 from app.services.training.job import execute_run, summarise, train_in_foreground
+from app.services.training.released import (
+    cancel_upload,
+    convert_release,
+    finish_upload,
+    import_in_foreground,
+    is_released,
+    register_release,
+    start_upload,
+    write_chunk,
+)
 from app.services.training.predictions import (
     frame_predictions,
     frames_for_prediction,
@@ -44,6 +56,14 @@ __all__ = [
     "RunRequest",
     "TrainingProblem",
     "cancel_run",
+    "cancel_upload",
+    "convert_release",
+    "finish_upload",
+    "import_in_foreground",
+    "is_released",
+    "register_release",
+    "start_upload",
+    "write_chunk",
     "checkpoint_root",
     "checkpoints",
     "completed_runs",

@@ -165,6 +165,11 @@ def _train_config(request: RunRequest):
 
 def _create_resumed_run(request: RunRequest, *, created_by: User | None) -> TrainingRun:
     checkpoint = request.resume_from
+    if checkpoint.run.folds is FoldsMode.RELEASED:
+        raise TrainingProblem(
+            f"checkpoint {checkpoint.id} is the authors' released model: it has no training state to continue",
+            field="resume",
+        )
     _check_epochs(request.epochs)
     if request.epochs <= checkpoint.epochs:
         raise TrainingProblem(
@@ -261,8 +266,13 @@ def resume_run(run: TrainingRun) -> TrainingRun:
     """Queue a failed or cancelled run again; finished folds are kept.
 
     Raises:
-        TrainingProblem: 409 if the run is queued, running or done.
+        TrainingProblem: 409 if the run is queued, running or done, or an imported release.
     """
+    if run.folds is FoldsMode.RELEASED:
+        raise TrainingProblem(
+            f"run {run.id} imports released weights: import the .caffemodel again (flask egonet import-weights)",
+            status=409,
+        )
     changed = db.session.execute(
         update(TrainingRun)
         .where(TrainingRun.id == run.id, TrainingRun.status.in_([RunStatus.FAILED, RunStatus.CANCELLED]))

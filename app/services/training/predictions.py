@@ -16,7 +16,7 @@ from flask import current_app
 
 from app.extensions import db
 from app.models import Activity, Frame, Sequence, utcnow
-from app.models.training import Checkpoint, Prediction, TrainingRun
+from app.models.training import Checkpoint, FoldsMode, Prediction, TrainingRun
 from app.services import media
 from app.services.training.control import TrainingProblem, checkpoint_root
 from egonet import io
@@ -123,7 +123,8 @@ def predict(
 ) -> list[Prediction]:
     """Run a checkpoint on frames and store a prediction for each (one transaction).
 
-    A frame in the checkpoint's test set gets ``held_out=True``; predicting
+    A frame in the checkpoint's test set gets ``held_out=True`` (every frame,
+    for the authors' released model: it was not trained on ours); predicting
     a frame again replaces that checkpoint's earlier prediction of it.
 
     Args:
@@ -152,6 +153,7 @@ def predict(
             field="frames",
         )
     held_out = set(checkpoint.test_frame_ids)
+    every_frame_held_out = checkpoint.run.folds is FoldsMode.RELEASED
     existing = _existing_predictions(checkpoint, frames)
     out = []
     for frame in frames:
@@ -159,7 +161,8 @@ def predict(
         dhg = io.read_dhg(media.absolute_path(frame.dhg_path)) if frame.dhg_path and uses_dhg else None
         path = media.store(io.encode_probability_png(predictor.predict(rgb, dhg)), ".png")
         prediction = existing.get(frame.id) or Prediction(run_id=checkpoint.run_id, checkpoint_id=checkpoint.id, frame_id=frame.id)
-        prediction.path, prediction.held_out, prediction.created_at = path, frame.id in held_out, utcnow()
+        prediction.path, prediction.created_at = path, utcnow()
+        prediction.held_out = every_frame_held_out or frame.id in held_out
         db.session.add(prediction)
         out.append(prediction)
         if on_progress is not None:

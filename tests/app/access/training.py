@@ -26,6 +26,12 @@ RULES = {
     "training.cancel": (ADMIN, 302),
     "training.resume": (ADMIN, 302),
     "training.prediction_overlay": (STAFF, 200),
+    # The released-weights upload: a bodiless start lacks its fields (400), a chunk its offset (400);
+    # the matrix's token names no upload (404).
+    "training.weights_upload_start": (ADMIN, 400),
+    "training.weights_upload_chunk": (ADMIN, 400),
+    "training.weights_upload_finish": (ADMIN, 404),
+    "training.weights_upload_cancel": (ADMIN, 404),
 }
 
 
@@ -44,4 +50,4 @@ def url_values(app, tmp_path) -> dict:
     with app.app_context():
         import_path(image_folder(tmp_path / "training-rec", n=1), activity="training")
         frame = db.session.execute(db.select(Frame).order_by(Frame.id.desc())).scalars().first()
-        return make_prediction_fixture(frame)
+        return make_prediction_fixture(frame) | {"upload": "0" * 32}
