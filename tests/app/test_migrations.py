@@ -76,6 +76,7 @@ def test_0007_gives_stored_dhg_images_the_authors_order(ctx):
         def stored() -> dict[str, str]:
             db.session.expire_all()
             rows = db.session.execute(db.select(Frame.source_name, Frame.dhg_path)).all()
+            db.session.rollback()  # no transaction left open to block the next migration's locks
             return {source.removesuffix(".png"): path for source, path in rows}
 
         upgrade()
