@@ -1,6 +1,8 @@
 // Training pages: while a run is queued or running, poll its progress and
 // update its row; when one finishes, reload to show its scores and checkpoints.
+// The charts (training_charts.js) poll their own data.
 import { api } from "./api.js";
+import { comparePage, runPage } from "./training_charts.js";
 
 const ACTIVE = new Set(["queued", "running"]);
 const POLL_MS = 2000;
@@ -53,4 +55,8 @@ async function poll(table) {
 if (typeof document !== "undefined") {
   const table = document.getElementById("runs");
   if (table) setTimeout(() => poll(table), POLL_MS);
+  const runChart = document.getElementById("run-chart");
+  if (runChart) runPage(runChart);
+  const compare = document.getElementById("compare");
+  if (compare && table) comparePage(compare, table);
 }
