@@ -35,7 +35,9 @@ function draw(box, chart, options) {
   const drawn = chart.series.some((s) => s.points.length);
   box.querySelector(".chart-empty").hidden = drawn;
   svg.classList.toggle("hidden", !drawn);
-  render(svg, lineChart({ ...chart, ...options }));
+  // Drawn at the box's own width, so text keeps its size whatever the layout.
+  const width = Math.max(320, Math.round(box.clientWidth - 24));
+  render(svg, lineChart({ ...chart, width, height: 240, ...options }));
   legend(box.querySelector(".legend"), chart.series.filter((s) => s.points.length));
 }
 
