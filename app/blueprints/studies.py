@@ -54,8 +54,11 @@ class StudyForm(Form):
     trial_limit_s = IntegerField("Per-trial limit (seconds, empty for none)", validators=[Optional(), NumberRange(1, 24 * 3600)])
     multiple_clicks = BooleanField("Several clicks per frame (then Next; otherwise one click answers)", default=True)
     sigma_px = FloatField("Click width sigma (native pixels)", default=60.0, validators=[InputRequired(), NumberRange(0.5, 10_000)])
-    superpixel_method = SelectField("Superpixels", choices=[SelectChoice("slic", "SLIC"), SelectChoice("felzenszwalb", "Felzenszwalb")],
+    superpixel_method = SelectField("Superpixels", choices=[SelectChoice("hierarchical", "Hierarchical (boundaries, like MCG)"),
+                                                             SelectChoice("slic", "SLIC"), SelectChoice("felzenszwalb", "Felzenszwalb")],
                                     default=SUPERPIXEL_DEFAULTS.method)
+    fine_regions = IntegerField("Hierarchy: fine regions", default=SUPERPIXEL_DEFAULTS.fine_regions, validators=[Optional()])
+    level = FloatField("Hierarchy: merge level", default=SUPERPIXEL_DEFAULTS.level, validators=[Optional()])
     n_segments = IntegerField("SLIC regions", default=SUPERPIXEL_DEFAULTS.n_segments, validators=[Optional()])
     compactness = FloatField("SLIC compactness", default=SUPERPIXEL_DEFAULTS.compactness, validators=[Optional()])
     scale = FloatField("Felzenszwalb scale", default=SUPERPIXEL_DEFAULTS.scale, validators=[Optional()])

@@ -563,7 +563,8 @@ def test_inspect_a_trained_run_then_delete_it_leaving_nothing_behind(app, demo, 
     assert "proposed by run" in confirm
     response = admin_client.post(f"/training/runs/{run_id}/delete")
     assert response.status_code == 302
-    assert "deleted with 2 checkpoints" in admin_client.get("/training/").data.decode()
+    listing = admin_client.get("/training/").data.decode()
+    assert "deleted with 2 checkpoints" in listing, re.findall(r"class=\"flash[^<]*", listing)
     with app.app_context():
         for model in (TrainingRun, Checkpoint, Prediction, TrainingEpoch):
             assert db.session.execute(db.select(model).where(model.run_id == run_id if model is not TrainingRun

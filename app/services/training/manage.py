@@ -225,18 +225,21 @@ def delete_run(run: TrainingRun) -> dict[str, int]:
         TrainingProblem: 409 while the run is queued or running (cancel it first).
     """
     run_id = run.id
-    checkpoint_ids = [c.id for c in run.checkpoints]
-    paths = _prediction_paths(run_id)
-    # The guard and the deletion in one statement: a run resumed meanwhile is not deleted.
-    gone = db.session.execute(
-        delete(TrainingRun).where(TrainingRun.id == run_id, TrainingRun.status.in_(list(FINAL_STATUSES)))
+    # First a guarded write on the run's row: it takes the row's lock (the database's write lock
+    # on SQLite), so the run cannot be resumed between this check and the deletion.
+    claimed = db.session.execute(
+        update(TrainingRun)
+        .where(TrainingRun.id == run_id, TrainingRun.status.in_(list(FINAL_STATUSES)))
+        .values(version=TrainingRun.version + 1)
         .execution_options(synchronize_session=False)
     ).rowcount
-    if not gone:
+    if not claimed:
         db.session.rollback()
         db.session.refresh(run)
         raise TrainingProblem(f"run {run_id} is {run.status.value}: cancel it first, then delete it", status=409)
-    # Explicit, not only ON DELETE: SQLite enforces no foreign keys here.
+    checkpoint_ids = list(db.session.execute(select(Checkpoint.id).where(Checkpoint.run_id == run_id)).scalars())
+    paths = _prediction_paths(run_id)
+    # Children first and explicitly: SQLite enforces no foreign keys here, PostgreSQL would cascade.
     for model, column, where in _proposal_refs(run_id, checkpoint_ids):
         db.session.execute(update(model).where(where).values({column: None}).execution_options(synchronize_session=False))
     counts = {}
@@ -244,6 +247,7 @@ def delete_run(run: TrainingRun) -> dict[str, int]:
         counts[name] = db.session.execute(
             delete(model).where(model.run_id == run_id).execution_options(synchronize_session=False)
         ).rowcount
+    db.session.execute(delete(TrainingRun).where(TrainingRun.id == run_id).execution_options(synchronize_session=False))
     unshared = paths - _shared_paths(paths, run_id)
     db.session.commit()
     db.session.expunge_all()
