@@ -407,6 +407,10 @@ def test_history_is_paged_after_the_last_row_seen_and_bounded(app, ctx, admin_cl
     db.session.commit()
     (again,) = admin_client.get(f"/training/history?runs={ids}&after={after}").get_json()["epochs"]
     assert (again["fold"], again["epoch"], again["train_loss"]) == ("cooking", 2, 0.45) and again["id"] > after
+    # The Training page ticks the runs of ?compare=, else the newest three with a history.
+    checked = lambda html: re.findall(r'class="compare-run" value="(\d+)"[^>]*checked', html)  # noqa: E731
+    assert checked(admin_client.get(f"/training/?compare={runs[0].id}").data.decode()) == [str(runs[0].id)]
+    assert sorted(checked(admin_client.get("/training/").data.decode())) == sorted(str(r.id) for r in runs)
     for query, field in (("runs=a,b", "runs"), ("runs=" + ",".join(map(str, range(1, 14))), "runs"), ("runs=1&after=-3", "after"),
                          ("runs=1&after=99999999999999999999", "after"), ("runs=0", "runs")):
         response = admin_client.get(f"/training/history?{query}", headers={"Accept": "application/json"})
@@ -548,6 +552,7 @@ def test_inspect_a_trained_run_then_delete_it_leaving_nothing_behind(app, demo, 
             assert picture.status_code == 200 and picture.mimetype == "image/png"
     assert admin_client.get(f"/training/predictions/{prediction_id}/other.png").status_code == 404
 
+    assert f"(run {run_id})" in admin_client.get("/scores/").data.decode()
     # Delete: the confirmation says what goes; afterwards nothing is left and nothing is orphaned.
     with app.app_context():
         paths = sorted(db.session.execute(db.select(Prediction.path).where(Prediction.run_id == run_id)).scalars())
@@ -575,5 +580,6 @@ def test_inspect_a_trained_run_then_delete_it_leaving_nothing_behind(app, demo, 
     result = runner.invoke(args=["egonet", "media-check"])
     assert result.exit_code == 0 and " 0 missing, 0 orphaned" in result.output, result.output
     assert admin_client.get(f"/training/runs/{run_id}").status_code == 404
-    assert admin_client.get("/scores/").status_code == 200
+    scores = admin_client.get("/scores/")
+    assert scores.status_code == 200 and f"(run {run_id})" not in scores.data.decode()
     assert admin_client.get(f"/scores/?runs={run_id}&chosen=1").status_code < 500
