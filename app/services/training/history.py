@@ -12,7 +12,7 @@ one, so a poller that asks for rows after the last id it saw
 from collections.abc import Iterable, Sequence
 from typing import Any
 
-from sqlalchemy import delete, func
+from sqlalchemy import delete
 
 from app.extensions import db
 from app.models.training import FINAL_STATUSES, Checkpoint, TrainingEpoch, TrainingRun
@@ -116,6 +116,3 @@ def runs_with_history(run_ids: Iterable[int]) -> set[int]:
     query = db.select(TrainingEpoch.run_id).where(TrainingEpoch.run_id.in_(ids)).group_by(TrainingEpoch.run_id)
     return set(db.session.execute(query).scalars())
 
-
-def epoch_count(run: TrainingRun) -> int:
-    return db.session.execute(db.select(func.count(TrainingEpoch.id)).where(TrainingEpoch.run_id == run.id)).scalar_one()
