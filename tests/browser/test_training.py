@@ -97,7 +97,9 @@ def test_charts_follow_a_run_compare_runs_browse_frames_and_delete(live_app, liv
         for name, status, folds, epochs in (("lite 10 epochs", RunStatus.DONE, ("cooking", "dining"), 6),
                                             ("lite live", RunStatus.RUNNING, ("single",), 2)):
             run = TrainingRun(name=name, model_name="egonet-lite", folds="loao", epochs=6, device="cpu", seed=0,
-                              config={"train": {}}, status=status, progress=0.3)
+                              config={"train": {"width": 160, "height": 120, "lr": 0.02, "lr_power": 0.9, "momentum": 0.9,
+                                                "weight_decay": 5e-4, "batch_size": 4}, "activities": list(folds), "frames": 4},
+                              status=status, progress=0.3)
             db.session.add(run)
             db.session.flush()
             for i, fold in enumerate(folds):
