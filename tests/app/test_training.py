@@ -583,3 +583,17 @@ def test_inspect_a_trained_run_then_delete_it_leaving_nothing_behind(app, demo, 
     scores = admin_client.get("/scores/")
     assert scores.status_code == 200 and f"(run {run_id})" not in scores.data.decode()
     assert admin_client.get(f"/scores/?runs={run_id}&chosen=1").status_code < 500
+
+
+def test_the_frames_page_sorts_worst_first_in_pages(ctx, demo):
+    frames = db.session.execute(db.select(Frame).order_by(Frame.id)).scalars().all()[:5]
+    run = hand_made_run(folds=("cooking",))
+    (checkpoint,) = run.checkpoints
+    for frame, f in zip(frames, (0.9, None, 0.1, 0.5, 0.1), strict=True):
+        db.session.add(Prediction(run=run, checkpoint=checkpoint, frame=frame, path=f"xx/{frame.id}.png", held_out=True, f_score=f))
+    db.session.commit()
+    pages = [training.frame_page(run, page=n, per_page=2) for n in (1, 2, 3, 9)]
+    assert [[p.f_score for p in page.predictions] for page in pages] == [[0.1, 0.1], [0.5, 0.9], [None], [None]]
+    assert [p.frame_id for p in pages[0].predictions] == [frames[2].id, frames[4].id]  # ties by frame id
+    assert (pages[0].total, pages[0].pages, pages[3].page, pages[0].unscored) == (5, 3, 3, 1)
+    assert training.frame_page(run, fold="dining").total == 0
