@@ -7,9 +7,9 @@ and a ``Prediction`` for every held-out frame (16-bit PNGs in the media
 store, probability x 65535), with each held-out frame's precision,
 recall and F at the fold's best threshold. Each epoch's record is written
 as the epoch ends (``app.services.training.history``). Progress, loss and
-ETA go to the row at most once a second; the web page polls them. A resumed run keeps its finished
-folds, and the fold that was under way continues from its last epoch's
-checkpoint file.
+ETA go to the row at most once a second; the web page polls them. A
+resumed run keeps its finished folds, and the fold that was under way
+continues from its last epoch's checkpoint file.
 """
 
 import logging
