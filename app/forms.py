@@ -75,8 +75,11 @@ class StudyForm(Form):
         default="shuffled",
     )  # fmt: skip
     sigma_px = FloatField("Click width sigma (native px; empty: 60 px at 1280 wide, scaled)", validators=[Optional(), NumberRange(0.5, 10_000)])
-    superpixel_method = SelectField("Superpixels", choices=[SelectChoice("slic", "SLIC"), SelectChoice("felzenszwalb", "Felzenszwalb")],
+    superpixel_method = SelectField("Superpixels", choices=[SelectChoice("hierarchical", "Hierarchical (boundaries, like MCG)"),
+                                                             SelectChoice("slic", "SLIC"), SelectChoice("felzenszwalb", "Felzenszwalb")],
                                     default=SUPERPIXEL_DEFAULTS.method)
+    fine_regions = IntegerField("Hierarchy: fine regions", default=SUPERPIXEL_DEFAULTS.fine_regions, validators=[Optional()])
+    level = FloatField("Hierarchy: merge level", default=SUPERPIXEL_DEFAULTS.level, validators=[Optional()])
     n_segments = IntegerField("SLIC regions", default=SUPERPIXEL_DEFAULTS.n_segments, validators=[Optional()])
     compactness = FloatField("SLIC compactness", default=SUPERPIXEL_DEFAULTS.compactness, validators=[Optional()])
     scale = FloatField("Felzenszwalb scale", default=SUPERPIXEL_DEFAULTS.scale, validators=[Optional()])
@@ -111,7 +114,7 @@ class StudyForm(Form):
     display_allow_phones = BooleanField("Phones may take part", default=True)
 
     JSON_FIELDS = ("catch_trials", "comprehension", "conditions", "open_link_quotas")
-    REGIONS = ("n_segments", "compactness", "scale", "min_size")
+    REGIONS = ("fine_regions", "level", "n_segments", "compactness", "scale", "min_size")
 
     def definition(self, activity_names: dict[int, str]) -> dict[str, Any] | None:
         """The form as a definition document; None (with the field's error set) when a JSON field does not parse."""

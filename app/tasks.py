@@ -12,7 +12,14 @@ from app.models import User
 from app.models.training import Checkpoint, TrainingRun
 from app.queue import job
 from app.services import exchange, labelling
-from app.services.training import TrainingProblem, convert_release, execute_run, frames_for_prediction, predict
+from app.services.training import (
+    TrainingProblem,
+    convert_release,
+    execute_run,
+    frames_for_prediction,
+    predict,
+    score_run_frames,
+)
 
 
 @job
@@ -40,6 +47,15 @@ def predict_frames(checkpoint_id: int, frame_ids: list[int], device: str = "auto
     if checkpoint is None:
         raise TrainingProblem(f"no checkpoint with id {checkpoint_id}")
     return len(predict(checkpoint, frames_for_prediction(frame_ids=frame_ids), device=device))
+
+
+@job
+def score_frames(run_id: int) -> int:
+    """Score a run's held-out frames that have no per-frame score (runs recorded before they were kept)."""
+    run = db.session.get(TrainingRun, run_id)
+    if run is None:
+        raise TrainingProblem(f"no training run with id {run_id}")
+    return score_run_frames(run)
 
 
 @job

@@ -77,7 +77,7 @@ def main() -> None:
     print(f"clicks benchmark on {source}")
     superpixels(frames[0][:64, :64].copy())  # import scikit-image outside the timings
 
-    for method in ("slic", "felzenszwalb"):
+    for method in ("hierarchical", "slic", "felzenszwalb"):
         times = []
         for frame in frames:
             t, labels = timed(lambda f=frame, m=method: superpixels(f, method=m), 2)

@@ -74,7 +74,7 @@ def main() -> None:
             overlay = median_ms(lambda: studies.overlay_png(frame, mask, points=CLICKS), 7)
             png = median_ms(lambda: studies.mask_png(mask), 7)
 
-    print(f"study soft masks at {W}x{H} ({int(labels.max()) + 1} SLIC regions)")
+    print(f"study soft masks at {W}x{H} ({int(labels.max()) + 1} regions, {settings['method']})")
     print(f"  first use: superpixels computed and cached in {first:.0f} ms ({size_kb:.0f} KiB .npz)")
     print(f"  cached labels read back: median {read:.1f} ms")
     print(f"  soft_mask on cached labels, {len(CLICKS)} clicks: median {project:.1f} ms (target <= 50 ms)")

@@ -7,14 +7,20 @@ per-pixel mask that is scored like a machine's probability map.
 
 Choices (see ``shared/docs/egonet-reference.md``):
 
-* Regions: SLIC superpixels from scikit-image by default (about 400 regions
-  per frame, i.e. ~55x55 px regions at 1280x960, on the order of the click
-  Gaussian's width), or Felzenszwalb's graph segmentation, which follows
-  object boundaries more closely but gives irregular sizes. MCG itself is
-  not available in Python; SLIC at this granularity is a stand-in for the
-  fine level of its hierarchy. Both are computed on a copy downscaled to at
-  most ``max_side`` pixels (SLIC at full 1280x960 takes over 1.5 s) and the
-  labels are upscaled with nearest neighbour.
+* Regions: the paper projected clicks onto MCG regions (a hierarchy of
+  regions merged along image boundaries, cut at one level). MCG itself is
+  not available in Python; ``"hierarchical"`` (the default) is built the
+  same way from scikit-image: a colour boundary map (Sobel of the CIELAB
+  image), a fine watershed over-segmentation of it, and the regions merged
+  in order of the mean boundary strength between them (a region adjacency
+  graph) until every remaining boundary is stronger than ``level``.
+  ``"felzenszwalb"`` (graph segmentation) also follows boundaries;
+  ``"slic"`` gives compact regions of similar size that ignore most
+  boundaries. ``bench/bench_regions.py`` scores the maps of simulated
+  clickers against known truth for each: SLIC barely changes the raw
+  Gaussian's MF, the boundary methods raise it most (README, "Human-study
+  soft masks"). Every method works on a copy downscaled to at most
+  ``max_side`` pixels and the labels are upscaled with nearest neighbour.
 * Width: the Gaussian's standard deviation, in pixels of the frame's native
   resolution (``exp(-d^2 / (2 sigma^2))``, peak 1).
 * Several clicks combine by pixel-wise maximum, before projection.
@@ -39,24 +45,36 @@ import numpy as np
 from egonet.errors import EgonetError
 from egonet.io import check_rgb
 
-__all__ = ["DEFAULT_SIGMA", "SUPERPIXEL_DEFAULTS", "MaskMean", "SuperpixelDefaults", "click_gaussian",
-           "project_to_regions", "soft_mask", "superpixels"]
+__all__ = ["DEFAULT_SIGMA", "METHOD_OPTIONS", "SUPERPIXEL_DEFAULTS", "SUPERPIXEL_METHODS", "MaskMean", "SuperpixelDefaults",
+           "boundary_strength", "click_gaussian", "project_to_regions", "soft_mask", "superpixels"]
 
 DEFAULT_SIGMA = 60.0
 """The paper's click width: standard deviation in native-resolution pixels."""
 
-SUPERPIXEL_METHODS = ("slic", "felzenszwalb")
+SUPERPIXEL_METHODS = ("hierarchical", "slic", "felzenszwalb")
+METHOD_OPTIONS = {
+    "hierarchical": ("fine_regions", "level"),
+    "slic": ("n_segments", "compactness"),
+    "felzenszwalb": ("scale", "min_size"),
+}
+"""The options that apply to each method (the others are refused)."""
 
 
 @dataclass(frozen=True)
 class SuperpixelDefaults:
     """The one place the superpixel defaults live (``superpixels``, the
-    study builder and its form all read them): SLIC with about 400 regions
-    of compactness 10, as a stand-in for the paper's MCG regions; for
-    Felzenszwalb, scale 100 and regions of at least 50 pixels; both on a
-    copy at most 640 px on its long side."""
+    study builder and its form all read them): the boundary-based
+    hierarchy, as a stand-in for the paper's MCG regions, from about 1,000
+    watershed regions merged up to boundary strength 0.35 (chosen with
+    ``bench/bench_regions.py`` on frames apart from those it reports);
+    for SLIC about 400 regions of compactness 10; for Felzenszwalb, scale
+    100 and regions of at least 50 pixels; all on a copy at most 640 px on
+    its long side. Studies record the settings they were made with, so a
+    new default never changes an existing study's masks."""
 
-    method: str = "slic"
+    method: str = "hierarchical"
+    fine_regions: int = 1000
+    level: float = 0.35
     n_segments: int = 400
     compactness: float = 10.0
     scale: float = 100.0
@@ -89,6 +107,8 @@ def superpixels(
     image: np.ndarray,
     *,
     method: str = SUPERPIXEL_DEFAULTS.method,
+    fine_regions: int | None = None,
+    level: float | None = None,
     n_segments: int | None = None,
     compactness: float | None = None,
     scale: float | None = None,
@@ -104,9 +124,15 @@ def superpixels(
 
     Args:
         image: Frame, uint8 (H, W, 3), RGB.
-        method: ``"slic"`` (default; compact regions of similar size, in
-            CIELAB) or ``"felzenszwalb"`` (graph-based, follows edges, sizes
-            vary).
+        method: ``"hierarchical"`` (default; watershed regions merged along
+            weak colour boundaries, see the module doc), ``"slic"`` (compact
+            regions of similar size, in CIELAB) or ``"felzenszwalb"``
+            (graph-based, follows edges, sizes vary).
+        fine_regions: hierarchical only: watershed regions before merging
+            (default 1000).
+        level: hierarchical only: regions merge while the mean boundary
+            strength between them is below ``level``, in units of the frame's
+            99th-percentile boundary strength (default 0.35; higher merges more).
         n_segments: SLIC only: approximate number of regions (default 400).
         compactness: SLIC only: colour against space trade-off, higher is
             more square (default 10).
@@ -128,53 +154,106 @@ def superpixels(
     Example:
         >>> img = np.zeros((60, 80, 3), dtype=np.uint8)
         >>> img[:, 40:] = 255
-        >>> labels = superpixels(img, n_segments=8)
+        >>> labels = superpixels(img, method="slic", n_segments=8)
         >>> labels.shape, labels.dtype.name, int(labels.min())
         ((60, 80), 'int32', 0)
     """
-    # Imported here: scikit-image is slow to import and soft_mask (scoring a
-    # study) does not need it.
-    from skimage.segmentation import felzenszwalb, slic
-
     h, w = check_rgb(image, "image", min_side=2)
     if method not in SUPERPIXEL_METHODS:
         raise EgonetError(f"unknown method {method!r}; valid methods: {', '.join(SUPERPIXEL_METHODS)}", field="method")
-    slic_only = {"n_segments": n_segments, "compactness": compactness}
-    felz_only = {"scale": scale, "min_size": min_size}
-    not_applicable = felz_only if method == "slic" else slic_only
-    for name, value in not_applicable.items():
-        if value is not None:
+    given = {"fine_regions": fine_regions, "level": level, "n_segments": n_segments, "compactness": compactness,
+             "scale": scale, "min_size": min_size}
+    for name, value in given.items():
+        if value is not None and name not in METHOD_OPTIONS[method]:
             raise EgonetError(f"{name} does not apply to method={method!r}", field=name)
     if max_side is not None and (isinstance(max_side, bool) or not isinstance(max_side, (int, np.integer)) or max_side < 8):
         raise EgonetError(f"max_side must be None or an int >= 8, got {max_side!r}", field="max_side")
+    options = {name: getattr(SUPERPIXEL_DEFAULTS, name) if given[name] is None else given[name] for name in METHOD_OPTIONS[method]}
+    _check_options(options)
 
     work = image
     if max_side is not None and max(h, w) > max_side:
         f = max_side / max(h, w)
         size = (max(2, round(w * f)), max(2, round(h * f)))
         work = cv2.resize(image, size, interpolation=cv2.INTER_AREA)
-
-    if method == "slic":
-        n = SUPERPIXEL_DEFAULTS.n_segments if n_segments is None else n_segments
-        c = SUPERPIXEL_DEFAULTS.compactness if compactness is None else compactness
-        if isinstance(n, bool) or not isinstance(n, (int, np.integer)) or n < 1:
-            raise EgonetError(f"n_segments must be a positive int, got {n!r}", field="n_segments")
-        if not np.isfinite(c) or c <= 0:
-            raise EgonetError(f"compactness must be a positive number, got {c!r}", field="compactness")
-        labels = slic(work, n_segments=int(n), compactness=float(c), start_label=0, channel_axis=-1)
-    else:
-        s = SUPERPIXEL_DEFAULTS.scale if scale is None else scale
-        m = SUPERPIXEL_DEFAULTS.min_size if min_size is None else min_size
-        if not np.isfinite(s) or s <= 0:
-            raise EgonetError(f"scale must be a positive number, got {s!r}", field="scale")
-        if isinstance(m, bool) or not isinstance(m, (int, np.integer)) or m < 1:
-            raise EgonetError(f"min_size must be a positive int, got {m!r}", field="min_size")
-        labels = felzenszwalb(work, scale=float(s), sigma=0.8, min_size=int(m), channel_axis=-1)
-
-    labels = np.asarray(labels, dtype=np.int32)
+    labels = np.asarray(_SEGMENTERS[method](work, **options), dtype=np.int32)
     if labels.shape != (h, w):
         labels = _upscale_nearest(labels, (h, w))
     return _relabel(labels)
+
+
+# Each option: (integer?, lowest allowed value).
+_OPTION_RULES = {"fine_regions": (True, 1), "n_segments": (True, 1), "min_size": (True, 1),
+                 "level": (False, 0.0), "compactness": (False, 0.0), "scale": (False, 0.0)}
+
+
+def _check_options(options: dict[str, float]) -> None:
+    for name, value in options.items():
+        integer, low = _OPTION_RULES[name]
+        if integer and (isinstance(value, bool) or not isinstance(value, (int, np.integer)) or value < low):
+            raise EgonetError(f"{name} must be a positive int, got {value!r}", field=name)
+        if not integer and (isinstance(value, bool) or not isinstance(value, (int, float, np.number))
+                            or not np.isfinite(value) or value <= low):
+            raise EgonetError(f"{name} must be a positive number, got {value!r}", field=name)
+
+
+# scikit-image is imported inside the segmenters: it is slow to import, and
+# soft_mask (scoring a study) does not need it.
+
+
+def _slic(work: np.ndarray, *, n_segments: int, compactness: float) -> np.ndarray:
+    from skimage.segmentation import slic
+
+    return slic(work, n_segments=int(n_segments), compactness=float(compactness), start_label=0, channel_axis=-1)
+
+
+def _felzenszwalb(work: np.ndarray, *, scale: float, min_size: int) -> np.ndarray:
+    from skimage.segmentation import felzenszwalb
+
+    return felzenszwalb(work, scale=float(scale), sigma=0.8, min_size=int(min_size), channel_axis=-1)
+
+
+def boundary_strength(image: np.ndarray) -> np.ndarray:
+    """Colour boundary strength: the Sobel gradient magnitude of the lightly smoothed CIELAB image,
+    in units of its 99th percentile (so levels mean the same on dull and vivid frames).
+
+    Args:
+        image: uint8 (H, W, 3), RGB.
+
+    Returns:
+        float64 (H, W), >= 0 (1 at the 99th percentile).
+    """
+    from skimage.color import rgb2lab
+    from skimage.filters import sobel
+
+    lab = rgb2lab(cv2.GaussianBlur(image, (0, 0), 1.0))
+    strength = np.sqrt(sum(sobel(lab[..., c]) ** 2 for c in range(3)))
+    return strength / max(float(np.percentile(strength, 99)), 1e-6)
+
+
+def _hierarchical(work: np.ndarray, *, fine_regions: int, level: float) -> np.ndarray:
+    """Fine watershed regions of the boundary map, merged weakest shared boundary first up to ``level``."""
+    from skimage import graph
+    from skimage.segmentation import watershed
+
+    strength = boundary_strength(work)
+    fine = watershed(strength, markers=int(fine_regions))
+    rag = graph.rag_boundary(fine, strength)
+
+    def keep_nothing(rag, src, dst):  # the merged node needs no attributes of its own
+        pass
+
+    def merged_weight(rag, src, dst, neighbour):
+        # The merged region's boundary with a neighbour is both boundaries: their pixel-weighted mean.
+        edges = [rag[node][neighbour] for node in (src, dst) if neighbour in rag[node]]
+        count = sum(e["count"] for e in edges)
+        return {"count": count, "weight": sum(e["weight"] * e["count"] for e in edges) / max(count, 1)}
+
+    return graph.merge_hierarchical(fine, rag, thresh=float(level), rag_copy=False, in_place_merge=True,
+                                    merge_func=keep_nothing, weight_func=merged_weight)
+
+
+_SEGMENTERS = {"hierarchical": _hierarchical, "slic": _slic, "felzenszwalb": _felzenszwalb}
 
 
 def _check_shape(shape: Sequence[int]) -> tuple[int, int]:

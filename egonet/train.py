@@ -637,6 +637,7 @@ def fit(
     checkpoint_path: Path | None = None,
     start: Mapping | None = None,
     on_map: Callable[[int, np.ndarray], None] | None = None,
+    on_epoch: Callable[[dict], None] | None = None,
     tracker: _Tracker | None = None,
 ) -> tuple[EgoNetModel, FoldResult]:
     """Train one model on ``train_set`` and score it on ``test_set``.
@@ -655,6 +656,9 @@ def fit(
             restart from the current weights).
         on_map: Receives every held-out probability map of the final
             evaluation, see :func:`evaluate`.
+        on_epoch: Receives each epoch's history record once it is complete
+            (rank 0): after its evaluation, and for the last epoch after the
+            final one, so a live chart never shows a record that changes.
         tracker: Progress bookkeeping shared by the folds of a run.
 
     Returns:
@@ -705,6 +709,8 @@ def fit(
         history.append(record)
         metrics = {"train_loss": train_loss, "epochs": epoch}
         save(metrics, complete=False)
+        if not last and on_epoch is not None and rank == 0:
+            on_epoch(dict(record))
         _barrier()
 
     if rank == 0:  # the final scores, and the held-out maps for the caller
@@ -712,6 +718,8 @@ def fit(
         final = evaluate(model, test_set, device=device, batch_size=per_process, prior=prior, on_map=on_map)
         metrics = _final_metrics(final, history, epoch=epoch, train_frames=len(train_set), test_frames=len(test_set))
         save(metrics, complete=True)
+        if on_epoch is not None and history:
+            on_epoch(dict(history[-1]))
     _barrier()
     model.eval()
     return model, FoldResult(fold, checkpoint_path if rank == 0 else None, metrics, history, **keys)
@@ -846,6 +854,7 @@ def cross_validate(
     on_progress: Callable[[Progress], None] | None = None,
     on_fold_end: Callable[[FoldResult], None] | None = None,
     on_map: Callable[[str, Sample, np.ndarray], None] | None = None,
+    on_epoch: Callable[[str, dict], None] | None = None,
 ) -> list[FoldResult]:
     """Train and score every fold: the outer loop.
 
@@ -865,6 +874,8 @@ def cross_validate(
         on_fold_end: Called with each fold's result (rank 0).
         on_map: Called with ``(fold, sample, float32 (H, W) probabilities at
             the frame's own size)`` for every held-out frame (rank 0).
+        on_epoch: Called with ``(fold, history record)`` as each epoch's
+            record is complete (rank 0), see :func:`fit`.
 
     Returns:
         The folds' results, in order (rank 0; other ranks get empty metrics).
@@ -898,9 +909,13 @@ def cross_validate(
         def fold_map(i: int, probability: np.ndarray, name: str = fold.name, held_out: FrameDataset = test_set) -> None:
             on_map(name, held_out.sample(i), probability)
 
+        def fold_epoch(record: dict, name: str = fold.name) -> None:
+            on_epoch(name, record)
+
         _, result = fit(
             train_set, test_set, config=config, fold=fold.name, checkpoint_path=path, start=state,
-            on_map=fold_map if on_map is not None else None, tracker=tracker,
+            on_map=fold_map if on_map is not None else None,
+            on_epoch=fold_epoch if on_epoch is not None else None, tracker=tracker,
         )
         if rank == 0 and on_fold_end is not None:
             on_fold_end(result)

@@ -1,14 +1,18 @@
 """Training runs: start through the queue, watch progress, list checkpoints.
 
-Staff see runs, checkpoints and predictions; only admins start, cancel or
-resume runs. A run never trains inside a request: starting one records the
-row and queues the job for ``flask egonet worker``. The index page polls
-``status`` for live progress.
+Staff see runs, checkpoints and predictions, their charts and per-frame
+results, and download checkpoints and configurations; only admins start,
+cancel, resume, rename, tag and delete runs. A run never trains inside a
+request: starting one records the row and queues the job for ``flask
+egonet worker``. The pages poll ``status`` for live progress and
+``history`` for the charts.
 """
 
 from flask import (
     Blueprint,
+    abort,
     flash,
+    jsonify,
     redirect,
     render_template,
     request,
@@ -32,7 +36,8 @@ from app.errors import Problem
 from app.extensions import db
 from app.forms import Form
 from app.models import Activity, Role
-from app.models.training import Prediction, TrainingRun
+from app.models.training import Checkpoint, Prediction, TrainingRun
+from app.queue import enqueue
 from app.security import current_role, roles
 from app.services import training
 from app.validation import Int, Str, json_body, query_int
@@ -97,13 +102,27 @@ def run_json(run: TrainingRun) -> dict:
 
 
 def _index(form: RunForm, status: int = 200):
+    tag = request.args.get("tag", "").strip()[:40] or None
+    runs = training.runs_tagged(tag)
+    charted = training.runs_with_history(r.id for r in runs)
+    try:
+        compare = set(training.parse_run_ids(request.args.get("compare", "")))
+    except training.TrainingProblem:
+        compare = set()
+    if not compare:  # by default the newest three runs that have a history
+        compare = {r.id for r in runs if r.id in charted}
+        compare = set(sorted(compare, reverse=True)[:3])
     return (
         render_template(
             "training/index.html",
-            runs=training.runs(),
-            checkpoints=training.checkpoints(),
+            runs=runs,
+            checkpoints=[c for c in training.checkpoints() if not tag or c.run_id in {r.id for r in runs}],
             form=form,
             can_start=current_role() is Role.ADMIN,
+            tag=tag,
+            tags=training.all_tags(),
+            compare=compare,
+            max_compared=training.MAX_COMPARED_RUNS,
         ),
         status,
     )
@@ -163,12 +182,21 @@ def status():
 
 @bp.get("/runs/<int:run_id>")
 def detail(run_id: int):
-    run = _run(run_id)
-    return render_template(
-        "training/detail.html",
-        run=run,
-        predictions=training.frame_predictions(run),
-        can_start=current_role() is Role.ADMIN,
+    return _detail(_run(run_id))
+
+
+def _detail(run: TrainingRun, *, edit_form: "EditForm | None" = None, status: int = 200):
+    if edit_form is None:
+        edit_form = EditForm(formdata=None, data={"name": run.name, "tags": ", ".join(run.tags or []), "version": run.version})
+    return (
+        render_template(
+            "training/detail.html",
+            run=run,
+            predictions=training.frame_predictions(run),
+            can_start=current_role() is Role.ADMIN,
+            edit_form=edit_form,
+        ),
+        status,
     )
 
 
@@ -239,3 +267,101 @@ def prediction_overlay(prediction_id: int):
     prediction = db.get_or_404(Prediction, prediction_id)
     # Predicting a frame again replaces the map behind this id: revalidated (ETag), not cached for long.
     return send_file(training.prediction_overlay(prediction), mimetype="image/png")
+
+
+# --------------------------------------------------------------------------- inspecting and managing runs
+
+
+class EditForm(Form):
+    name = StringField("Name", validators=[InputRequired(), Length(max=200)])
+    tags = StringField("Tags (comma-separated)", validators=[Optional(), Length(max=600)])
+    version = IntegerField(validators=[InputRequired(), NumberRange(0, 2**31 - 1)])
+
+
+@bp.get("/history")
+def history():
+    """Epoch rows of some runs for the charts (``?runs=3,5&after=<last id seen>``), bounded pages."""
+    run_ids = training.parse_run_ids(request.args.get("runs", ""))
+    return training.chart_data(run_ids, after=query_int("after", min=0) or 0)
+
+
+@bp.get("/checkpoints/<int:checkpoint_id>/download")
+def download_checkpoint(checkpoint_id: int):
+    path, name = training.checkpoint_file(db.get_or_404(Checkpoint, checkpoint_id))
+    # send_file streams the file from disk; conditional requests and ranges are answered too.
+    return send_file(path, mimetype="application/octet-stream", as_attachment=True, download_name=name, max_age=0)
+
+
+@bp.get("/runs/<int:run_id>/config.json")
+def run_config(run_id: int):
+    run = _run(run_id)
+    response = jsonify(training.run_config(run))
+    response.headers["Content-Disposition"] = f'attachment; filename="run-{run.id}-config.json"'
+    return response
+
+
+@bp.post("/runs/<int:run_id>/edit")
+@roles(Role.ADMIN)
+def edit(run_id: int):
+    run = _run(run_id)
+    form = EditForm()
+    if not form.validate_on_submit():
+        return _detail(run, edit_form=form, status=400)
+    try:
+        training.edit_run(run, name=form.name.data, tags=training.parse_tags(form.tags.data or ""), version=form.version.data)
+    except training.TrainingProblem as exc:
+        if exc.status != 409:
+            getattr(form, exc.field, form.name).errors = [str(exc)]
+            return _detail(run, edit_form=form, status=exc.status)
+        flash(f"Not saved: {exc}. Yours was: {form.name.data!r}, tags {form.tags.data or 'none'}.", "error")
+        return _detail(run, status=409)
+    flash(f"Run {run.id} saved.")
+    return redirect(url_for("training.detail", run_id=run.id))
+
+
+@bp.get("/runs/<int:run_id>/frames")
+def frames(run_id: int):
+    """Held-out frames of a run, worst F first, with the prediction, the truth and the DHG side by side."""
+    run = _run(run_id)
+    fold = request.args.get("fold") or None
+    if fold is not None and fold not in {c.fold for c in run.checkpoints}:
+        raise training.TrainingProblem(f"run {run.id} has no fold {fold[:120]!r}", field="fold", status=404)
+    page = training.frame_page(run, page=query_int("page", max=10**6) or 1, fold=fold)
+    thresholds = {c.id: c.metrics.get("threshold") for c in run.checkpoints}
+    return render_template("training/frames.html", run=run, page=page, thresholds=thresholds,
+                           can_start=current_role() is Role.ADMIN)
+
+
+@bp.post("/runs/<int:run_id>/frames/score")
+@roles(Role.ADMIN)
+def score_frames(run_id: int):
+    run = _run(run_id)
+    missing = training.unscored_count(run)
+    if missing:
+        enqueue("score_frames", run.id)
+        flash(f"Scoring {missing} held-out frames in the worker (flask egonet worker); reload in a moment.")
+    else:
+        flash("Every held-out frame of this run has its scores.")
+    return redirect(url_for("training.frames", run_id=run.id))
+
+
+@bp.get("/predictions/<int:prediction_id>/<kind>.png")
+def prediction_picture(prediction_id: int, kind: str):
+    if kind not in ("prediction", "truth"):
+        abort(404)
+    return send_file(training.prediction_picture(db.get_or_404(Prediction, prediction_id), kind), mimetype="image/png")
+
+
+@bp.route("/runs/<int:run_id>/delete", methods=["GET", "POST"])
+@roles(Role.ADMIN)
+def delete(run_id: int):
+    """GET: what deleting the run removes, and the button; POST: delete it (refused while it is queued or running)."""
+    run = _run(run_id)
+    if request.method == "GET":
+        plan = training.deletion_plan(run)
+        return render_template("training/delete.html", plan=plan), 200 if plan.allowed else 409
+    name = f"#{run.id} {run.name}"
+    counts = training.delete_run(run)
+    flash(f"Run {name} deleted with {counts['checkpoints']} checkpoints, {counts['predictions']} predictions "
+          f"({counts['media_files']} files) and {counts['epochs']} epoch records.")
+    return redirect(url_for("training.index"))

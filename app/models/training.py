@@ -12,7 +12,15 @@ Each finished fold leaves a ``Checkpoint`` (the file under
 frame it held out. A prediction is a 16-bit PNG in the media store
 (probability x 65535). ``held_out`` is true when the frame was in the
 checkpoint's test set, which is what scoring reads; predictions made later
-on other frames (``flask egonet predict``) have it false.
+on other frames (``flask egonet predict``) have it false. A held-out
+prediction also keeps its frame's precision, recall and F at the fold's
+best threshold (the per-frame browser sorts by it).
+
+``TrainingEpoch`` rows are the per-epoch history of every fold, written as
+each epoch ends (the Training page's charts poll them). ``name`` and
+``tags`` are edited by admins; ``version`` counts those edits (the worker's
+progress reports leave it alone), so two admins editing at once cannot
+overwrite each other.
 """
 
 import enum
@@ -67,6 +75,8 @@ class TrainingRun(Base):
     eta_s: Mapped[float | None] = mapped_column(Float)
     message: Mapped[str | None] = mapped_column(Text)
     metrics: Mapped[dict[str, Any]] = mapped_column(JSON, default=dict)
+    tags: Mapped[list[str]] = mapped_column(JSON, default=list)
+    version: Mapped[int] = mapped_column(default=1)
     created_by_id: Mapped[int | None] = mapped_column(ForeignKey("user.id"))
     created_at: Mapped[datetime] = mapped_column(UTCDateTime(), default=utcnow)
     started_at: Mapped[datetime | None] = mapped_column(UTCDateTime())
@@ -115,10 +125,32 @@ class Prediction(Base):
     run_id: Mapped[int] = mapped_column(ForeignKey("training_run.id", ondelete="CASCADE"), index=True)
     checkpoint_id: Mapped[int] = mapped_column(ForeignKey("training_checkpoint.id", ondelete="CASCADE"), index=True)
     frame_id: Mapped[int] = mapped_column(ForeignKey("frame.id", ondelete="CASCADE"), index=True)
-    path: Mapped[str] = mapped_column(String(200))
+    path: Mapped[str] = mapped_column(String(200), info={"media": True})
     held_out: Mapped[bool] = mapped_column(default=False)
+    # Held-out frames: scores of this map against the frame's ground truth at the fold's best threshold.
+    f_score: Mapped[float | None] = mapped_column(Float)
+    precision: Mapped[float | None] = mapped_column(Float)
+    recall: Mapped[float | None] = mapped_column(Float)
     created_at: Mapped[datetime] = mapped_column(UTCDateTime(), default=utcnow)
 
     run: Mapped[TrainingRun] = relationship()
     checkpoint: Mapped[Checkpoint] = relationship()
     frame: Mapped[Frame] = relationship()
+
+
+class TrainingEpoch(Base):
+    """One epoch of one fold: its training loss and learning rate, and its held-out scores when evaluated."""
+
+    __tablename__ = "training_epoch"
+    __table_args__ = (UniqueConstraint("run_id", "fold", "epoch"),)
+
+    id: Mapped[int] = mapped_column(primary_key=True)
+    run_id: Mapped[int] = mapped_column(ForeignKey("training_run.id", ondelete="CASCADE"), index=True)
+    fold: Mapped[str] = mapped_column(String(120))
+    epoch: Mapped[int]
+    lr: Mapped[float | None] = mapped_column(Float)
+    train_loss: Mapped[float | None] = mapped_column(Float)
+    loss: Mapped[float | None] = mapped_column(Float)
+    max_f: Mapped[float | None] = mapped_column(Float)
+    ap: Mapped[float | None] = mapped_column(Float)
+    created_at: Mapped[datetime] = mapped_column(UTCDateTime(), default=utcnow)

@@ -1,7 +1,9 @@
 // Training pages: while a run is queued or running, poll its progress and
 // update its row; when one finishes, reload to show its scores and checkpoints.
+// The charts (training_charts.js) poll their own data.
 import { api } from "./api.js";
 import { formatBytes, uploadWeights } from "./weights_upload.js";
+import { comparePage, runPage } from "./training_charts.js";
 
 const ACTIVE = new Set(["queued", "running"]);
 const POLL_MS = 2000;
@@ -92,4 +94,8 @@ if (typeof document !== "undefined") {
   if (table) setTimeout(() => poll(table), POLL_MS);
   const weights = document.getElementById("weights-form");
   if (weights) wireWeightsForm(weights);
+  const runChart = document.getElementById("run-chart");
+  if (runChart) runPage(runChart);
+  const compare = document.getElementById("compare");
+  if (compare && table) comparePage(compare, table);
 }

@@ -273,7 +273,7 @@ def test_exports_csv_json_and_mask_pngs(ctx, tmp_path):
     png = files[f"P01/{trial.position:04d}-frame{trial.frame.id}.png"]
     decoded = cv2.imdecode(np.frombuffer(png, np.uint8), cv2.IMREAD_UNCHANGED)
     assert decoded.dtype == np.uint16
-    np.testing.assert_array_equal(decoded, np.round(studies.trial_soft_mask(trial) * 65535).astype(np.uint16))
+    np.testing.assert_array_equal(decoded, np.round(studies.trial_soft_mask(trial).astype(np.float64) * 65535).astype(np.uint16))
     manifest = list(csv.DictReader(io.StringIO(files["manifest.csv"].decode())))
     assert len(manifest) == 8 and manifest[-1]["participant"] == "mean" and manifest[-1]["participants"] == "1"
 

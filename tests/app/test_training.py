@@ -12,8 +12,8 @@ import torch
 
 from app.extensions import db
 from app.models import Activity, Frame
-from app.models.training import Prediction, RunStatus, TrainingRun
-from app.services import training
+from app.models.training import Checkpoint, FoldsMode, Prediction, RunStatus, TrainingEpoch, TrainingRun
+from app.services import media, training
 from app.services.demo import create_demo
 from egonet.train import load_checkpoint
 
@@ -339,3 +339,261 @@ def test_cli_predict_chooses_frames_and_can_queue(app, demo, runner, monkeypatch
                            (["--frames", "a,b"], "give frame ids separated by commas")):
         result = runner.invoke(args=["egonet", "predict", str(checkpoint_id), *extra])
         assert result.exit_code != 0 and message in result.output, result.output
+
+
+# --------------------------------------------------------------------------- inspecting runs: history, frames, files
+
+
+def hand_made_run(*, status=RunStatus.DONE, name="hand made", tags=(), folds=("cooking",), frame=None, path=None) -> TrainingRun:
+    """A run with a checkpoint file and epoch rows per fold, and a held-out prediction of ``frame`` (no training)
+    stored at ``path`` (a media path) or in a file of its own."""
+    from egonet import io
+
+    run = TrainingRun(name=name, model_name="egonet-lite", folds=FoldsMode.LOAO, epochs=2, device="cpu",
+                      seed=0, config={"train": {"width": 32}}, status=status, tags=list(tags))
+    db.session.add(run)
+    db.session.flush()
+    for fold in folds:
+        checkpoint = Checkpoint(run=run, fold=fold, path=f"run-{run.id}/{fold}.pt", epochs=2,
+                                metrics={"max_f": 0.5, "aop_max_f": 0.4, "threshold": 0.3},
+                                test_frame_ids=[frame.id] if frame is not None else [])
+        file = training.checkpoint_root() / checkpoint.path
+        file.parent.mkdir(parents=True, exist_ok=True)
+        file.write_bytes(f"weights of {fold}".encode())
+        db.session.add(checkpoint)
+        training.history.record_epochs(run.id, fold, [{"epoch": 1, "train_loss": 0.7, "lr": 0.02, "loss": 0.6, "max_f": 0.3},
+                                                      {"epoch": 2, "train_loss": 0.5, "lr": 0.01, "loss": 0.55, "max_f": 0.5}])
+        if frame is not None:
+            probability = np.full((frame.height, frame.width), 0.25, np.float32)
+            path = path or media.store(io.encode_probability_png(probability), ".png")
+            db.session.add(Prediction(run=run, checkpoint=checkpoint, frame_id=frame.id, held_out=True, path=path))
+    db.session.commit()
+    return run
+
+
+def test_per_frame_scores_by_hand():
+    from egonet.metrics import count_stats
+
+    from app.services.training.frames import scores_at
+
+    prob = np.array([[0.9, 0.4], [0.2, 0.0]], np.float32)
+    truth = np.array([[True, True], [False, False]])
+    counts = count_stats(prob, truth)
+    assert scores_at(counts, 0.5) == pytest.approx((2 / 3, 1.0, 0.5))  # one of the two object pixels reaches 0.5
+    assert scores_at(counts, 0.3) == pytest.approx((1.0, 1.0, 1.0))
+    assert scores_at(counts, 0.15) == pytest.approx((0.8, 2 / 3, 1.0))
+    empty = count_stats(prob, np.zeros((2, 2), bool))
+    assert scores_at(empty, 0.95) == (1.0, 1.0, None)  # no object, nothing predicted: right
+    assert scores_at(empty, 0.5) == (0.0, 0.0, None)
+
+
+def test_history_is_paged_after_the_last_row_seen_and_bounded(app, ctx, admin_client, monkeypatch):
+    runs = [hand_made_run(name=f"run {i}", folds=("cooking", "dining")) for i in range(2)]
+    ids = ",".join(str(r.id) for r in runs)
+    monkeypatch.setattr(training.history, "PAGE_ROWS", 3)
+    seen, after = [], 0
+    while True:
+        body = admin_client.get(f"/training/history?runs={ids}&after={after}").get_json()
+        seen += body["epochs"]
+        after = body["after"]
+        if not body["more"]:
+            break
+    assert len(seen) == 8 and len({r["id"] for r in seen}) == 8 and {r["run"] for r in seen} == {r.id for r in runs}
+    assert [r["name"] for r in body["runs"]] == ["run 0", "run 1"]
+    assert body["runs"][0]["folds"]["cooking"] == {"aop_max_f": 0.4, "max_f": 0.5, "epochs": 2}
+    assert admin_client.get(f"/training/history?runs={ids}&after={after}").get_json()["epochs"] == []
+    # A record written again comes again, with a newer id.
+    training.history.record_epochs(runs[0].id, "cooking", [{"epoch": 2, "train_loss": 0.45}])
+    db.session.commit()
+    (again,) = admin_client.get(f"/training/history?runs={ids}&after={after}").get_json()["epochs"]
+    assert (again["fold"], again["epoch"], again["train_loss"]) == ("cooking", 2, 0.45) and again["id"] > after
+    # The Training page ticks the runs of ?compare=, else the newest three with a history.
+    checked = lambda html: re.findall(r'class="compare-run" value="(\d+)"[^>]*checked', html)  # noqa: E731
+    assert checked(admin_client.get(f"/training/?compare={runs[0].id}").data.decode()) == [str(runs[0].id)]
+    assert sorted(checked(admin_client.get("/training/").data.decode())) == sorted(str(r.id) for r in runs)
+    for query, field in (("runs=a,b", "runs"), ("runs=" + ",".join(map(str, range(1, 14))), "runs"), ("runs=1&after=-3", "after"),
+                         ("runs=1&after=99999999999999999999", "after"), ("runs=0", "runs")):
+        response = admin_client.get(f"/training/history?{query}", headers={"Accept": "application/json"})
+        assert response.status_code == 400 and field in response.get_json()["fields"], query
+
+
+def test_admins_rename_and_tag_with_a_version_check(app, ctx, admin_client, make_user):
+    run = hand_made_run()
+    form = {"name": "lite baseline", "tags": "baseline, lite 160, baseline", "version": "1"}
+    assert admin_client.post(f"/training/runs/{run.id}/edit", data=form).status_code == 302
+    db.session.refresh(run)
+    assert (run.name, run.tags, run.version) == ("lite baseline", ["baseline", "lite 160"], 2)
+    # A second admin's edit based on the version they loaded is refused, and says what is there now.
+    stale = admin_client.post(f"/training/runs/{run.id}/edit", data=form | {"name": "mine", "tags": ""})
+    assert stale.status_code == 409 and b"changed by someone else" in stale.data and b"lite baseline" in stale.data
+    db.session.refresh(run)
+    assert run.name == "lite baseline" and run.version == 2
+    bad = admin_client.post(f"/training/runs/{run.id}/edit", data=form | {"version": "2", "tags": "ok, no<script>"})
+    assert bad.status_code == 400 and b"tag" in bad.data
+    assert admin_client.post(f"/training/runs/{run.id}/edit", data={"tags": "x", "version": "2"}).status_code == 400
+    other = hand_made_run(name="untagged")
+    page = admin_client.get("/training/?tag=baseline").data
+    assert b"lite baseline" in page and b"untagged" not in page
+    assert b"untagged" in admin_client.get("/training/").data
+    # Only admins edit: the access matrix checks every other role gets 403.
+
+
+def test_staff_download_checkpoints_and_configuration(app, ctx, client, make_user, tmp_path):
+    run = hand_made_run(folds=("desk work",))
+    (checkpoint,) = run.checkpoints
+    client.login_as(make_user("annotator"))
+    with client.get(f"/training/checkpoints/{checkpoint.id}/download") as response:
+        assert response.status_code == 200 and response.mimetype == "application/octet-stream"
+        assert response.headers["Content-Disposition"] == f"attachment; filename=run-{run.id}-desk-work-e2.pt"
+        assert response.data == b"weights of desk work"
+    with client.get(f"/training/runs/{run.id}/config.json") as response:
+        assert response.headers["Content-Disposition"] == f'attachment; filename="run-{run.id}-config.json"'
+        body = response.get_json()
+        assert body["config"] == {"train": {"width": 32}} and body["checkpoints"][0]["fold"] == "desk work"
+    (training.checkpoint_root() / checkpoint.path).unlink()
+    response = client.get(f"/training/checkpoints/{checkpoint.id}/download", headers={"Accept": "application/json"})
+    assert response.status_code == 404 and "missing on the server" in response.get_json()["message"]
+
+
+def test_a_queued_or_running_run_cannot_be_deleted(app, ctx, admin_client):
+    run = hand_made_run(status=RunStatus.RUNNING)
+    page = admin_client.get(f"/training/runs/{run.id}/delete")
+    assert page.status_code == 409 and b"cancel it first" in page.data and b"confirm-delete" not in page.data
+    assert admin_client.post(f"/training/runs/{run.id}/delete").status_code == 409
+    assert db.session.get(TrainingRun, run.id) is not None
+    assert (training.checkpoint_root() / f"run-{run.id}").exists()
+
+
+def test_the_migration_copies_the_history_of_older_runs(ctx):
+    import sqlalchemy as sa
+    from flask_migrate import downgrade, upgrade
+
+    downgrade(revision="0006")
+    try:
+        with db.engine.begin() as conn:
+            conn.execute(sa.text(
+                "INSERT INTO training_run (id, name, model_name, model_options, folds, epochs, device, seed, config, status, progress,"
+                " metrics, created_at, updated_at) VALUES (7, 'old', 'egonet-lite', '{}', 'single', 2, 'cpu', 0, '{}', 'done', 1,"
+                " '{}', '2026-01-01 00:00:00', '2026-01-01 00:00:00')"))
+            history = '{"max_f": 0.5, "history": [{"epoch": 1, "train_loss": 0.6, "lr": 0.02, "max_f": 0.4}, {"epoch": 2, "train_loss": 0.5, "lr": 0.01, "loss": 0.55, "max_f": 0.5, "ap": 0.45}]}'
+            conn.execute(sa.text(
+                "INSERT INTO training_checkpoint (id, run_id, fold, path, epochs, metrics, test_frame_ids, created_at)"
+                " VALUES (3, 7, 'single', 'run-7/single.pt', 2, :m, '[]', '2026-01-01 00:00:00')"), {"m": history})
+    finally:
+        upgrade()
+    run = db.session.get(TrainingRun, 7)
+    assert run.tags == [] and run.version == 1
+    rows = training.chart_data([7])["epochs"]
+    assert [(r["fold"], r["epoch"], r["train_loss"], r["max_f"], r["ap"]) for r in rows] == [
+        ("single", 1, 0.6, 0.4, None), ("single", 2, 0.5, 0.5, 0.45)]
+
+
+@pytest.mark.slow
+def test_inspect_a_trained_run_then_delete_it_leaving_nothing_behind(app, demo, admin_client, runner):
+    """A real tiny run: epochs recorded as they end, per-frame scores, the frames page, then deletion."""
+    from app.models import Annotation
+    from app.services.ground_truth import ground_truths, mask_of
+
+    seen_live = []
+    with app.app_context():
+        run = training.create_run(training.RunRequest(**(TINY | {"epochs": 2, "activity_ids": two_activities(demo)})))
+
+        def watch(progress):  # while the second fold trains, the first fold's epochs are already rows
+            if progress.fold_index == 1 and not seen_live:
+                seen_live.extend(db.session.execute(db.select(TrainingEpoch.fold, TrainingEpoch.epoch)).all())
+
+        run = training.execute_run(run.id, on_progress=watch)
+        assert sorted(seen_live) == [("cooking", 1), ("cooking", 2)]
+        rows = training.chart_data([run.id])["epochs"]
+        assert sorted((r["fold"], r["epoch"]) for r in rows) == [("cooking", 1), ("cooking", 2), ("dining", 1), ("dining", 2)]
+        for checkpoint in run.checkpoints:
+            last = next(r for r in rows if r["fold"] == checkpoint.fold and r["epoch"] == 2)
+            assert last["max_f"] == pytest.approx(checkpoint.metrics["max_f"]) and last["loss"] is not None
+            first = next(r for r in rows if r["fold"] == checkpoint.fold and r["epoch"] == 1)
+            assert first["max_f"] is not None and first["train_loss"] > 0
+        # Per-frame F at the fold's threshold, checked against the stored map and the truth directly.
+        predictions = db.session.execute(db.select(Prediction).where(Prediction.run_id == run.id)).scalars().all()
+        truths = ground_truths([p.frame_id for p in predictions])
+        for p in predictions:
+            t = p.checkpoint.metrics["threshold"]
+            predicted = training.read_probability(p.path).astype(np.float64) >= t - 1e-9
+            truth = mask_of(truths[p.frame_id])
+            tp = (predicted & truth).sum()
+            f = 2 * tp / (predicted.sum() + truth.sum()) if predicted.sum() + truth.sum() else 1.0
+            # The job scored the float map, this the stored 16-bit one: a pixel within 2e-5 of t may differ.
+            assert p.f_score == pytest.approx(f, abs=0.02), p.frame_id
+        recorded = {p.id: p.f_score for p in predictions}
+        order = [p.frame_id for p in sorted(predictions, key=lambda p: (p.f_score, p.frame_id))]
+        # Runs recorded before per-frame scores: the page offers to score them, the job does.
+        for p in predictions:
+            p.f_score = None
+        db.session.commit()
+        run_id, prediction_id = run.id, predictions[0].id
+        annotation = db.session.execute(db.select(Annotation)).scalars().first()
+        annotation.proposed_by_run_id, annotation.proposed_by_checkpoint_id = run.id, run.checkpoints[0].id
+        db.session.commit()
+        annotation_id = annotation.id
+
+    page = admin_client.get(f"/training/runs/{run_id}/frames")
+    assert b"have no per-frame score yet" in page.data
+    from app import tasks
+
+    with app.app_context():
+        assert tasks.score_frames.func(run_id) == len(recorded)
+        rescored = {p.id: p.f_score for p in db.session.execute(db.select(Prediction)).scalars()}
+    assert rescored == pytest.approx(recorded, abs=0.02)
+    page = admin_client.get(f"/training/runs/{run_id}/frames").data.decode()
+    listed = [int(x) for x in re.findall(r'class="frame-row" data-frame="(\d+)"', page)]
+    assert listed == order and "no per-frame score" not in page
+    assert "dining" in admin_client.get(f"/training/runs/{run_id}/frames?fold=dining").data.decode()
+    assert admin_client.get(f"/training/runs/{run_id}/frames?fold=nowhere").status_code == 404
+    for kind in ("prediction", "truth"):
+        with admin_client.get(f"/training/predictions/{prediction_id}/{kind}.png") as picture:
+            assert picture.status_code == 200 and picture.mimetype == "image/png"
+    assert admin_client.get(f"/training/predictions/{prediction_id}/other.png").status_code == 404
+
+    assert f"(run {run_id})" in admin_client.get("/scores/").data.decode()
+    # Delete: the confirmation says what goes; afterwards nothing is left and nothing is orphaned.
+    with app.app_context():
+        paths = sorted(db.session.execute(db.select(Prediction.path).where(Prediction.run_id == run_id)).scalars())
+        # Media are content-addressed: another run's row may name the same file, which must stay.
+        hand_made_run(name="kept", frame=db.session.get(Frame, order[0]), path=paths[0])
+        files = [media.absolute_path(p) for p in paths[1:]]
+        kept_files = [media.absolute_path(paths[0])]
+        folder = training.checkpoint_root() / f"run-{run_id}"
+        assert folder.is_dir() and all(f.exists() for f in files)
+    confirm = admin_client.get(f"/training/runs/{run_id}/delete").data.decode()
+    assert "2 checkpoints" in confirm and f"{len(paths)} predictions and {len(files)} media files" in confirm
+    assert "4 epoch records" in confirm
+    assert "proposed by run" in confirm
+    response = admin_client.post(f"/training/runs/{run_id}/delete")
+    assert response.status_code == 302
+    listing = admin_client.get("/training/").data.decode()
+    assert "deleted with 2 checkpoints" in listing, re.findall(r"class=\"flash[^<]*", listing)
+    with app.app_context():
+        for model in (TrainingRun, Checkpoint, Prediction, TrainingEpoch):
+            assert db.session.execute(db.select(model).where(model.run_id == run_id if model is not TrainingRun
+                                                             else model.id == run_id)).first() is None
+        annotation = db.session.get(Annotation, annotation_id)
+        assert annotation.proposed_by_run_id is None and annotation.proposed_by_checkpoint_id is None
+    assert not folder.exists() and not any(f.exists() for f in files) and all(f.exists() for f in kept_files)
+    result = runner.invoke(args=["egonet", "media-check"])
+    assert result.exit_code == 0 and " 0 missing, 0 orphaned" in result.output, result.output
+    assert admin_client.get(f"/training/runs/{run_id}").status_code == 404
+    scores = admin_client.get("/scores/")
+    assert scores.status_code == 200 and f"(run {run_id})" not in scores.data.decode()
+    assert admin_client.get(f"/scores/?runs={run_id}&chosen=1").status_code < 500
+
+
+def test_the_frames_page_sorts_worst_first_in_pages(ctx, demo):
+    frames = db.session.execute(db.select(Frame).order_by(Frame.id)).scalars().all()[:5]
+    run = hand_made_run(folds=("cooking",))
+    (checkpoint,) = run.checkpoints
+    for frame, f in zip(frames, (0.9, None, 0.1, 0.5, 0.1), strict=True):
+        db.session.add(Prediction(run=run, checkpoint=checkpoint, frame=frame, path=f"xx/{frame.id}.png", held_out=True, f_score=f))
+    db.session.commit()
+    pages = [training.frame_page(run, page=n, per_page=2) for n in (1, 2, 3, 9)]
+    assert [[p.f_score for p in page.predictions] for page in pages] == [[0.1, 0.1], [0.5, 0.9], [None], [None]]
+    assert [p.frame_id for p in pages[0].predictions] == [frames[2].id, frames[4].id]  # ties by frame id
+    assert (pages[0].total, pages[0].pages, pages[3].page, pages[0].unscored) == (5, 3, 3, 1)
+    assert training.frame_page(run, fold="dining").total == 0

@@ -5,7 +5,7 @@ import math
 import numpy as np
 import pytest
 
-from egonet.clicks import click_gaussian, project_to_regions, soft_mask, superpixels
+from egonet.clicks import SUPERPIXEL_DEFAULTS, boundary_strength, click_gaussian, project_to_regions, soft_mask, superpixels
 
 
 def stripes(h=8, w=8, n=4):
@@ -142,21 +142,25 @@ def test_soft_mask_validation():
 # superpixels.
 
 
-@pytest.mark.parametrize("method", ["slic", "felzenszwalb"])
+FEW_REGIONS = {"slic": {"n_segments": 30}, "felzenszwalb": {"scale": 20.0}, "hierarchical": {"fine_regions": 150, "level": 0.2}}
+
+
+@pytest.mark.parametrize("method", ["slic", "felzenszwalb", "hierarchical"])
 def test_superpixels_labels_contiguous(method):
     img = smooth_image(48, 64)
-    labels = superpixels(img, method=method, **({"n_segments": 30} if method == "slic" else {"scale": 20.0}))
+    labels = superpixels(img, method=method, **FEW_REGIONS[method])
     assert labels.shape == (48, 64) and labels.dtype == np.int32
     n = int(labels.max()) + 1
     assert n > 3
     np.testing.assert_array_equal(np.unique(labels), np.arange(n))
 
 
-@pytest.mark.parametrize("method", ["slic", "felzenszwalb"])
+@pytest.mark.parametrize("method", ["slic", "felzenszwalb", "hierarchical"])
 @pytest.mark.parametrize("max_side", [None, 32])
 def test_superpixels_follow_colour_boundary(method, max_side):
     img = two_colour_image(60, 80)
-    labels = superpixels(img, method=method, max_side=max_side)
+    options = {"fine_regions": 150} if method == "hierarchical" else {}
+    labels = superpixels(img, method=method, max_side=max_side, **options)
     assert labels.shape == (60, 80)
     left, right = set(np.unique(labels[:, :40])), set(np.unique(labels[:, 40:]))
     assert not left & right
@@ -164,21 +168,68 @@ def test_superpixels_follow_colour_boundary(method, max_side):
 
 def test_superpixels_n_segments_controls_count():
     img = smooth_image(60, 80, seed=1)
-    few = superpixels(img, n_segments=4).max() + 1
-    many = superpixels(img, n_segments=100).max() + 1
+    few = superpixels(img, method="slic", n_segments=4).max() + 1
+    many = superpixels(img, method="slic", n_segments=100).max() + 1
     assert few < many
+
+
+def test_hierarchical_level_cuts_the_hierarchy():
+    img = smooth_image(60, 80, seed=2)
+    counts = [int(superpixels(img, level=level, fine_regions=150).max()) + 1 for level in (0.05, 0.3, 1.5)]
+    assert counts[0] > counts[1] > counts[2]
+    fine = superpixels(img, level=1e-9, fine_regions=120)
+    assert 60 <= fine.max() + 1 <= 130  # nothing merged: the watershed's own regions
+    # Merging only joins regions: every coarse region is a union of finer ones.
+    coarse, finer = superpixels(img, level=0.5, fine_regions=150), superpixels(img, level=0.2, fine_regions=150)
+    for r in np.unique(finer):
+        assert len(np.unique(coarse[finer == r])) == 1
+
+
+def test_hierarchical_regions_stop_at_an_object_boundary():
+    img = smooth_image(60, 80, seed=3) // 4 + 90
+    yy, xx = np.mgrid[:60, :80]
+    disc = (xx - 50) ** 2 + (yy - 30) ** 2 < 12**2
+    img[disc] = (230, 40, 40)
+    labels = superpixels(img, max_side=None, fine_regions=60)
+    inside, outside = set(np.unique(labels[disc])), set(np.unique(labels[~disc]))
+    assert not inside & outside
+    clicked = labels == labels[30, 50]
+    assert clicked[disc].mean() > 0.5  # the clicked region is most of the object
+    out = soft_mask((60, 80), [(50.0, 30.0)], sigma=15.0, labels=labels)
+    assert out[clicked].min() > out[~disc].max()
+
+
+def test_boundary_strength_is_relative_and_peaks_on_edges():
+    img = two_colour_image(40, 60)
+    strength = boundary_strength(img)
+    assert strength.shape == (40, 60) and strength.min() >= 0
+    assert strength[:, 28:32].mean() > 10 * strength[:, :20].mean()
+    np.testing.assert_allclose(boundary_strength(img // 2 + 20)[:, 28:32], strength[:, 28:32], rtol=0.35)
+    assert SUPERPIXEL_DEFAULTS.method == "hierarchical"
+
+
+def test_a_flat_frame_is_one_or_few_regions():
+    flat = np.full((30, 40, 3), 128, np.uint8)
+    labels = superpixels(flat, fine_regions=100)
+    assert labels.shape == (30, 40) and labels.min() == 0 and labels.max() < 5
 
 
 def test_superpixels_validation():
     img = two_colour_image()
-    with pytest.raises(ValueError, match="valid methods: slic, felzenszwalb"):
+    with pytest.raises(ValueError, match="valid methods: hierarchical, slic, felzenszwalb"):
         superpixels(img, method="mcg")
     with pytest.raises(ValueError, match="scale does not apply"):
         superpixels(img, method="slic", scale=50.0)
     with pytest.raises(ValueError, match="n_segments does not apply"):
         superpixels(img, method="felzenszwalb", n_segments=10)
+    with pytest.raises(ValueError, match="level does not apply"):
+        superpixels(img, method="slic", level=0.3)
     with pytest.raises(ValueError, match="n_segments"):
-        superpixels(img, n_segments=0)
+        superpixels(img, method="slic", n_segments=0)
+    with pytest.raises(ValueError, match="level must be a positive number"):
+        superpixels(img, level=float("nan"))
+    with pytest.raises(ValueError, match="fine_regions must be a positive int"):
+        superpixels(img, fine_regions=2.5)
     with pytest.raises(ValueError, match="image"):
         superpixels(img.astype(np.float32))
     with pytest.raises(ValueError, match="image"):
@@ -189,7 +240,7 @@ def test_superpixels_validation():
 
 def test_superpixels_feed_soft_mask():
     img = two_colour_image(60, 80)
-    labels = superpixels(img, n_segments=12)
+    labels = superpixels(img, method="slic", n_segments=12)
     out = soft_mask((60, 80), [(60.0, 30.0)], sigma=10.0, labels=labels)
     for r in np.unique(labels):
         assert np.ptp(out[labels == r]) == 0

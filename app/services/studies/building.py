@@ -28,7 +28,7 @@ from app.services.studies.common import StudyProblem, check_int, check_keys, che
 from egonet import clicks as egonet_clicks
 from egonet.clicks import SUPERPIXEL_DEFAULTS
 
-SUPERPIXEL_OPTIONS = {"slic": ("n_segments", "compactness"), "felzenszwalb": ("scale", "min_size")}
+SUPERPIXEL_OPTIONS = egonet_clicks.METHOD_OPTIONS
 DEFAULT_SUPERPIXELS = {
     "method": SUPERPIXEL_DEFAULTS.method,
     **{name: getattr(SUPERPIXEL_DEFAULTS, name) for name in SUPERPIXEL_OPTIONS[SUPERPIXEL_DEFAULTS.method]},
@@ -36,6 +36,8 @@ DEFAULT_SUPERPIXELS = {
 }
 # Each option's default (egonet.clicks.SUPERPIXEL_DEFAULTS), type and accepted range.
 OPTION_RULES = {
+    "fine_regions": (SUPERPIXEL_DEFAULTS.fine_regions, int, 2, 20_000),
+    "level": (SUPERPIXEL_DEFAULTS.level, float, 1e-3, 10.0),
     "n_segments": (SUPERPIXEL_DEFAULTS.n_segments, int, 1, 10_000),
     "compactness": (SUPERPIXEL_DEFAULTS.compactness, float, 1e-3, 1e3),
     "scale": (SUPERPIXEL_DEFAULTS.scale, float, 1e-3, 1e5),

@@ -13,6 +13,9 @@ A run is a ``TrainingRun`` row first, then a job that trains it with
   maps; for the scorer, ``completed_runs()`` and ``held_out_predictions(run)``.
 * ``released``: the authors' released ``.caffemodel`` as a run with one
   checkpoint (``register_release``, ``convert_release``, the page's chunked upload).
+* ``history``: the per-epoch rows the job writes and the charts poll.
+* ``frames``: per-frame scores of held-out predictions; the per-frame browser.
+* ``manage``: rename and tag runs, their downloads, deleting a run and all it made.
 
 Callers import from here: ``from app.services import training``.
 """
@@ -30,6 +33,8 @@ from app.services.training.control import (
     runs,
     start_run,
 )
+from app.services.training.frames import FramePage, frame_page, score_run_frames, unscored_count
+from app.services.training.history import MAX_COMPARED_RUNS, chart_data, parse_run_ids, runs_with_history
 from app.services.training.job import execute_run, summarise, train_in_foreground
 from app.services.training.released import (
     cancel_upload,
@@ -41,6 +46,17 @@ from app.services.training.released import (
     start_upload,
     write_chunk,
 )
+from app.services.training.manage import (
+    DeletionPlan,
+    all_tags,
+    checkpoint_file,
+    delete_run,
+    deletion_plan,
+    edit_run,
+    parse_tags,
+    run_config,
+    runs_tagged,
+)
 from app.services.training.predictions import (
     frame_predictions,
     frames_for_prediction,
@@ -48,13 +64,18 @@ from app.services.training.predictions import (
     latest_prediction,
     predict,
     prediction_overlay,
+    prediction_picture,
     read_probability,
 )
 
 __all__ = [
+    "MAX_COMPARED_RUNS",
     "MAX_EPOCHS",
+    "DeletionPlan",
+    "FramePage",
     "RunRequest",
     "TrainingProblem",
+    "all_tags",
     "cancel_run",
     "cancel_upload",
     "convert_release",
@@ -64,21 +85,35 @@ __all__ = [
     "register_release",
     "start_upload",
     "write_chunk",
+    "chart_data",
+    "checkpoint_file",
     "checkpoint_root",
     "checkpoints",
     "completed_runs",
     "create_run",
+    "delete_run",
+    "deletion_plan",
+    "edit_run",
     "execute_run",
+    "frame_page",
     "frame_predictions",
     "frames_for_prediction",
     "held_out_predictions",
     "latest_prediction",
+    "parse_run_ids",
+    "parse_tags",
     "predict",
     "prediction_overlay",
+    "prediction_picture",
     "read_probability",
     "resume_run",
+    "run_config",
     "runs",
+    "runs_tagged",
+    "runs_with_history",
+    "score_run_frames",
     "start_run",
     "summarise",
     "train_in_foreground",
+    "unscored_count",
 ]

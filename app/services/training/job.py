@@ -4,10 +4,12 @@
 (``app.services.ground_truth``), trains with ``egonet.train.cross_validate``
 and, after each fold, records in one transaction the fold's ``Checkpoint``
 and a ``Prediction`` for every held-out frame (16-bit PNGs in the media
-store, probability x 65535). Progress, loss and ETA go to the row at most
-once a second; the web page polls them. A resumed run keeps its finished
-folds, and the fold that was under way continues from its last epoch's
-checkpoint file.
+store, probability x 65535), with each held-out frame's precision,
+recall and F at the fold's best threshold. Each epoch's record is written
+as the epoch ends (``app.services.training.history``). Progress, loss and
+ETA go to the row at most once a second; the web page polls them. A
+resumed run keeps its finished folds, and the fold that was under way
+continues from its last epoch's checkpoint file.
 """
 
 import logging
@@ -23,6 +25,8 @@ from app.models import User, utcnow
 from app.models.training import FINAL_STATUSES, Checkpoint, Prediction, RunStatus, TrainingRun
 from app.services import ground_truth, media
 from app.services.training.control import RunRequest, TrainingProblem, cancel_run, checkpoint_root, create_run
+from app.services.training.frames import FoldScorer
+from app.services.training.history import record_epochs
 from egonet import io
 
 log = logging.getLogger(__name__)
@@ -65,6 +69,7 @@ class _Recorder:
         self.last_write = 0.0
         self.last_phase = None
         self.maps: list[tuple[int, str]] = []  # (frame id, media path) of the fold under way
+        self.scorer = FoldScorer()
 
     def progress(self, progress) -> None:
         from egonet.train import Cancelled
@@ -97,6 +102,11 @@ class _Recorder:
     def map(self, fold: str, sample, probability: np.ndarray) -> None:
         png = io.encode_probability_png(probability)
         self.maps.append((int(sample.key), media.store(png, ".png")))
+        self.scorer.add(int(sample.key), probability, sample.mask)
+
+    def epoch(self, fold: str, record: dict) -> None:
+        record_epochs(self.run_id, fold, [_plain(record)])
+        db.session.commit()
 
     def fold_end(self, result) -> None:
         checkpoint = Checkpoint(
@@ -109,9 +119,15 @@ class _Recorder:
         )
         db.session.add(checkpoint)
         db.session.flush()
-        for frame_id, path in self.maps:
-            db.session.add(Prediction(run_id=self.run_id, checkpoint_id=checkpoint.id, frame_id=frame_id, path=path, held_out=True))
+        predictions = [
+            Prediction(run_id=self.run_id, checkpoint_id=checkpoint.id, frame_id=frame_id, path=path, held_out=True)
+            for frame_id, path in self.maps
+        ]
+        self.scorer.apply(predictions, float(result.metrics.get("threshold", 0.5)))
+        db.session.add_all(predictions)
         self.maps = []
+        # The whole history again: a run that continues a checkpoint inherits its earlier epochs.
+        record_epochs(self.run_id, result.name, _plain(result.history))
         run = db.session.get(TrainingRun, self.run_id)
         run.metrics = summarise(run.checkpoints)
         db.session.commit()
@@ -161,7 +177,7 @@ def execute_run(run_id: int, *, on_progress: Callable | None = None) -> Training
         samples, folds, start = _plan(run, config)
         cross_validate(
             samples, config, out_dir=out_dir, folds=folds, start=start,
-            on_progress=recorder.progress, on_fold_end=recorder.fold_end, on_map=recorder.map,
+            on_progress=recorder.progress, on_fold_end=recorder.fold_end, on_map=recorder.map, on_epoch=recorder.epoch,
         )
     except Cancelled:
         db.session.rollback()

@@ -21,6 +21,10 @@ from app.services import media
 from app.services.training.control import TrainingProblem, checkpoint_root
 from egonet import io
 from egonet.overlay import heatmap
+from egonet.overlay import overlay as egonet_overlay
+
+PICTURE_WIDTH = 320
+"""Width of the per-frame browser's pictures."""
 
 
 def held_out_predictions(run: TrainingRun) -> Iterator[tuple[Frame, np.ndarray]]:
@@ -86,6 +90,34 @@ def prediction_overlay(prediction: Prediction) -> Path:
     return path
 
 
+def prediction_picture(prediction: Prediction, kind: str) -> Path:
+    """A small PNG for the per-frame browser, cached (its name holds every input's content hash).
+
+    ``kind`` ``"prediction"``: the frame with the map's heat map and the
+    ground truth's outline in green; ``"truth"``: the frame with the ground
+    truth's mask (red) and outline.
+
+    Raises:
+        TrainingProblem: 404 for another ``kind``.
+    """
+    from app.services import ground_truth
+
+    if kind not in ("prediction", "truth"):
+        raise TrainingProblem(f"no picture {kind!r}: prediction or truth", status=404)
+    frame = prediction.frame
+    annotation = ground_truth.ground_truths([frame.id]).get(frame.id)
+    truth_name = Path(annotation.mask_path).stem if annotation is not None and annotation.mask_path else "none"
+    source = Path(prediction.path).stem if kind == "prediction" else Path(frame.rgb_path).stem
+    path = Path(current_app.config["CACHE_ROOT"]) / "predictions" / f"{kind}-{source}-{truth_name}-{Path(frame.rgb_path).stem}.png"
+    if not path.exists():
+        rgb = io.read_image(media.absolute_path(frame.rgb_path))
+        truth = ground_truth.mask_of(annotation) if annotation is not None else np.zeros(rgb.shape[:2], bool)
+        layer = read_probability(prediction.path, shape=rgb.shape[:2]) if kind == "prediction" else truth.astype(np.float32)
+        picture = egonet_overlay(rgb, layer, outline=truth, max_width=PICTURE_WIDTH)
+        media.write_atomic(path, io.encode_png(picture))
+    return path
+
+
 # --------------------------------------------------------------------------- predicting
 
 
@@ -124,8 +156,9 @@ def predict(
     """Run a checkpoint on frames and store a prediction for each (one transaction).
 
     A frame in the checkpoint's test set gets ``held_out=True`` (every frame,
-    for the authors' released model: it was not trained on ours); predicting
-    a frame again replaces that checkpoint's earlier prediction of it.
+    for the authors' released model: it was not trained on ours) and its
+    per-frame scores at the fold's threshold (``frames.scores_at``);
+    predicting a frame again replaces that checkpoint's earlier prediction of it.
 
     Args:
         checkpoint: The trained fold.
@@ -136,6 +169,8 @@ def predict(
     Raises:
         TrainingProblem: No frames, frames without DHG, or an unreadable checkpoint.
     """
+    from app.services import ground_truth
+    from app.services.training.frames import frame_counts, scores_at, threshold_of
     from egonet.predictor import NetworkPredictor
     from egonet.train import load_checkpoint, resolve_device
 
@@ -154,15 +189,23 @@ def predict(
         )
     held_out = set(checkpoint.test_frame_ids)
     every_frame_held_out = checkpoint.run.folds is FoldsMode.RELEASED
+    if every_frame_held_out:
+        held_out = {frame.id for frame in frames}
+    truths = ground_truth.ground_truths([f.id for f in frames if f.id in held_out])
     existing = _existing_predictions(checkpoint, frames)
     out = []
     for frame in frames:
         rgb = io.read_image(media.absolute_path(frame.rgb_path))
         dhg = io.read_dhg(media.absolute_path(frame.dhg_path)) if frame.dhg_path and uses_dhg else None
-        path = media.store(io.encode_probability_png(predictor.predict(rgb, dhg)), ".png")
+        probability = predictor.predict(rgb, dhg)
+        path = media.store(io.encode_probability_png(probability), ".png")
         prediction = existing.get(frame.id) or Prediction(run_id=checkpoint.run_id, checkpoint_id=checkpoint.id, frame_id=frame.id)
-        prediction.path, prediction.created_at = path, utcnow()
-        prediction.held_out = every_frame_held_out or frame.id in held_out
+        prediction.path, prediction.held_out, prediction.created_at = path, frame.id in held_out, utcnow()
+        prediction.f_score = prediction.precision = prediction.recall = None
+        if frame.id in truths:
+            mask = truths[frame.id].mask_path
+            counts = frame_counts(probability, media.absolute_path(mask) if mask else None)
+            prediction.f_score, prediction.precision, prediction.recall = scores_at(counts, threshold_of(checkpoint))
         db.session.add(prediction)
         out.append(prediction)
         if on_progress is not None:
