@@ -183,8 +183,8 @@ class Estimate:
         The share ``q`` of resamples below 0 (ties half, +0.5 of a resample
         either way so it is never 0 or 1) is the BCa interval's lower end at
         the one-sided level ``Phi(w / (1 + a w) - z0)`` with
-        ``w = Phi^-1(q) - z0``; p is twice the smaller tail. With
-        ``a = z0 = 0`` it is ``2 min(q, 1 - q)``.
+        ``w = Phi^-1(q) - z0``; p is twice the smaller tail, and at least
+        ``1 / (B + 1)``. With ``a = z0 = 0`` it is ``2 min(q, 1 - q)``.
         """
         d = self.resampled
         if d.size == 0:
@@ -195,7 +195,8 @@ class Estimate:
         q = (np.count_nonzero(d < 0) + 0.5 * np.count_nonzero(d == 0) + 0.5) / (d.size + 1)
         w = _NORMAL.inv_cdf(q) - z0
         tail = _NORMAL.cdf(w / (1 + a * w) - z0) if 1 + a * w > 0 else float(w > 0)
-        return float(min(1.0, 2 * min(tail, 1 - tail)))
+        # Never below 1 / (B + 1): B resamples cannot tell smaller p-values apart.
+        return float(min(1.0, max(2 * min(tail, 1 - tail), 1 / (d.size + 1))))
 
 
 def _quantiles(ordered: np.ndarray, levels: Sequence[float]) -> tuple[float, ...]:
