@@ -58,6 +58,9 @@ MAX_RESAMPLES = 100_000
 MAX_JACKKNIFE = 100
 """At most this many jackknife groups per stratum (frame i is in group i mod 100)."""
 
+TIE = 1e-6
+"""Values closer than this count as equal (bootstrap rows may be computed in float32: ~1e-7 relative error)."""
+
 _NORMAL = NormalDist()
 
 
@@ -152,7 +155,9 @@ class Estimate:
 
     def _bias_and_acceleration(self) -> tuple[float, float]:
         b = self.resampled.size
-        below = (np.count_nonzero(self.resampled < self.value) + 0.5 * np.count_nonzero(self.resampled == self.value)) / b
+        # Resampled values within 1e-6 of the estimate are ties (they may be computed in float32).
+        tied = np.abs(self.resampled - self.value) <= TIE
+        below = (np.count_nonzero((self.resampled < self.value) & ~tied) + 0.5 * np.count_nonzero(tied)) / b
         z0 = _NORMAL.inv_cdf(min(max(below, 0.5 / b), 1 - 0.5 / b))
         num = den = 0.0
         for jack in self.jackknife:
@@ -174,7 +179,9 @@ class Estimate:
             z = z0 + _NORMAL.inv_cdf(tail)
             shrink = 1 - a * z
             levels.append(_NORMAL.cdf(z0 + z / shrink) if shrink > 0 else float(tail > 0.5))
-        lo, hi = _quantiles(np.sort(self.resampled), levels)
+        bounds = _quantiles(np.sort(self.resampled), levels)
+        # A bound within TIE of the estimate is the estimate (one frame: every resample is the sample, up to float32).
+        lo, hi = (self.value if abs(b - self.value) <= TIE else b for b in bounds)
         return lo, hi
 
     def p_value(self) -> float | None:
@@ -189,10 +196,11 @@ class Estimate:
         d = self.resampled
         if d.size == 0:
             return None
-        if self.value == 0 and not d.any():
+        if abs(self.value) <= TIE and not (np.abs(d) > TIE).any():
             return 1.0  # identical rows
         z0, a = self._bias_and_acceleration()
-        q = (np.count_nonzero(d < 0) + 0.5 * np.count_nonzero(d == 0) + 0.5) / (d.size + 1)
+        tied = np.abs(d) <= TIE
+        q = (np.count_nonzero((d < 0) & ~tied) + 0.5 * np.count_nonzero(tied) + 0.5) / (d.size + 1)
         w = _NORMAL.inv_cdf(q) - z0
         tail = _NORMAL.cdf(w / (1 + a * w) - z0) if 1 + a * w > 0 else float(w > 0)
         # Never below 1 / (B + 1): B resamples cannot tell smaller p-values apart.

@@ -22,6 +22,12 @@ from egonet.errors import EgonetError
 from egonet.metrics.thresholds import Counts, check_beta2, threshold_values
 
 
+def _floats(a: np.ndarray) -> np.ndarray:
+    """``a`` as floats: float32 stays float32 (the bootstrap's fast rows), anything else becomes float64."""
+    a = np.asarray(a)
+    return a if a.dtype == np.float32 else np.asarray(a, dtype=np.float64)
+
+
 def precision_recall(tp: np.ndarray, fp: np.ndarray, positives: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     """Precision and recall from true and false positives and the number of positive pixels.
 
@@ -32,11 +38,11 @@ def precision_recall(tp: np.ndarray, fp: np.ndarray, positives: np.ndarray) -> t
             ((..., 1) or (..., T)).
 
     Returns:
-        ``(precision, recall)``, float64 (..., T).
+        ``(precision, recall)``, float64 (..., T) (float32 for float32 counts).
     """
-    tp = np.asarray(tp, dtype=np.float64)
-    predicted = tp + np.asarray(fp, dtype=np.float64)
-    positives = np.broadcast_to(np.asarray(positives, dtype=np.float64), tp.shape)
+    tp = _floats(tp)
+    predicted = tp + _floats(fp).astype(tp.dtype, copy=False)
+    positives = np.broadcast_to(_floats(positives).astype(tp.dtype, copy=False), tp.shape)
     precision = np.divide(tp, predicted, out=np.ones_like(tp), where=predicted > 0)
     recall = np.divide(tp, positives, out=np.zeros_like(tp), where=positives > 0)
     return precision, recall
@@ -59,16 +65,16 @@ def curve_from_counts(counts: Counts) -> tuple[np.ndarray, np.ndarray]:
 
 
 def f_scores(precision: np.ndarray, recall: np.ndarray, *, beta2: float = 1.0) -> np.ndarray:
-    """``F = (1 + beta2) P R / (beta2 P + R)``, 0 where ``P + R = 0``; float64 of the curves' shape (..., T)."""
-    p = np.asarray(precision, dtype=np.float64)
-    r = np.asarray(recall, dtype=np.float64)
+    """``F = (1 + beta2) P R / (beta2 P + R)``, 0 where ``P + R = 0``; float64 (float32 for float32 curves) of the curves' shape (..., T)."""
+    p = _floats(precision)
+    r = _floats(recall).astype(p.dtype, copy=False)
     return np.divide((1.0 + beta2) * p * r, beta2 * p + r, out=np.zeros_like(p), where=(p + r) > 0)
 
 
 def average_precision(precision: np.ndarray, recall: np.ndarray) -> np.ndarray:
     """``AP = sum_k (R_k - R_{k+1}) P_k`` along the last axis (increasing thresholds, ``R_{T+1} = 0``); shape (...)."""
-    p = np.asarray(precision, dtype=np.float64)
-    r = np.asarray(recall, dtype=np.float64)
+    p = _floats(precision)
+    r = _floats(recall).astype(p.dtype, copy=False)
     drop = r.copy()
     drop[..., :-1] -= r[..., 1:]
     return np.sum(drop * p, axis=-1)

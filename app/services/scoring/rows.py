@@ -21,7 +21,7 @@ from __future__ import annotations
 
 import hashlib
 from collections.abc import Sequence
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 from functools import reduce
 
 import numpy as np
@@ -111,6 +111,7 @@ def _entities(sources: Sequence[Source]) -> list[_Entity]:
 
 
 def _fingerprint(parts: Sequence[object]) -> str:
+    """A short digest of strings, tuples of strings and arrays (whole: an array's repr would shorten it)."""
     digest = hashlib.sha1()
     for part in parts:
         digest.update(part.tobytes() if isinstance(part, np.ndarray) else repr(part).encode())
@@ -123,14 +124,26 @@ class Scorer:
 
     metric: str
     resampler: Resampler
+    _scored: dict[tuple[str, str], dict[str, Values]] = field(default_factory=dict, repr=False)
 
     @property
     def statistics(self) -> list[str]:
         return list(STATISTIC_LABELS[self.metric])
 
     def values(self, entity: _Entity, chosen: dict[str, np.ndarray]) -> list[dict[str, Values]]:
-        """Each member's estimates per activity (activities with frames), and under :data:`ALL`."""
-        return [self._member(member, {a: ids for a, ids in chosen.items() if ids.size}) for member in entity.members]
+        """Each member's estimates per activity (activities with frames), and under :data:`ALL`.
+
+        A source scored once on some frames is not scored again on them (a
+        group's runs are both in the group and rows of their own).
+        """
+        chosen = {a: ids for a, ids in chosen.items() if ids.size}
+        frames = _fingerprint([part for a, ids in chosen.items() for part in (a, ids)])
+        out = []
+        for member in entity.members:
+            if (member.key, frames) not in self._scored:
+                self._scored[member.key, frames] = self._member(member, chosen)
+            out.append(self._scored[member.key, frames])
+        return out
 
     def _member(self, member: Source, chosen: dict[str, np.ndarray]) -> dict[str, Values]:
         """One source's estimates. Its ``all`` reduces sums of the activities' weighted sums: no second pass over the frames.
@@ -142,17 +155,18 @@ class Scorer:
         """
         thresholds, b = member.stats.counts.thresholds, self.resampler.resamples
         sums = {
-            a: weighted_sums(member.stats.select(ids), metric=self.metric, weights=self.resampler.weights(a, ids.size))
+            a: weighted_sums(member.stats.select(ids), metric=self.metric, weights=self.resampler.weights(a, ids.size), resampled_in_float32=True)
             for a, ids in chosen.items()
         }
         out: dict[str, Values] = {}
         for a, (s, n) in sums.items():
-            reduced = reduce_sums(s, n, metric=self.metric, thresholds=thresholds)
+            reduced = reduce_sums(s, n, metric=self.metric, thresholds=thresholds, resampled_in_float32=True)
             out[a] = {k: self.resampler.estimate(v) for k, v in reduced.items()}
         if sums:
             head = [sum(parts[i][: 1 + b] for parts in sums.values()) for i in (0, 1)]
             jack = [[head[i][0] - parts[i][0] + parts[i][1 + b :] for parts in sums.values()] for i in (0, 1)]
-            reduced = reduce_sums(np.vstack([head[0], *jack[0]]), np.concatenate([head[1], *jack[1]]), metric=self.metric, thresholds=thresholds)
+            reduced = reduce_sums(np.vstack([head[0], *jack[0]]), np.concatenate([head[1], *jack[1]]), metric=self.metric,
+                                  thresholds=thresholds, resampled_in_float32=True)  # fmt: skip
             splits = np.cumsum([1 + b] + [len(j) for j in jack[1]])[:-1]
             out[ALL] = {}
             for k, v in reduced.items():
