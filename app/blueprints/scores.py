@@ -55,6 +55,9 @@ def _compare() -> tuple[str, str] | None:
         return None
     if not a or not b:
         raise scoring.ScoringProblem("compare: choose two rows", fields={"compare_a" if not a else "compare_b": "choose a row"})
+    for name, key in (("compare_a", a), ("compare_b", b)):
+        if len(key) > 200:
+            raise scoring.ScoringProblem(f"{name}: not a row key (at most 200 characters)", fields={name: "not a row key"})
     return a, b
 
 

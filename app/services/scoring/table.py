@@ -234,10 +234,6 @@ class Report:
 
     # -- values the renderers share --------------------------------------------
 
-    @property
-    def per_image(self) -> bool:
-        return self.metric == "per-image"
-
     def statistics(self) -> list[str]:
         """The convention's statistics, in the order they are shown (MF-like first)."""
         return list(STATISTIC_LABELS[self.metric])
