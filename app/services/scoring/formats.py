@@ -279,6 +279,10 @@ def comparison_dict(c: Comparison) -> dict[str, Any]:
     }
 
 
+def _signed(ci: tuple[float, float] | None) -> str:
+    return "" if ci is None else f"[{ci[0]:+.3f}, {ci[1]:+.3f}]"
+
+
 def _p(p: float | None) -> str:
     return "-" if p is None else f"{p:.3f}"
 
@@ -289,7 +293,7 @@ def comparison_text(c: Comparison) -> str:
     head = c.headline()
     lines = [
         f"{c.a[1]} [{c.a[0]}] minus {c.b[1]} [{c.b[0]}], on the frames both have ({c.metric} convention).",
-        f"Mean {labels['max_f']} difference {head.value:+.3f} {_interval(head.ci)} p = {_p(head.p_value)} ({head.n_frames} frames).",
+        f"{labels['max_f']} difference (mean over activities) {head.value:+.3f} {_signed(head.ci)} p = {_p(head.p_value)} ({head.n_frames} frames).",
         f"Paired BCa bootstrap over frames within each activity, {c.resamples} resamples, seed {c.seed}; p two-sided.",
         "",
     ]
@@ -301,7 +305,6 @@ def comparison_text(c: Comparison) -> str:
         text = f"{name:<20}{next(iter(ds.values())).n_frames:>6}"
         for s in c.statistics:
             d = ds[s]
-            ci = "" if d.ci is None else f"[{d.ci[0]:+.3f}, {d.ci[1]:+.3f}]"
-            text += f"  {d.value:>+12.3f}  {ci:<18}{_p(d.p_value):>6}"
+            text += f"  {d.value:>+12.3f}  {_signed(d.ci):<18}{_p(d.p_value):>6}"
         lines.append(text.rstrip())
     return "\n".join(lines) + "\n"
