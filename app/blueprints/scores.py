@@ -1,9 +1,14 @@
-"""The Scores page: Table 2 for this project, with precision-recall curves and downloads.
+"""The Scores page: Table 2 for this project, with intervals, comparisons, precision-recall curves and downloads.
 
-The choice of runs and studies travels in the query string (checkboxes in a
-GET form), so a table can be bookmarked and its downloads repeat it. Without
-``chosen`` in the query, the page scores every completed run, every study and
-the baselines.
+Everything travels in the query string (a GET form), so a table can be
+bookmarked and its downloads repeat it:
+
+* what to score: ``chosen``, ``runs``, ``studies``, ``baselines`` (without
+  ``chosen``: every completed run, every study and the baselines);
+* how: ``metric`` (``pooled``, ``per-image``, ``ods-ois``), ``frames``
+  (``shared``, ``each``), ``answered_only``;
+* ``compare_a`` / ``compare_b``: two row keys to compare;
+* ``plotted`` and ``plot``: the rows the precision-recall plots draw.
 """
 
 from flask import Blueprint, Response, render_template, request
@@ -17,6 +22,7 @@ DOWNLOADS = {
     "tex": ("application/x-tex", lambda r: r.to_latex()),
     "json": ("application/json", lambda r: r.to_json()),
 }
+FIGURES = {"svg": "image/svg+xml", "pdf": "application/pdf"}
 
 
 def _ids(name: str) -> list[int]:
@@ -34,44 +40,120 @@ def _choice() -> dict:
     return {"run_ids": _ids("runs"), "study_ids": _ids("studies"), "baselines": "baselines" in request.args}
 
 
-def _query(choice: dict, runs: list, studies: list) -> dict:
-    """Query values that repeat this choice (for the download links)."""
+def _view() -> dict:
+    """How to score: the convention, the frames, and whether people's unanswered trials are left out."""
+    return {
+        "metric": request.args.get("metric", "pooled"),
+        "frames": request.args.get("frames", "shared"),
+        "answered_only": request.args.get("answered_only") == "1",
+    }
+
+
+def _compare() -> tuple[str, str] | None:
+    a, b = request.args.get("compare_a", ""), request.args.get("compare_b", "")
+    if not a and not b:
+        return None
+    if not a or not b:
+        raise scoring.ScoringProblem("compare: choose two rows", fields={"compare_a" if not a else "compare_b": "choose a row"})
+    for name, key in (("compare_a", a), ("compare_b", b)):
+        if len(key) > 200:
+            raise scoring.ScoringProblem(f"{name}: not a row key (at most 200 characters)", fields={name: "not a row key"})
+    return a, b
+
+
+def _plot_rows() -> set[str] | None:
+    return set(request.args.getlist("plot")) if "plotted" in request.args else None
+
+
+def _query(choice: dict, view: dict, runs: list, studies: list) -> dict:
+    """Query values that repeat this choice and view (for the forms' hidden fields and the download links)."""
     query = {
         "chosen": 1,
         "runs": [run.id for run in runs] if choice["run_ids"] is None else choice["run_ids"],
         "studies": [study.id for study, _ in studies] if choice["study_ids"] is None else choice["study_ids"],
+        "metric": view["metric"],
+        "frames": view["frames"],
     }
     if choice["baselines"]:
         query["baselines"] = 1
+    if view["answered_only"]:
+        query["answered_only"] = 1
     return query
 
 
 @bp.get("/")
 def index():
-    choice = _choice()
-    report = scoring.build_report(**choice)
-    plots = [scoring.pr_plot(report, key) for key in ([scoring.ALL, *report.activities] if report.rows else [])]
+    choice, view = _choice(), _view()
+    report = scoring.build_report(**choice, **view, compare_keys=_compare())
+    shown = _plot_rows()
+    keys = [scoring.ALL, *report.activities] if report.rows else []
+    plots = [scoring.pr_plot(report, key, rows=shown) for key in keys]
     runs, studies = scoring.available_runs(), scoring.available_studies()
-    query = _query(choice, runs, studies)
+    query = _query(choice, view, runs, studies)
     return render_template(
         "scores/index.html",
         report=report,
         plots=plots,
+        plot_rows=scoring.default_plot_rows(report) if shown is None else shown,
         best=report.best(),
         runs=runs,
         studies=studies,
         chosen_runs=set(query["runs"]),
         chosen_studies=set(query["studies"]),
         baselines=choice["baselines"],
+        view=view,
         query=query,
-        definition=scoring.DEFINITION,
+        metrics=scoring.METRIC_TITLES,
+        metric_short=scoring.METRIC_SHORT,
+        frames=scoring.FRAMES,
+        compare=request.args,
     )
 
 
 @bp.get("/table.<any(csv, tex, json):table_format>")
 def download(table_format: str):
     """The table as CSV, LaTeX (booktabs) or JSON (with the curves), for the same choice as the page."""
-    report = scoring.build_report(**_choice())
+    report = scoring.build_report(**_choice(), **_view(), compare_keys=_compare())
     mimetype, render = DOWNLOADS[table_format]
     headers = {"Content-Disposition": f'attachment; filename="scores.{table_format}"'}
     return Response(render(report), mimetype=mimetype, headers=headers)
+
+
+@bp.get("/figure.<any(svg, pdf):figure_format>")
+def figure(figure_format: str):
+    """One precision-recall plot (``activity``, default all activities) as an SVG or PDF file for a paper."""
+    report = scoring.build_report(**_choice(), **_view())
+    key = request.args.get("activity", scoring.ALL)
+    if key != scoring.ALL and key not in report.activities:
+        raise scoring.ScoringProblem(f"activity: no row has frames of {key!r}", fields={"activity": "not an activity of the table"})
+    body = scoring.pr_figure(report, key, rows=_plot_rows(), file_format=figure_format)
+    name = "pr-all" if key == scoring.ALL else "pr-" + "".join(ch if ch.isalnum() else "-" for ch in key)
+    headers = {"Content-Disposition": f'attachment; filename="{name}.{figure_format}"'}
+    return Response(body, mimetype=FIGURES[figure_format], headers=headers)
+
+
+def _frame_table():
+    view = _view()
+    return scoring.frame_table(
+        **_choice(),
+        activity=request.args.get("activity") or None,
+        frames=view["frames"],
+        answered_only=view["answered_only"],
+        sort=request.args.get("sort") or None,
+    )
+
+
+@bp.get("/frames")
+def frames():
+    """Per-image scores: each frame of one activity with every row's own best F and AP on it."""
+    table = _frame_table()
+    choice, view = _choice(), _view()
+    query = _query(choice, view, scoring.available_runs(), scoring.available_studies())
+    return render_template("scores/frames.html", table=table, query=query, view=view)
+
+
+@bp.get("/frames.csv")
+def frames_csv():
+    table = _frame_table()
+    name = "per-image-" + "".join(ch if ch.isalnum() else "-" for ch in table.activity or "none")
+    return Response(table.to_csv(), mimetype="text/csv", headers={"Content-Disposition": f'attachment; filename="{name}.csv"'})

@@ -1,8 +1,10 @@
-"""The score table: people, baselines and model rows against a direct computation; cache; renderers; CLI; page."""
+"""The score table's numbers: people, baselines, models and seed groups against direct computations; frames; comparisons; cache.
 
-import csv
-import io
+The renderers, the CLI and the page are in tests/app/test_scoring_pages.py.
+"""
+
 import json
+from datetime import UTC, datetime, timedelta
 from pathlib import Path
 
 import cv2
@@ -16,11 +18,12 @@ from app.models.training import Checkpoint, FoldsMode, Prediction, RunStatus, Tr
 from app.services import ground_truth, media, scoring, studies, training
 from app.services.demo import create_demo
 from app.services.importing import FrameItem, add_frames
+from app.services.scoring import cache as scoring_cache
 from app.services.scoring import sources as scoring_sources
 from egonet import clicks as egonet_clicks
 from egonet import io as egonet_io
 from egonet.baselines import ActionObjectPrior, CenterPrior, GraphSaliency, HandledViewedObject, SpectralResidualSaliency
-from egonet.metrics import score_maps
+from egonet.metrics import count_stats, score_maps
 from tests.app.access.studies import build_study
 
 SIZE = (48, 64)
@@ -28,6 +31,17 @@ HANDLED_ROW = "handled + viewed object (hands: labelled tactile objects)"
 # Each activity's action-object sits somewhere else, so a prior fitted with
 # or without the tested activity's own masks gives different scores.
 BOXES = {"cooking": (slice(5, 20), slice(5, 25)), "hotel": (slice(25, 45), slice(35, 60)), "desk work": (slice(15, 35), slice(20, 45))}
+T0 = datetime(2026, 5, 4, 10, 0, 0, tzinfo=UTC)
+
+
+class Clock:
+    """The studies' clock (the app's STUDY_CLOCK), moved by hand."""
+
+    def __init__(self, t: datetime):
+        self.t = t
+
+    def __call__(self) -> datetime:
+        return self.t
 
 
 def add_activity(name: str, *, n: int = 3, seed: int = 0) -> None:
@@ -64,7 +78,7 @@ def rgb_of(frame: Frame) -> np.ndarray:
 
 
 def row(report: scoring.Report, name: str) -> scoring.Row:
-    return next(r for r in report.rows if r.name == name)
+    return next(r for r in report.all_rows() if r.name == name)
 
 
 def answer(participant: Participant, answers) -> list[int]:
@@ -82,21 +96,33 @@ def answer(participant: Participant, answers) -> list[int]:
     return answered
 
 
+def assert_cell(cell: scoring.Cell, expected, n: int, *, ap: bool = True) -> None:
+    """A cell equals a direct ``score_maps`` (to 1e-12), has ``n`` frames, and an interval around its value."""
+    assert cell.n_frames == n
+    assert cell.max_f == pytest.approx(expected.max_f, abs=1e-12)
+    lo, hi = cell.ci["max_f"]
+    assert lo <= cell.max_f + 1e-12 and cell.max_f - 1e-12 <= hi
+    if ap:
+        assert cell.ap == pytest.approx(expected.ap, abs=1e-12)
+    else:
+        assert cell.ap is None and cell.ci["ap"] is None  # MF only for people
+
+
 # --------------------------------------------------------------------------
-# People
+# People: shared frames, each row's own frames, unanswered trials
 
 
-def test_people_rows_match_a_direct_computation_on_the_frames_they_answered(ctx, tmp_path):
+def test_people_on_shared_and_own_frames_and_their_unanswered_trials(app, ctx, tmp_path):
+    clock = app.config["STUDY_CLOCK"] = Clock(T0)
     ids = build_study(tmp_path, activities=("cooking", "hotel"), frames=3, per_activity=2, participants=2, sigma_px=6.0)
     first, second = (db.session.get(Participant, pid) for pid in ids["participants"])
-    # P01 clicks every frame at a known point; P02 answers "none" once, clicks twice, then stops.
     clicks_of = {}
 
     def first_answers(trial):
         clicks_of[first.id, trial.frame.id] = [(17.0, 14.0)]
         return studies.Answer(clicks=[(17.0, 14.0, 400.0)])
 
-    def second_answers(trial):
+    def second_answers(trial):  # "none" once, clicks twice, then the tab is closed
         if trial.position == 1:
             clicks_of[second.id, trial.frame.id] = []
             return studies.Answer(clicks=[], none=True)
@@ -107,43 +133,99 @@ def test_people_rows_match_a_direct_computation_on_the_frames_they_answered(ctx,
 
     answered = {first.id: answer(first, first_answers), second.id: answer(second, second_answers)}
     assert len(answered[first.id]) == 4 and len(answered[second.id]) == 3
-
-    report = scoring.build_report(run_ids=[], study_ids=[ids["study"]], baselines=False)
-    assert [(r.name, r.kind) for r in report.rows] == [("P01", "human"), ("P02", "human")]
-    assert report.activities == ["cooking", "hotel"]
-
     study = db.session.get(Study, ids["study"])
-    for person in (first, second):
-        by_activity: dict[str, tuple[list, list]] = {}
-        for frame_id in answered[person.id]:
-            frame = db.session.get(Frame, frame_id)
-            labels = studies.superpixel_labels(frame, study.superpixels)
-            soft = egonet_clicks.soft_mask(SIZE, clicks_of[person.id, frame_id], sigma=6.0, labels=labels)
-            probs, masks = by_activity.setdefault(frame.sequence.activity.name, ([], []))
-            probs.append(soft)
-            masks.append(truth_mask(frame))
-        got = row(report, person.label)
-        assert set(got.cells) == set(by_activity)
-        expected = {a: score_maps(p, m) for a, (p, m) in by_activity.items()}
-        for activity, score in expected.items():
-            cell = got.cells[activity]
-            assert cell.max_f == score.max_f and cell.ap is None  # MF only for people
-            assert cell.n_frames == len(by_activity[activity][0])
-        assert got.mean() == (pytest.approx(np.mean([s.max_f for s in expected.values()]), abs=1e-12), None)
-        pooled = score_maps([p for ps, _ in by_activity.values() for p in ps], [m for _, ms in by_activity.values() for m in ms])
-        assert got.overall.max_f == pooled.max_f
-        assert got.overall.n_frames == len(answered[person.id])
-    assert sum(c.n_frames for c in row(report, "P02").cells.values()) == 3  # only what P02 answered
+    frames = {fid: db.session.get(Frame, fid) for fid in answered[first.id]}
+    activity = {fid: f.sequence.activity.name for fid, f in frames.items()}
 
-    # Two studies: names say which study; a participant without answers is only a note.
+    def soft(person, fid):
+        if (person.id, fid) not in clicks_of:
+            return np.zeros(SIZE, np.float32)  # no answer: an empty map
+        labels = studies.superpixel_labels(frames[fid], study.superpixels)
+        return egonet_clicks.soft_mask(SIZE, clicks_of[person.id, fid], sigma=6.0, labels=labels)
+
+    def direct(person, fids):
+        by_activity = {}
+        for fid in fids:
+            probs, masks = by_activity.setdefault(activity[fid], ([], []))
+            probs.append(soft(person, fid))
+            masks.append(truth_mask(frames[fid]))
+        return {a: (score_maps(p, m), len(p)) for a, (p, m) in by_activity.items()}
+
+    def check(report, person, fids):
+        got = row(report, person.label)
+        expected = direct(person, fids)
+        assert set(got.cells) == set(expected)
+        for a, (score, n) in expected.items():
+            assert_cell(got.cells[a], score, n, ap=False)
+        assert got.mean.max_f == pytest.approx(np.mean([s.max_f for s, _ in expected.values()]), abs=1e-12)
+        assert got.mean.n_frames == len(fids) and got.mean.activities == len(expected)
+
+    # P02 is still in session: their last trial is pending, not unanswered.
+    each = scoring.build_report(run_ids=[], study_ids=[ids["study"]], baselines=False, frames="each")
+    assert [(r.name, r.kind, r.unanswered) for r in each.rows] == [("P01", "human", 0), ("P02", "human", 0)]
+    check(each, first, answered[first.id])
+    check(each, second, answered[second.id])
+    assert "P02 is still in session: 1 trials not answered yet are left out." in each.notes
+    # The activity where P02 has one frame less: the two are on different frames, so neither is bold there.
+    short = activity[next(f for f in answered[first.id] if f not in answered[second.id])]
+    best = each.best()
+    assert not best.get((short, "max_f")) and not best.get(("mean", "max_f"))
+    full = next(a for a in each.activities if a != short)
+    assert set(best[full, "max_f"]) <= {r.key for r in each.rows} and best[full, "max_f"]
+
+    # By default both are scored on the frames both have.
+    shared = scoring.build_report(run_ids=[], study_ids=[ids["study"]], baselines=False)
+    assert shared.frames == "shared"
+    check(shared, first, answered[second.id])
+    check(shared, second, answered[second.id])
+    assert shared.row(f"participant:{first.id}").cells[short].frames_available == 2
+    assert any(note.startswith(f"{short}: 1 frames shared by the 2 rows") for note in shared.notes)
+
+    # The session's time runs out: the trial P02 never answered counts as an empty map.
+    clock.t = T0 + timedelta(hours=2)
+    late = scoring.build_report(run_ids=[], study_ids=[ids["study"]], baselines=False)
+    assert [(r.name, r.unanswered) for r in late.rows] == [("P01", 0), ("P02", 1)]
+    check(late, first, answered[first.id])
+    check(late, second, answered[first.id])  # the empty map included
+    assert not any("still in session" in note for note in late.notes)
+    # Answered trials only, as before: P02 back on 3 frames, and the table still says 1 was unanswered.
+    answered_only = scoring.build_report(run_ids=[], study_ids=[ids["study"]], baselines=False, answered_only=True, frames="each")
+    check(answered_only, second, answered[second.id])
+    assert row(answered_only, "P02").unanswered == 1 and answered_only.answered_only
+
+    # Two studies: names say which study; a participant who has not started is only a note.
     other = build_study(tmp_path / "other", activities=("desk work",), frames=2, per_activity=1, participants=1)
     both = scoring.build_report(run_ids=[], study_ids=[ids["study"], other["study"]], baselines=False)
     assert [r.name for r in both.rows] == [f"P01 (study {ids['study']})", f"P02 (study {ids['study']})"]
-    assert any("no answered trials" in note for note in both.notes)
+    assert f"P01 (study {other['study']}) has not started." in both.notes
+
+
+def test_an_expired_trial_is_unanswered_while_the_session_goes_on(app, ctx, tmp_path):
+    clock = app.config["STUDY_CLOCK"] = Clock(T0)
+    ids = build_study(tmp_path, activities=("cooking", "hotel"), frames=2, per_activity=2, participants=1, trial_limit_s=5)
+    person = db.session.get(Participant, ids["participants"][0])
+    studies.answer_consent(person, agree=True)
+    studies.start_session(person)
+    state = studies.session_state(person)
+    state = studies.submit(person, state.trial, studies.Answer(clicks=[(20.0, 15.0, 300.0)]))
+    expired = state.trial.frame.id
+    clock.t += timedelta(seconds=10)  # the second trial's 5 s run out
+    state = studies.session_state(person)
+    studies.submit(person, state.trial, studies.Answer(clicks=[(20.0, 15.0, 300.0)]))
+    report = scoring.build_report(run_ids=[], study_ids=[ids["study"]], baselines=False, frames="each")
+    (got,) = report.rows
+    assert got.unanswered == 1 and got.mean.n_frames == 3  # two answers and the expired trial; the fourth is pending
+    # Per image, it is there as an empty map (best F 0), marked unanswered.
+    frame = db.session.get(Frame, expired)
+    table = scoring.frame_table(run_ids=[], study_ids=[ids["study"]], baselines=False, activity=frame.sequence.activity.name, frames="each")
+    line = next(line for line in table.lines if line.frame_id == expired)
+    assert line.scores[got.key][0] == 0.0 and line.scores[got.key][2] is None and line.answered == {got.key: False}
+    only = scoring.build_report(run_ids=[], study_ids=[ids["study"]], baselines=False, frames="each", answered_only=True)
+    assert only.rows[0].mean.n_frames == 2 and only.rows[0].unanswered == 1
 
 
 # --------------------------------------------------------------------------
-# Baselines
+# Baselines, and the three conventions
 
 
 def test_baselines_match_a_direct_computation_and_aop_follows_the_fold_rule(ctx):
@@ -164,9 +246,7 @@ def test_baselines_match_a_direct_computation_and_aop_follows_the_fold_rule(ctx)
         others = [m for a, ms in masks.items() if a != activity for m in ms]
         prior = ActionObjectPrior.fit(others)
         expected = score_maps([prior.predict(rgb) for rgb in rgbs[activity]], masks[activity])
-        assert aop.cells[activity].max_f == pytest.approx(expected.max_f, abs=1e-9)
-        assert aop.cells[activity].ap == pytest.approx(expected.ap, abs=1e-9)
-        assert aop.cells[activity].n_frames == 3
+        assert_cell(aop.cells[activity], expected, 3)
         # A prior that has seen the tested activity scores differently: the fold rule matters here.
         leaky = ActionObjectPrior.fit([m for ms in masks.values() for m in ms])
         assert score_maps([leaky.predict(rgb) for rgb in rgbs[activity]], masks[activity]).ap != pytest.approx(expected.ap, abs=1e-3)
@@ -182,14 +262,15 @@ def test_baselines_match_a_direct_computation_and_aop_follows_the_fold_rule(ctx)
         got = row(report, name)
         for activity in frames:
             expected = score_maps([predict(rgb, m, activity) for rgb, m in zip(rgbs[activity], masks[activity])], masks[activity])
-            assert (got.cells[activity].max_f, got.cells[activity].ap) == (expected.max_f, expected.ap)
+            assert (got.cells[activity].max_f, got.cells[activity].ap) == (expected.max_f, expected.ap)  # the same arithmetic
         pooled = score_maps(
             [predict(rgb, m, a) for a in frames for rgb, m in zip(rgbs[a], masks[a])], [m for a in frames for m in masks[a]]
         )
-        assert (got.overall.max_f, got.overall.ap) == (pooled.max_f, pooled.ap)
-        mean_mf, mean_ap = got.mean()
-        assert mean_mf == pytest.approx(np.mean([got.cells[a].max_f for a in frames]))
-        assert mean_ap == pytest.approx(np.mean([got.cells[a].ap for a in frames]))
+        assert got.overall.max_f == pytest.approx(pooled.max_f, abs=1e-12) and got.overall.n_frames == 9
+        assert got.mean.max_f == pytest.approx(np.mean([got.cells[a].max_f for a in frames]), abs=1e-12)
+        assert got.mean.ap == pytest.approx(np.mean([got.cells[a].ap for a in frames]), abs=1e-12)
+        lo, hi = got.mean.ci["max_f"]
+        assert lo < got.mean.max_f < hi
 
 
 def test_with_one_activity_there_is_no_aop(ctx):
@@ -199,38 +280,72 @@ def test_with_one_activity_there_is_no_aop(ctx):
     assert report.notes == ["AOP: no other activity has labelled frames to fit the prior for cooking."]
 
 
-def test_per_image_mode_and_thresholds(ctx):
+def test_the_conventions_and_thresholds_against_direct_computations(ctx):
     add_activity("cooking", seed=1)
     add_activity("hotel", seed=2)
-    pooled = scoring.build_report(run_ids=[], study_ids=[])
-    per_image = scoring.build_report(run_ids=[], study_ids=[], per_image=True)
-    coarse = scoring.build_report(run_ids=[], study_ids=[], thresholds=9)
     frames = frames_by_activity()["hotel"]
     probs = [CenterPrior().predict(rgb_of(f), None) for f in frames]
     masks = [truth_mask(f) for f in frames]
-    assert row(per_image, "centre prior").cells["hotel"].max_f == score_maps(probs, masks, per_image=True).max_f
+    own = [score_maps([p], [m]) for p, m in zip(probs, masks)]  # each frame's own curve
+
+    per_image = row(scoring.build_report(run_ids=[], study_ids=[], metric="per-image"), "centre prior").cells["hotel"]
+    assert per_image.max_f == pytest.approx(np.mean([s.max_f for s in own]), abs=1e-12)
+    assert per_image.ap == pytest.approx(np.mean([s.ap for s in own]), abs=1e-12)
+
+    # OIS: each frame's counts at its own best threshold (the highest on ties), summed, then F.
+    at_best = []
+    for p, m, s in zip(probs, masks, own):
+        k = int(np.flatnonzero(s.f == s.f.max())[-1])
+        counts = count_stats(p, m)
+        at_best.append([counts.tp[k], counts.fp[k], counts.fn[k]])
+    tp, fp, fn = np.sum(at_best, axis=0)
+    precision, recall = tp / (tp + fp), tp / (tp + fn)
+    ods_ois = scoring.build_report(run_ids=[], study_ids=[], metric="ods-ois")
+    cell = row(ods_ois, "centre prior").cells["hotel"]
+    assert ods_ois.statistics() == ["max_f", "ois", "ap"] and ods_ois.label("max_f") == "ODS"
+    assert cell.values["ois"] == pytest.approx(2 * precision * recall / (precision + recall), abs=1e-12)
+    pooled = score_maps(probs, masks)
+    assert (cell.max_f, cell.ap) == (pooled.max_f, pooled.ap)  # ODS and AP are the pooled numbers
+    assert cell.ci["ois"] is not None
+
+    coarse = scoring.build_report(run_ids=[], study_ids=[], thresholds=9)
     assert row(coarse, "centre prior").cells["hotel"].ap == score_maps(probs, masks, thresholds=9).ap
-    assert row(pooled, "centre prior").cells["hotel"].max_f == score_maps(probs, masks).max_f
     assert len(row(coarse, "AOP").curves["hotel"].precision) == 9
-    with pytest.raises(scoring.ScoringProblem) as info:
-        scoring.build_report(thresholds=0)
-    assert info.value.field == "thresholds"
+    for bad, field in ((dict(thresholds=0), "thresholds"), (dict(metric="mean"), "metric"), (dict(frames="some"), "frames"),
+                       (dict(resamples=-1), "resamples"), (dict(seed=-1), "seed")):  # fmt: skip
+        with pytest.raises(scoring.ScoringProblem) as info:
+            scoring.build_report(**bad)
+        assert info.value.field == field
+
+
+def test_intervals_follow_resamples_and_seed(ctx):
+    add_activity("cooking", seed=1)
+    add_activity("hotel", seed=2)
+    one = scoring.build_report(run_ids=[], study_ids=[])
+    assert one.to_json() == scoring.build_report(run_ids=[], study_ids=[]).to_json()  # seeded: the same intervals
+    other = scoring.build_report(run_ids=[], study_ids=[], seed=5)
+    cell, moved = row(one, "centre prior").cells["hotel"], row(other, "centre prior").cells["hotel"]
+    assert cell.max_f == moved.max_f and cell.ci["max_f"] != moved.ci["max_f"]
+    none = scoring.build_report(run_ids=[], study_ids=[], resamples=0)
+    assert row(none, "centre prior").cells["hotel"].ci == {"max_f": None, "ap": None}
+    assert row(none, "centre prior").cells["hotel"].max_f == cell.max_f
 
 
 # --------------------------------------------------------------------------
-# Model rows (held-out predictions of completed training runs)
+# Model rows (held-out predictions of completed training runs) and seed groups
 
 
-def make_run(run_id_hint: str, *, held_out: list[str], folds: str = "loao", seed: int = 0) -> TrainingRun:
+def make_run(name: str, *, held_out: list[str], folds: str = "loao", seed: int = 0, config: dict | None = None, maps=None) -> TrainingRun:
     """A done run of egonet-lite with a stored 16-bit prediction for every frame of ``held_out`` activities.
 
     Every other labelled frame gets a prediction too, but not held out:
-    scoring must ignore it.
+    scoring must ignore it. ``maps(frame, rng)`` gives a prediction (default: noise).
     """
     rng = np.random.default_rng(seed)
     run = TrainingRun(
-        name=run_id_hint, model_name="egonet-lite", folds=FoldsMode(folds), epochs=1, device="cpu", seed=seed, status=RunStatus.DONE
-    )
+        name=name, model_name="egonet-lite", folds=FoldsMode(folds), epochs=1, device="cpu", seed=seed, status=RunStatus.DONE,
+        config=config or {},
+    )  # fmt: skip
     db.session.add(run)
     db.session.flush()
     checkpoint = Checkpoint(run_id=run.id, fold="fold", path=f"run-{run.id}/fold.pt", epochs=1)
@@ -238,8 +353,8 @@ def make_run(run_id_hint: str, *, held_out: list[str], folds: str = "loao", seed
     db.session.flush()
     for activity, frames in frames_by_activity().items():
         for frame in frames:
-            u16 = rng.integers(0, 65536, (frame.height, frame.width), dtype=np.uint16)
-            path = media.store(egonet_io.encode_png(u16), ".png")
+            prob = rng.random((frame.height, frame.width)) if maps is None else maps(frame, rng)
+            path = media.store(egonet_io.encode_probability_png(prob.astype(np.float32)), ".png")
             db.session.add(Prediction(run_id=run.id, checkpoint_id=checkpoint.id, frame_id=frame.id, path=path, held_out=activity in held_out))
     db.session.commit()
     return run
@@ -258,11 +373,8 @@ def test_model_rows_score_held_out_predictions_only(ctx):
     single = make_run("lite single", held_out=["hotel"], folds="single", seed=4)
     report = scoring.build_report(study_ids=[], baselines=False)
     # Newest first, named by model and run.
-    assert [(r.name, r.kind) for r in report.rows] == [
-        (f"egonet-lite (run {single.id})", "model"),
-        (f"egonet-lite (run {loao.id})", "model"),
-    ]
-    assert row(report, f"egonet-lite (run {single.id})").detail == "lite single, single folds"
+    assert [(r.name, r.kind) for r in report.rows] == [(f"egonet-lite (run {single.id})", "model"), (f"egonet-lite (run {loao.id})", "model")]
+    assert row(report, f"egonet-lite (run {single.id})").detail == "lite single, single folds, seed 4"
     frames = frames_by_activity()
     for run, activities in ((loao, ["cooking", "hotel"]), (single, ["hotel"])):
         got = row(report, f"egonet-lite (run {run.id})")
@@ -270,10 +382,9 @@ def test_model_rows_score_held_out_predictions_only(ctx):
         for activity in activities:
             probs = [stored_prediction(run, f) for f in frames[activity]]
             expected = score_maps(probs, [truth_mask(f) for f in frames[activity]])
-            assert (got.cells[activity].max_f, got.cells[activity].ap) == (expected.max_f, expected.ap)
-            assert got.cells[activity].n_frames == 3
+            assert_cell(got.cells[activity], expected, 3)
     assert report.partial_means()  # the single run has hotel only
-    assert "*" in report.to_table() and "$^*$" in report.to_latex()
+    assert not report.complete(row(report, f"egonet-lite (run {single.id})"))
 
     one = scoring.build_report(run_ids=[loao.id], study_ids=[], baselines=False)
     assert [r.name for r in one.rows] == [f"egonet-lite (run {loao.id})"]
@@ -284,6 +395,65 @@ def test_model_rows_score_held_out_predictions_only(ctx):
         with pytest.raises(scoring.ScoringProblem) as info:
             scoring.build_report(run_ids=[run_id])
         assert info.value.field == "runs" and f"run {run_id} is not a completed training run" in str(info.value)
+
+
+def config_of(seed: int, *, epochs: int = 6, device: str = "cpu") -> dict:
+    """A run's recorded configuration, as ``training.create_run`` writes it."""
+    train = {"model": "egonet-lite", "folds": "loao", "epochs": epochs, "seed": seed, "device": device, "lr": 0.02, "batch_size": 4}
+    return {"train": train, "activity_ids": None, "activities": ["cooking", "hotel"], "frames": 6}
+
+
+def test_runs_that_differ_only_in_their_seed_are_one_row_with_their_spread(ctx):
+    add_activity("cooking", seed=1)
+    add_activity("hotel", seed=2)
+    seeds = [make_run(f"seed {s}", held_out=["cooking", "hotel"], seed=s, config=config_of(s, device="cuda" if s else "cpu")) for s in (0, 1, 2)]
+    longer = make_run("longer", held_out=["cooking", "hotel"], seed=0, config=config_of(0, epochs=12))
+    report = scoring.build_report(study_ids=[], baselines=False)
+    group_key = "seeds:" + ",".join(str(r.id) for r in reversed(seeds))  # newest first, as the runs are listed
+    assert [r.key for r in report.rows] == [f"run:{longer.id}", group_key]
+    group = report.row(group_key)
+    assert group.name == "egonet-lite (3 seeds)" and group.kind == "model"
+    assert [m.key for m in group.members] == [f"run:{r.id}" for r in reversed(seeds)]
+    assert all(m.group == group_key for m in group.members) and [m.seed for m in group.members] == [2, 1, 0]
+    for activity in ("cooking", "hotel"):
+        values = [m.cells[activity].max_f for m in group.members]
+        alone = scoring.build_report(run_ids=[seeds[0].id], study_ids=[], baselines=False).rows[0].cells[activity]
+        assert group.members[-1].cells[activity].max_f == alone.max_f  # each run as on its own
+        cell = group.cells[activity]
+        assert cell.max_f == pytest.approx(np.mean(values), abs=1e-12)
+        assert cell.sd["max_f"] == pytest.approx(np.std(values, ddof=1), abs=1e-12) and cell.sd["max_f"] > 0
+        lo, hi = cell.ci["max_f"]
+        assert lo <= cell.max_f <= hi
+    assert group.mean.max_f == pytest.approx(np.mean([m.mean.max_f for m in group.members]), abs=1e-12)
+    # Only top-level rows compete for best; the group's runs never do.
+    assert all(not (set(keys) & {m.key for m in group.members}) for keys in report.best().values())
+    data = json.loads(report.to_json())
+    by_key = {r["key"]: r for r in data["rows"]}
+    assert by_key[group_key]["members"] == [m.key for m in group.members]
+    assert by_key[f"run:{seeds[0].id}"]["group"] == group_key
+    assert by_key[group_key]["cells"]["hotel"]["max_f_sd"] == pytest.approx(group.cells["hotel"].sd["max_f"])
+
+
+def test_a_paired_comparison_rejects_a_real_difference_and_not_identical_rows(ctx):
+    for seed, name in enumerate(("cooking", "hotel")):
+        add_activity(name, n=8, seed=seed)
+    truth = {f.id: truth_mask(f) for fs in frames_by_activity().values() for f in fs}
+    good = make_run("good", held_out=["cooking", "hotel"], seed=1, maps=lambda f, rng: np.clip(0.8 * truth[f.id] + 0.3 * rng.random(truth[f.id].shape), 0, 1))
+    noisy = make_run("noisy", held_out=["cooking", "hotel"], seed=2)
+    a, b = f"run:{good.id}", f"run:{noisy.id}"
+    report = scoring.build_report(study_ids=[], baselines=False, compare_keys=(a, b))
+    comparison = report.comparison
+    assert comparison.a == (a, f"egonet-lite (run {good.id})") and comparison.statistics == ("max_f", "ap")
+    head = comparison.headline()
+    assert head.value == pytest.approx(row(report, comparison.a[1]).mean.max_f - row(report, comparison.b[1]).mean.max_f, abs=1e-12)
+    assert head.p_value < 0.01 and head.ci[0] > 0 and head.n_frames == 16
+    assert all(d["max_f"].p_value < 0.05 for d in comparison.activities.values())
+    same = scoring.build_report(study_ids=[], baselines=False, compare_keys=(a, a)).comparison
+    assert same.headline().value == 0 and same.headline().p_value == 1.0
+    assert all(d.p_value == 1.0 for ds in same.activities.values() for d in ds.values())
+    with pytest.raises(scoring.ScoringProblem, match="there is no row 'run:999'") as info:
+        scoring.build_report(study_ids=[], baselines=False, compare_keys=(a, "run:999"))
+    assert info.value.field == "compare"
 
 
 def test_model_frames_without_ground_truth_are_left_out_with_a_note(ctx):
@@ -310,7 +480,7 @@ def test_a_run_whose_maps_cannot_be_scored_is_a_note_not_an_error(ctx, app):
     report = scoring.build_report(study_ids=[])
     assert [r.name for r in report.rows] == ["AOP", "centre prior", "saliency", "GBVS", HANDLED_ROW]
     assert any(note.startswith(f"egonet-lite (run {run.id}) could not be scored:") and "10x10" in note for note in report.notes)
-    assert len(list((Path(app.config["CACHE_ROOT"]) / "scores").glob("*.json"))) == 1  # the baselines only
+    assert len(list((Path(app.config["CACHE_ROOT"]) / "scores").glob("*.npz"))) == 1  # the baselines only
 
 
 @pytest.mark.slow
@@ -332,10 +502,11 @@ def test_a_small_trained_run_scores_as_a_direct_computation_on_its_held_out_maps
 
     result = runner.invoke(args=["egonet", "score", "--format", "json", "--no-baselines", "--studies", ""])
     assert result.exit_code == 0, result.output
-    (got,) = json.loads(result.stdout)["rows"]
+    data = json.loads(result.stdout)
+    (got,) = data["rows"]
     with app.app_context():
         (run,) = training.completed_runs()
-        assert got["name"] == f"egonet-lite (run {run.id})" and got["kind"] == "model"
+        assert got["name"] == f"egonet-lite (run {run.id})" and got["kind"] == "model" and got["seed"] == 0
         by_activity: dict[str, tuple[list, list]] = {}
         for frame, probability in training.held_out_predictions(run):
             probs, masks = by_activity.setdefault(frame.sequence.activity.name, ([], []))
@@ -344,7 +515,9 @@ def test_a_small_trained_run_scores_as_a_direct_computation_on_its_held_out_maps
     assert sorted(by_activity) == ["cooking", "dining"]
     for activity, (probs, masks) in by_activity.items():
         expected = score_maps(probs, masks)
-        assert got["cells"][activity] == {"max_f": expected.max_f, "ap": expected.ap, "n_frames": len(probs)}
+        cell = got["cells"][activity]
+        assert (cell["max_f"], cell["ap"], cell["n_frames"]) == (expected.max_f, expected.ap, len(probs))
+        assert cell["max_f_ci"][0] <= cell["max_f"] <= cell["max_f_ci"][1]
     assert got["mean"]["max_f"] == pytest.approx(np.mean([c["max_f"] for c in got["cells"].values()]))
 
 
@@ -365,9 +538,10 @@ def test_statistics_are_cached_and_recomputed_when_their_inputs_change(ctx, monk
     again = scoring.build_report(study_ids=[])
     assert scored == []  # read back
     assert again.to_json() == first.to_json()
-    per_image = scoring.build_report(study_ids=[], per_image=True)  # the same statistics serve per-image mode
-    assert per_image.per_image and scored == []
-    assert row(per_image, "centre prior").cells["cooking"].max_f != row(first, "centre prior").cells["cooking"].max_f
+    # The same per-frame counts serve every convention, frame choice and resampling.
+    for view in (dict(metric="per-image"), dict(metric="ods-ois", frames="each"), dict(resamples=50, seed=3)):
+        scoring.build_report(study_ids=[], **view)
+    assert scored == []
     assert scoring.build_report(study_ids=[], use_cache=False).to_json() == first.to_json()
     assert scored == ["run", "baselines"]
 
@@ -392,200 +566,16 @@ def test_statistics_are_cached_and_recomputed_when_their_inputs_change(ctx, monk
     assert fresh.to_json() == first.to_json()  # the masks and maps themselves did not change
 
 
-def test_unreadable_cache_is_scored_again(ctx, app):
+def test_an_unreadable_or_old_cache_file_is_scored_again(ctx, app):
     add_activity("cooking", seed=1)
     add_activity("hotel", seed=2)
     first = scoring.build_report(run_ids=[], study_ids=[])
-    files = list((Path(app.config["CACHE_ROOT"]) / "scores").glob("*.json"))
-    assert len(files) == 1
-    files[0].write_text("{not json")
-    assert scoring.build_report(run_ids=[], study_ids=[]).to_csv() == first.to_csv()
-    assert json.loads(files[0].read_text())["stats"]
-
-
-# --------------------------------------------------------------------------
-# Renderers
-
-
-def cell(mf, ap, n=10):
-    return scoring.Cell(mf, ap, n)
-
-
-def curve():
-    return scoring.Curve((1.0, 0.5), (0.2, 0.1), 0)
-
-
-def hand_report() -> scoring.Report:
-    def make(key, name, kind, cells):
-        overall = cell(0.5, None if kind == "human" else 0.4, 20)
-        return scoring.Row(key, name, kind, "", cells, overall, {**{a: curve() for a in cells}, scoring.ALL: curve()})
-
-    rows = [
-        make("run:1", "lite_v2 (run 1)", "model", {"cooking": cell(0.40, 0.30), "hotel": cell(0.20, 0.10)}),
-        make("baseline:aop", "AOP", "baseline", {"cooking": cell(0.30, 0.35), "hotel": cell(0.20, 0.05)}),
-        make("participant:1", "P01", "human", {"cooking": cell(0.45, None)}),
-    ]
-    return scoring.Report(activities=["cooking", "hotel"], rows=rows, notes=["a note"])
-
-
-def test_mean_and_best_values():
-    report = hand_report()
-    assert report.rows[0].mean() == (pytest.approx(0.30), pytest.approx(0.20))
-    assert report.rows[2].mean() == (0.45, None)
-    best = report.best()
-    assert best[("cooking", "mf")] == 0.45 and best[("cooking", "ap")] == 0.35
-    assert best[("hotel", "mf")] == 0.20  # a tie: both rows are best
-    assert best[("mean", "mf")] == 0.45 and best[("mean", "ap")] == 0.2
-    assert not report.complete(report.rows[2]) and report.partial_means()
-
-
-def test_latex_is_table_2_shaped_with_the_best_in_bold():
-    tex = hand_report().to_latex()
-    assert "\\begin{tabular}{lcccccc}" in tex and "\\bottomrule" in tex
-    assert "\\multicolumn{2}{c}{cooking} & \\multicolumn{2}{c}{hotel} & \\multicolumn{2}{c}{mean}" in tex
-    lines = {line.split(" & ")[0]: line for line in tex.splitlines() if " & " in line}
-    assert lines["lite\\_v2 (run 1)"] == (
-        "lite\\_v2 (run 1) & 0.400 & 0.300 & \\textbf{0.200} & \\textbf{0.100} & 0.300 & \\textbf{0.200} \\\\"
-    )
-    assert lines["AOP"] == "AOP & 0.300 & \\textbf{0.350} & \\textbf{0.200} & 0.050 & 0.250 & \\textbf{0.200} \\\\"
-    assert lines["P01"] == "P01 & \\textbf{0.450} & -- & -- & -- & \\textbf{0.450}$^*$ & -- \\\\"
-    assert tex.count("\\midrule") == 3  # one per group
-
-
-def test_csv_table_and_json():
-    report = hand_report()
-    rows = list(csv.reader(io.StringIO(report.to_csv())))
-    assert rows[0] == [
-        "method", "kind", "cooking MF", "cooking AP", "cooking frames", "hotel MF", "hotel AP", "hotel frames",
-        "mean MF", "mean AP", "mean over activities",
-    ]  # fmt: skip
-    assert rows[1] == ["lite_v2 (run 1)", "model", "0.4000", "0.3000", "10", "0.2000", "0.1000", "10", "0.3000", "0.2000", "2"]
-    assert rows[3] == ["P01", "human", "0.4500", "", "10", "", "", "", "0.4500", "", "1"]
-
-    table = report.to_table()
-    assert "cooking" in table.splitlines()[0] and "mean" in table.splitlines()[0]
-    line = next(line for line in table.splitlines() if line.startswith("lite_v2"))
-    assert line.split() == ["lite_v2", "(run", "1)", "0.400", "0.300", "0.200", "0.100", "0.300", "0.200"]
-    assert "-- People (MF only)" in table and "a note" in table and "* mean over" in table
-
-    data = json.loads(report.to_json())
-    assert data["activities"] == ["cooking", "hotel"] and data["thresholds"] == 99
-    assert len(data["threshold_values"]) == 99 and data["threshold_values"][0] == 0.01
-    first = data["rows"][0]
-    assert first["cells"]["cooking"] == {"max_f": 0.4, "ap": 0.3, "n_frames": 10}
-    assert first["mean"]["activities"] == 2 and first["curves"]["all"]["precision"] == [1.0, 0.5]
-    assert "unweighted mean" in data["definition"]
-
-
-def test_empty_report_renders():
-    empty = scoring.Report(activities=[], rows=[])
-    assert "nothing to score" in empty.to_table()
-    assert list(csv.reader(io.StringIO(empty.to_csv()))) == [["method", "kind", "mean MF", "mean AP", "mean over activities"]]
-    assert "\\begin{tabular}{lcc}" in empty.to_latex()
-    assert json.loads(empty.to_json())["rows"] == []
-
-
-def test_pr_plot_maps_curves_to_svg_coordinates():
-    report = hand_report()
-    plot = scoring.pr_plot(report, "cooking", width=300, height=270)
-    left, top, right, bottom = scoring.PLOT_MARGIN
-    assert [line.name for line in plot.lines] == ["lite_v2 (run 1)", "AOP", "P01"]
-    first = plot.lines[0]
-    # (recall 0.2, precision 1.0) then (0.1, 0.5)
-    sx, sy = 300 - left - right, 270 - top - bottom
-    assert first.points == f"{round(left + 0.2 * sx, 1)},{float(top)} {round(left + 0.1 * sx, 1)},{round(top + 0.5 * sy, 1)}"
-    assert (first.best_x, first.best_y) == (round(left + 0.2 * sx, 1), float(top))
-    assert plot.lines[2].dashed and not first.dashed
-    assert "MF 0.400" in first.best_label
-    assert len(plot.iso_f) == 4 and plot.title == "cooking"
-    assert [line.name for line in scoring.pr_plot(report, "hotel").lines] == ["lite_v2 (run 1)", "AOP"]
-    assert scoring.pr_plot(report, scoring.ALL).title == "All activities (pooled)"
-
-
-# --------------------------------------------------------------------------
-# CLI
-
-
-def test_score_command_prints_each_format(ctx, runner, tmp_path):
-    ids = build_study(tmp_path, activities=("cooking", "hotel"), frames=3, per_activity=2, participants=1)
-    answer(db.session.get(Participant, ids["participants"][0]), lambda t: studies.Answer(clicks=[(20.0, 15.0, 300.0)]))
-
-    result = runner.invoke(args=["egonet", "score"])
-    assert result.exit_code == 0, result.output
-    table = result.stdout
-    assert "AOP" in table and "centre prior" in table and "saliency" in table and "P01" in table
-    assert "cooking" in table and "mean" in table
-
-    result = runner.invoke(args=["egonet", "score", "--format", "csv", "--runs", "", "--studies", str(ids["study"])])
-    assert result.exit_code == 0, result.output
-    rows = list(csv.reader(io.StringIO(result.stdout)))  # stdout holds the CSV only
-    assert [r[0] for r in rows[1:]] == ["AOP", "centre prior", "saliency", "GBVS", HANDLED_ROW, "P01"]
-
-    result = runner.invoke(args=["egonet", "score", "--format", "latex", "--no-baselines"])
-    assert result.exit_code == 0 and "\\begin{tabular}" in result.stdout and "AOP" not in result.stdout
-
-    result = runner.invoke(args=["egonet", "score", "--format", "json", "--studies", "", "--thresholds", "19", "--per-image", "--no-cache"])
-    data = json.loads(result.stdout)
-    assert data["thresholds"] == 19 and data["per_image"] is True
-    assert [r["name"] for r in data["rows"]] == ["AOP", "centre prior", "saliency", "GBVS", HANDLED_ROW]
-
-    report = scoring.build_report(run_ids=[], study_ids=[ids["study"]])
-    assert runner.invoke(args=["egonet", "score", "--format", "csv"]).stdout == report.to_csv()
-
-
-def test_score_command_errors_are_one_line(ctx, runner):
-    result = runner.invoke(args=["egonet", "score", "--studies", "12"])
-    assert result.exit_code == 1
-    assert [line for line in result.output.splitlines() if line.startswith("Error:")] == ["Error: study 12 does not exist"]
-    result = runner.invoke(args=["egonet", "score", "--runs", "x"])
-    assert result.exit_code == 2 and "--runs" in result.output
-    result = runner.invoke(args=["egonet", "score", "--format", "xml"])
-    assert result.exit_code == 2 and "--format" in result.output
-    result = runner.invoke(args=["egonet", "score", "--thresholds", "0"])
-    assert result.exit_code == 2 and "--thresholds" in result.output
-
-
-# --------------------------------------------------------------------------
-# The page
-
-
-def test_scores_page_shows_the_table_plots_and_downloads(app, admin_client, tmp_path):
-    with app.app_context():
-        ids = build_study(tmp_path, activities=("cooking", "hotel"), frames=3, per_activity=2, participants=1)
-        answer(db.session.get(Participant, ids["participants"][0]), lambda t: studies.Answer(clicks=[(20.0, 15.0, 300.0)]))
-        run_id = make_run("lite", held_out=["cooking"]).id
-    page = admin_client.get("/scores/")
-    assert page.status_code == 200
-    html = page.get_data(as_text=True)
-    assert 'id="score-table"' in html and "<svg" in html and "<polyline" in html
-    for name in (f"egonet-lite (run {run_id})", "AOP", "centre prior", "saliency", "P01"):
-        assert name in html
-    assert html.count('class="pr-plot"') == 3  # all activities, cooking, hotel
-    assert f'name="studies" value="{ids["study"]}" checked' in html
-    assert f'name="runs" value="{run_id}" checked' in html
-    assert f"/scores/table.csv?chosen=1&amp;runs={run_id}&amp;studies={ids['study']}&amp;baselines=1" in html
-
-    page = admin_client.get("/scores/?chosen=1")  # nothing ticked: no rows
-    assert page.status_code == 200 and "Nothing to score yet" in page.get_data(as_text=True)
-    page = admin_client.get(f"/scores/?chosen=1&studies={ids['study']}")
-    html = page.get_data(as_text=True)
-    assert 'data-row="participant:' in html and 'data-row="baseline:aop"' not in html
-
-    with admin_client.get(f"/scores/table.csv?chosen=1&baselines=1&studies={ids['study']}") as response:
-        assert response.status_code == 200 and response.mimetype == "text/csv"
-        assert 'filename="scores.csv"' in response.headers["Content-Disposition"]
-        assert [r[0] for r in csv.reader(io.StringIO(response.get_data(as_text=True)))][1:] == ["AOP", "centre prior", "saliency", "GBVS", HANDLED_ROW, "P01"]
-    with admin_client.get("/scores/table.tex") as response:
-        assert response.status_code == 200 and "\\begin{tabular}" in response.get_data(as_text=True)
-    with admin_client.get("/scores/table.json") as response:
-        assert response.status_code == 200 and json.loads(response.get_data(as_text=True))["rows"]
-
-
-def test_scores_page_refuses_bad_choices(admin_client):
-    page = admin_client.get("/scores/?chosen=1&studies=99")
-    assert page.status_code == 400 and "study 99 does not exist" in page.get_data(as_text=True)
-    with admin_client.get("/scores/table.csv?chosen=1&runs=abc", headers={"Accept": "application/json"}) as response:
-        assert response.status_code == 400 and response.get_json()["fields"] == {"runs": "must be whole numbers"}
-    with admin_client.get("/scores/table.json?chosen=1&runs=5", headers={"Accept": "application/json"}) as response:
-        assert response.status_code == 400 and "runs" in response.get_json()["fields"]
-    assert admin_client.get("/scores/table.xml").status_code == 404
+    folder = Path(app.config["CACHE_ROOT"]) / "scores"
+    (path,) = folder.glob("*.npz")
+    (folder / "0123.json").write_text('{"stats": {}, "notes": []}')  # a version 1 file: never read
+    for junk in (b"PK\x03\x04 truncated", b"", b"not a zip at all"):
+        path.write_bytes(junk)
+        assert scoring.build_report(run_ids=[], study_ids=[]).to_csv() == first.to_csv()
+        assert path.read_bytes()[:2] == b"PK"  # rewritten
+    # Statistics of another shape (another number of thresholds) are not used either.
+    assert scoring_cache.read_cached(path, 99) is not None and scoring_cache.read_cached(path, 9) is None

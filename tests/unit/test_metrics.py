@@ -1,4 +1,8 @@
-"""Tests for egonet.metrics: hand-checked cases and a direct reference."""
+"""Tests for egonet.metrics: hand-checked cases and a direct reference.
+
+The per-frame conventions (pooled, per-image, ODS/OIS), the bootstrap and
+the paired test are in tests/unit/test_metrics_frames.py.
+"""
 
 import dataclasses
 

@@ -15,44 +15,74 @@ Rows, in this order:
   ground truth; MF only, as in the paper (AP says little about near-binary
   maps).
 
-Columns are the activities and their mean. Every cell holds MF, AP and the
-number of frames scored. The metric is ``egonet.metrics`` (see
-:data:`DEFINITION`): by default pixel counts are pooled over all the frames
-of the activity at 99 thresholds ``k / 100``. The **mean** column is the
+Columns are the activities and their mean. Every cell holds the chosen
+convention's statistics (``egonet.metrics.frames``: ``pooled``, the
+default, ``per-image`` or ``ods-ois``), their 95 % bootstrap intervals and
+the number of frames scored. By default (``frames="shared"``) every row of
+an activity is scored on the frames all those rows have; ``"each"`` scores
+each row on all its frames and marks the best only among rows on the same
+frames. Runs that differ only in their seed are grouped (mean and standard
+deviation across the seeds, each seed below). The **mean** column is the
 unweighted mean of a row's per-activity values, over the activities the row
 has frames in (marked with ``*`` when that is not every column). Each row
 also keeps the curve pooled over all its frames, for the overall
-precision-recall plot.
+precision-recall plot. Participants' unanswered trials count as empty maps
+unless ``answered_only``.
 
 Ground truth is each frame's finished annotation
-(``app.services.ground_truth``). Computing a row streams its maps through
-one ``ScoreAccumulator`` per activity and stores the accumulators' sufficient
-statistics (per-threshold TP/FP/FN and per-map curve sums) as JSON under
-``CACHE_ROOT/scores/``, named by a hash of everything the row depends on
-(the ground-truth annotations' ids, versions and update times, the run or the
-participant's answers, the number of thresholds, the scorer's version). A
-later report with the same inputs reads the statistics back instead of
-scoring again, in pooled or per-image mode alike.
+(``app.services.ground_truth``). Computing a row streams its maps one at a
+time into per-frame counts at every threshold and stores them as ``.npz``
+under ``CACHE_ROOT/scores/``, named by a hash of everything the row depends
+on (the ground-truth annotations' ids, versions and update times, the run or
+the participant's trials, the number of thresholds, the scorer's version).
+A later report with the same inputs reads the counts back instead of
+scoring again, under any convention, frames or resamples.
 
 The package, one module per concern:
 
 * ``report``: :func:`build_report`, what to score and the jobs that fill the rows;
-* ``sources``: ground truth and each source's statistics per activity;
-* ``cache``: the statistics on disk;
-* ``table``: :class:`Report` and its rows, as text, CSV, LaTeX or JSON;
-* ``plots``: :func:`pr_plot`, the precision-recall plots of the Scores page.
+* ``sources``: ground truth and each source's per-frame counts;
+* ``cache``: the per-frame counts on disk;
+* ``rows``: frames per row (shared or each), seed groups, intervals, paired comparisons;
+* ``table``: :class:`Report`, its rows and cells, a :class:`Comparison`;
+* ``formats``: the report as text, CSV, LaTeX or JSON;
+* ``plots``: :func:`pr_plot` (the page's SVG) and :func:`pr_figure` (SVG/PDF files);
+* ``perframe``: :func:`frame_table`, per-image scores of one activity.
 """
 
-from app.services.scoring.plots import PLOT_MARGIN, Plot, PlotLine, pr_plot
-from app.services.scoring.report import ScoringProblem, available_runs, available_studies, build_report
-from app.services.scoring.table import ALL, DEFINITION, Cell, Curve, Report, Row
+from app.services.scoring.perframe import FrameTable, frame_table
+from app.services.scoring.plots import PLOT_MARGIN, Plot, PlotLine, default_plot_rows, pr_figure, pr_plot
+from app.services.scoring.report import available_runs, available_studies, build_report, load_sources
+from app.services.scoring.rows import ScoringProblem
+from app.services.scoring.table import (
+    ALL,
+    FRAMES,
+    MEAN,
+    METRIC_SHORT,
+    METRIC_TITLES,
+    STATISTIC_LABELS,
+    Cell,
+    Comparison,
+    Curve,
+    Difference,
+    Report,
+    Row,
+    definition,
+)
 
 __all__ = [
     "ALL",
-    "DEFINITION",
+    "FRAMES",
+    "MEAN",
+    "METRIC_SHORT",
+    "METRIC_TITLES",
     "PLOT_MARGIN",
+    "STATISTIC_LABELS",
     "Cell",
+    "Comparison",
     "Curve",
+    "Difference",
+    "FrameTable",
     "Plot",
     "PlotLine",
     "Report",
@@ -61,5 +91,10 @@ __all__ = [
     "available_runs",
     "available_studies",
     "build_report",
+    "default_plot_rows",
+    "definition",
+    "frame_table",
+    "load_sources",
+    "pr_figure",
     "pr_plot",
 ]

@@ -1,35 +1,45 @@
 """Building the score table: which runs, studies and baselines, scored (or read from the cache) into rows.
 
 :func:`build_report` turns the choice into jobs (one per run, one for the
-baselines, one per participant), each with a cache key; a job's statistics
-are read back from ``cache`` or scored by ``sources`` and written there,
-then reduced to the rows of a :class:`~app.services.scoring.table.Report`.
+baselines, one per participant), each with a cache key; a job's per-frame
+statistics are read back from ``cache`` or scored by ``sources`` and written
+there, then ``rows`` reduces them to the rows of a
+:class:`~app.services.scoring.table.Report` under the chosen convention,
+frames and resamples. :func:`load_sources` is the first half alone (the
+per-image page uses it).
+
+A new kind of row registers in :func:`_jobs`: a function that returns
+:class:`_Job` objects (their rows, cache key and how to score them).
 """
 
 from __future__ import annotations
 
+import json
+from collections import defaultdict
 from collections.abc import Callable, Sequence
-from dataclasses import dataclass
+from dataclasses import dataclass, field
+from datetime import timedelta
 from typing import Any, NamedTuple
 
 import numpy as np
 from sqlalchemy import func
 
-from app.errors import Problem
 from app.extensions import db
-from app.models.studies import ANSWERED, Participant, Study, Trial
+from app.models.studies import ANSWERED, EndReason, FrameKind, Outcome, Participant, Study, StudyFrame, Trial
 from app.models.training import Prediction, TrainingRun
-from app.services import training
 from app.services import studies as studies_service
+from app.services import training
 from app.services.scoring import cache, sources
-from app.services.scoring.cache import Stats
+from app.services.scoring.rows import Scorer, ScoringProblem, Source, build_rows, compare
 from app.services.scoring.sources import AOP_SIZE, BASELINE_NAMES, CENTER_SIGMA, SALIENCY, Scored, Truth
-from app.services.scoring.table import ALL, BASELINE, HUMAN, MODEL, Cell, Curve, Report, Row
-from egonet.metrics import DEFAULT_THRESHOLDS, ScoreAccumulator, threshold_values
+from app.services.scoring.table import BASELINE, FRAMES, HUMAN, MODEL, Report
+from egonet.metrics import DEFAULT_RESAMPLES, DEFAULT_THRESHOLDS, METRICS, Resampler, threshold_values
+from egonet.metrics.bootstrap import MAX_RESAMPLES
 
+__all__ = ["ScoringProblem", "available_runs", "available_studies", "build_report", "load_sources"]
 
-class ScoringProblem(Problem):
-    """A score request that cannot go ahead; ``field`` names the bad input."""
+# Training options that do not change what a run learns: runs differing only in these (and the seed) are grouped.
+_NOT_THE_EXPERIMENT = ("seed", "device", "num_workers")
 
 
 # --------------------------------------------------------------------------
@@ -71,7 +81,7 @@ def _choose_studies(study_ids: Sequence[int] | None) -> list[int]:
 
 
 # --------------------------------------------------------------------------
-# Building the report
+# Jobs: rows scored in one pass, with their cache key
 
 
 class _RowSpec(NamedTuple):
@@ -80,6 +90,9 @@ class _RowSpec(NamedTuple):
     name: str
     kind: str
     detail: str
+    signature: str | None = None  # runs with equal signatures differ only in their seed
+    label: str = ""
+    seed: int | None = None
 
 
 @dataclass
@@ -90,111 +103,17 @@ class _Job:
     cache_key: dict[str, Any]
     frames: int  # frames it will score, for progress (0 when unknown)
     score: Callable[[Callable[[int], None]], Scored]
+    notes: list[str] = field(default_factory=list)  # said whenever the job's rows are shown
 
 
-def build_report(
-    *,
-    run_ids: Sequence[int] | None = None,
-    study_ids: Sequence[int] | None = None,
-    baselines: bool = True,
-    thresholds: int = DEFAULT_THRESHOLDS,
-    per_image: bool = False,
-    use_cache: bool = True,
-    on_start: Callable[[int], None] | None = None,
-    on_progress: Callable[[int], None] | None = None,
-    exclude_failed_checks: bool = False,
-    by_condition: bool = False,
-) -> Report:
-    """Score the chosen runs, the baselines and the chosen studies' participants.
-
-    Args:
-        run_ids: Completed training runs to include; None for all of them.
-        study_ids: Studies whose participants to include; None for all.
-        baselines: Include AOP, the centre prior and saliency.
-        thresholds: The number T of thresholds ``k / (T + 1)``.
-        per_image: Average P and R over frames instead of pooling counts.
-        use_cache: Read statistics cached by an earlier report with the
-            same inputs (they are written either way).
-        on_start: Called once with the number of frames to score.
-        on_progress: Called with the number of frames just scored.
-        exclude_failed_checks: Leave out participants who failed a
-            comprehension or attention (catch trial) check.
-        by_condition: Split the human rows by the studies' conditions
-            (ordered and named by condition).
-
-    Returns:
-        The :class:`Report`. A source whose maps cannot be scored (say, a
-        run whose predictions do not match the frames' sizes) becomes a note
-        instead of a row, so the other rows still show.
-
-    Raises:
-        ScoringProblem: naming ``runs``, ``studies`` or ``thresholds``.
-
-    Example::
-
-        report = build_report(run_ids=[3], study_ids=[1])
-        print(report.to_table())
-    """
-    try:
-        threshold_values(thresholds)
-    except ValueError as exc:
-        raise ScoringProblem(str(exc), field="thresholds") from None
-    runs = _choose_runs(run_ids)
-    chosen_studies = _choose_studies(study_ids)
-    truth = sources.load_truth()
-    notes: list[str] = []
-    jobs = [_run_job(run, truth, thresholds) for run in runs]
-    if baselines and truth.frames:
-        jobs.append(_baseline_job(truth, thresholds))
-    jobs += _participant_jobs(
-        chosen_studies, truth, thresholds, notes, exclude_failed_checks=exclude_failed_checks, by_condition=by_condition
-    )
-    rows = _rows(
-        jobs,
-        thresholds=thresholds,
-        per_image=per_image,
-        use_cache=use_cache,
-        on_start=on_start,
-        on_progress=on_progress,
-        notes=notes,
-    )
-    activities = sorted({a for r in rows for a in r.cells})
-    return Report(activities=activities, rows=rows, thresholds=thresholds, per_image=per_image, notes=notes)
-
-
-def _rows(
-    jobs: list[_Job],
-    *,
-    thresholds: int,
-    per_image: bool,
-    use_cache: bool,
-    on_start: Callable[[int], None] | None,
-    on_progress: Callable[[int], None] | None,
-    notes: list[str],
-) -> list[Row]:
-    """The jobs' rows, from cached statistics or scored now (and cached); what went wrong goes to ``notes``."""
-    cached = [(cache.cache_path(job.cache_key), job) for job in jobs]
-    cached = [(path, job, cache.read_cached(path, thresholds) if use_cache else None) for path, job in cached]
-    if on_start is not None:
-        on_start(sum(job.frames for _, job, got in cached if got is None))
-    rows = []
-    for path, job, got in cached:
-        if got is None:
-            try:
-                got = job.score(on_progress or (lambda n: None))
-            except ValueError as exc:  # a map or mask that egonet.metrics refuses
-                notes.append(f"{job.rows[0].name} could not be scored: {exc}")
-                continue
-            cache.write_cached(path, *got)
-        stats, job_notes = got
-        notes += job_notes
-        for spec in job.rows:
-            if not stats.get(spec.stats):
-                if not job_notes:  # else the job has said why
-                    notes.append(f"{spec.name} has no frames with a ground truth to score.")
-                continue
-            rows.append(_row(spec, stats[spec.stats], per_image=per_image))
-    return rows
+def _run_signature(run: TrainingRun) -> str | None:
+    """Everything a run's training depends on but its seed; None for a run without a recorded configuration."""
+    if not isinstance(run.config, dict) or "train" not in run.config:
+        return None
+    train = {k: v for k, v in run.config["train"].items() if k not in _NOT_THE_EXPERIMENT}
+    rest = {k: v for k, v in run.config.items() if k != "train"}
+    what = {"model": run.model_name, "options": run.model_options, "folds": str(run.folds), "train": train, **rest}
+    return json.dumps(what, sort_keys=True, default=str)
 
 
 def _run_job(run: TrainingRun, truth: Truth, thresholds: int) -> _Job:
@@ -202,8 +121,18 @@ def _run_job(run: TrainingRun, truth: Truth, thresholds: int) -> _Job:
     predictions = db.session.execute(
         db.select(func.count(), func.max(Prediction.id)).where(Prediction.run_id == run.id, Prediction.held_out.is_(True))
     ).one()
+    spec = _RowSpec(
+        f"run:{run.id}",
+        "",
+        sources.run_row_name(run),
+        MODEL,
+        f"{run.name}, {run.folds} folds, seed {run.seed}",
+        signature=_run_signature(run),
+        label=run.model_name,
+        seed=run.seed,
+    )
     return _Job(
-        rows=[_RowSpec(f"run:{run.id}", "", sources.run_row_name(run), MODEL, f"{run.name}, {run.folds} folds")],
+        rows=[spec],
         cache_key={"run": run.id, "predictions": list(predictions), "truth": truth.fingerprint, "thresholds": thresholds},
         # Leave-one-activity-out holds every labelled frame out once.
         frames=len(truth.frames) if run.folds == "loao" else 0,
@@ -225,6 +154,14 @@ def _baseline_job(truth: Truth, thresholds: int) -> _Job:
     )
 
 
+def _session_over(person: Participant) -> bool:
+    """Whether the participant can answer no more (finished, or past the deadline and its grace)."""
+    if person.finished_at is not None:
+        return True
+    limit = person.deadline + timedelta(seconds=studies_service.LATE_GRACE_S) if person.deadline else None
+    return limit is not None and studies_service.now() > limit
+
+
 def _participant_jobs(
     study_ids: list[int], truth: Truth, thresholds: int, notes: list[str], *, exclude_failed_checks: bool, by_condition: bool
 ) -> list[_Job]:
@@ -234,47 +171,218 @@ def _participant_jobs(
         left_out = len(studies_service.study_participants(study_ids)) - len(participants)
         if left_out:
             notes.append(f"{left_out} participant{'s' if left_out != 1 else ''} who failed a check left out.")
-    # Answers are never changed once given, so their number and the last
-    # answered trial tell whether a participant's cached scores still hold.
-    answered = {
-        pid: (n, last)
-        for pid, n, last in db.session.execute(
-            db.select(Trial.participant_id, func.count(), func.max(Trial.id))
-            .where(Trial.participant_id.in_([p.id for p in participants]), Trial.outcome.in_(ANSWERED))
-            .group_by(Trial.participant_id)
-        ).all()
-    }
+    # Only the timed part's main trials are scored (never practice or catch trials).
+    trials: dict[int, list[tuple[int, Outcome | None]]] = defaultdict(list)
+    for pid, tid, outcome in db.session.execute(
+        db.select(Trial.participant_id, Trial.id, Trial.outcome)
+        .join(StudyFrame, StudyFrame.id == Trial.study_frame_id)
+        .where(Trial.participant_id.in_([p.id for p in participants]), StudyFrame.kind == FrameKind.MAIN)
+        .order_by(Trial.id)
+    ):
+        trials[pid].append((tid, outcome))
     jobs = []
     for person, condition in chosen:
-        n, last = answered.get(person.id, (0, None))
         name = person.label if len(study_ids) == 1 else f"{person.label} (study {person.study_id})"
         if condition is not None:
             name = f"{name} [{condition or 'no condition'}]"
-        if n == 0:
+        if person.end_reason is EndReason.DECLINED or person.started_at is None:
+            notes.append(f"{name} {'declined consent' if person.end_reason is EndReason.DECLINED else 'has not started'}.")
+            continue
+        over = _session_over(person)
+        answered = [(t, str(o)) for t, o in trials[person.id] if o in ANSWERED]
+        unanswered = [(t, "unanswered") for t, o in trials[person.id] if o is Outcome.EXPIRED or (over and o is None)]
+        pending = sum(1 for _, o in trials[person.id] if o is None and not over)
+        if not answered and not unanswered:
             notes.append(f"{name} has no answered trials yet.")
             continue
+        job_notes = [f"{name} is still in session: {pending} trials not answered yet are left out."] if pending else []
         jobs.append(
             _Job(
                 rows=[_RowSpec(f"participant:{person.id}", "", name, HUMAN, f"{person.study.name}, participant {person.number}")],
-                cache_key={"participant": person.id, "answered": [n, last], "truth": truth.fingerprint, "thresholds": thresholds},
-                frames=n,
-                score=lambda progress, person=person: sources.participant_stats(person, truth, thresholds, progress),
+                # Answers are never changed once given: the trials and their outcomes say whether the scores still hold.
+                cache_key={"participant": person.id, "trials": sorted(answered + unanswered), "truth": truth.fingerprint, "thresholds": thresholds},
+                frames=len(answered) + len(unanswered),
+                score=lambda progress, person=person, over=over: sources.participant_stats(
+                    person, truth, thresholds, progress, session_over=over
+                ),
+                notes=job_notes,
             )
         )
     return jobs
 
 
-def _row(spec: _RowSpec, stats: Stats, *, per_image: bool) -> Row:
-    def scored(acc: ScoreAccumulator) -> tuple[Cell, Curve]:
-        s = acc.score(per_image=per_image)
-        best = int(np.argmax(s.f))
-        curve = Curve(tuple(np.round(s.precision, 5).tolist()), tuple(np.round(s.recall, 5).tolist()), best)
-        return Cell(s.max_f, None if spec.kind == HUMAN else s.ap, s.n_maps), curve
+def _jobs(
+    run_ids: Sequence[int] | None,
+    study_ids: Sequence[int] | None,
+    baselines: bool,
+    thresholds: int,
+    notes: list[str],
+    *,
+    exclude_failed_checks: bool = False,
+    by_condition: bool = False,
+) -> list[_Job]:
+    """Every job of the choice, in table order: models, baselines, people."""
+    runs = _choose_runs(run_ids)
+    chosen_studies = _choose_studies(study_ids)
+    truth = sources.load_truth()
+    jobs = [_run_job(run, truth, thresholds) for run in runs]
+    if baselines and truth.frames:
+        jobs.append(_baseline_job(truth, thresholds))
+    return jobs + _participant_jobs(
+        chosen_studies, truth, thresholds, notes, exclude_failed_checks=exclude_failed_checks, by_condition=by_condition
+    )
 
-    cells, curves = {}, {}
-    pooled = ScoreAccumulator(thresholds=next(iter(stats.values())).thresholds)
-    for activity in sorted(stats):
-        cells[activity], curves[activity] = scored(stats[activity])
-        pooled.merge(stats[activity])
-    overall, curves[ALL] = scored(pooled)
-    return Row(spec.key, spec.name, spec.kind, spec.detail, cells, overall, curves)
+
+# --------------------------------------------------------------------------
+# Building the report
+
+
+def load_sources(
+    *,
+    run_ids: Sequence[int] | None = None,
+    study_ids: Sequence[int] | None = None,
+    baselines: bool = True,
+    thresholds: int = DEFAULT_THRESHOLDS,
+    answered_only: bool = False,
+    exclude_failed_checks: bool = False,
+    by_condition: bool = False,
+    use_cache: bool = True,
+    on_start: Callable[[int], None] | None = None,
+    on_progress: Callable[[int], None] | None = None,
+) -> tuple[list[Source], list[str]]:
+    """Every chosen row's per-frame statistics, from the cache or scored now (and cached), and the notes.
+
+    Arguments as :func:`build_report`. A job whose maps cannot be scored
+    (say, a run whose predictions do not match the frames' sizes) becomes a
+    note instead of rows.
+    """
+    try:
+        threshold_values(thresholds)
+    except ValueError as exc:
+        raise ScoringProblem(str(exc), field="thresholds") from None
+    notes: list[str] = []
+    jobs = _jobs(
+        run_ids, study_ids, baselines, thresholds, notes, exclude_failed_checks=exclude_failed_checks, by_condition=by_condition
+    )
+    cached = [(cache.cache_path(job.cache_key), job) for job in jobs]
+    cached = [(path, job, cache.read_cached(path, thresholds) if use_cache else None) for path, job in cached]
+    if on_start is not None:
+        on_start(sum(job.frames for _, job, got in cached if got is None))
+    out = []
+    for path, job, got in cached:
+        if got is None:
+            try:
+                got = job.score(on_progress or (lambda n: None))
+            except ValueError as exc:  # a map or mask that egonet.metrics refuses
+                notes.append(f"{job.rows[0].name} could not be scored: {exc}")
+                continue
+            cache.write_cached(path, *got)
+        stats, job_notes = got
+        notes += job_notes + job.notes
+        for spec in job.rows:
+            found = stats.get(spec.stats)
+            if found is not None and answered_only:
+                found = found.take(found.answered)
+            if found is None or found.n == 0:
+                if not job_notes:  # else the job has said why
+                    notes.append(f"{spec.name} has no frames with a ground truth to score.")
+                continue
+            unanswered = int(np.count_nonzero(~stats[spec.stats].answered)) if spec.kind == HUMAN else None
+            out.append(Source(spec.key, spec.name, spec.kind, spec.detail, found, unanswered, spec.signature, spec.label, spec.seed))
+    return out, notes
+
+
+def _check_view(metric: str, frames: str, resamples: int, seed: int) -> None:
+    if metric not in METRICS:
+        raise ScoringProblem(f"metric must be one of {', '.join(METRICS)}, got {metric!r}", field="metric")
+    if frames not in FRAMES:
+        raise ScoringProblem(f"frames must be one of {', '.join(FRAMES)}, got {frames!r}", field="frames")
+    if isinstance(resamples, bool) or not isinstance(resamples, int) or not 0 <= resamples <= MAX_RESAMPLES:
+        raise ScoringProblem(f"resamples must be a whole number from 0 to {MAX_RESAMPLES}", field="resamples")
+    if isinstance(seed, bool) or not isinstance(seed, int) or seed < 0:
+        raise ScoringProblem("seed must be a whole number >= 0", field="seed")
+
+
+def build_report(
+    *,
+    run_ids: Sequence[int] | None = None,
+    study_ids: Sequence[int] | None = None,
+    baselines: bool = True,
+    thresholds: int = DEFAULT_THRESHOLDS,
+    metric: str = "pooled",
+    frames: str = "shared",
+    answered_only: bool = False,
+    resamples: int = DEFAULT_RESAMPLES,
+    seed: int = 0,
+    compare_keys: tuple[str, str] | None = None,
+    exclude_failed_checks: bool = False,
+    by_condition: bool = False,
+    use_cache: bool = True,
+    on_start: Callable[[int], None] | None = None,
+    on_progress: Callable[[int], None] | None = None,
+) -> Report:
+    """Score the chosen runs, the baselines and the chosen studies' participants.
+
+    Args:
+        run_ids: Completed training runs to include; None for all of them.
+        study_ids: Studies whose participants to include; None for all.
+        baselines: Include AOP, the centre prior, saliency, GBVS and the handled + viewed object.
+        thresholds: The number T of thresholds ``k / (T + 1)``.
+        metric: The convention: ``"pooled"``, ``"per-image"`` or ``"ods-ois"``
+            (``egonet.metrics.frames``).
+        frames: ``"shared"``: score each activity on the frames every row
+            there has; ``"each"``: every row on all its frames.
+        answered_only: Leave out participants' unanswered trials (by default
+            each counts as an empty map).
+        resamples: Bootstrap resamples for the 95 % intervals (0: none).
+        seed: The bootstrap's seed.
+        compare_keys: Two row keys to compare with a paired test (``report.comparison``).
+        exclude_failed_checks: Leave out participants who failed a
+            comprehension or attention (catch trial) check.
+        by_condition: Split the human rows by the studies' conditions
+            (ordered and named by condition).
+        use_cache: Read statistics cached by an earlier report with the
+            same inputs (they are written either way).
+        on_start: Called once with the number of frames to score.
+        on_progress: Called with the number of frames just scored.
+
+    Returns:
+        The :class:`Report`.
+
+    Raises:
+        ScoringProblem: naming ``runs``, ``studies``, ``thresholds``,
+            ``metric``, ``frames``, ``resamples``, ``seed`` or ``compare``.
+
+    Example::
+
+        report = build_report(run_ids=[3], study_ids=[1], metric="per-image")
+        print(report.to_table())
+    """
+    _check_view(metric, frames, resamples, seed)
+    found, notes = load_sources(
+        run_ids=run_ids,
+        study_ids=study_ids,
+        baselines=baselines,
+        thresholds=thresholds,
+        answered_only=answered_only,
+        exclude_failed_checks=exclude_failed_checks,
+        by_condition=by_condition,
+        use_cache=use_cache,
+        on_start=on_start,
+        on_progress=on_progress,
+    )
+    scorer = Scorer(metric, Resampler(resamples=resamples, seed=seed))
+    rows, activities, frame_notes = build_rows(found, frames=frames, scorer=scorer)
+    comparison = compare(found, *compare_keys, scorer=scorer) if compare_keys else None
+    return Report(
+        activities=activities,
+        rows=rows,
+        thresholds=thresholds,
+        metric=metric,
+        frames=frames,
+        answered_only=answered_only,
+        resamples=resamples,
+        seed=seed,
+        notes=frame_notes + notes,
+        comparison=comparison,
+    )

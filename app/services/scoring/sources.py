@@ -2,7 +2,7 @@
 
 Ground truth is each frame's finished annotation (``app.services.ground_truth``),
 loaded once per report as a :class:`Truth`. The three sources stream their
-maps through one ``ScoreAccumulator`` per activity:
+maps, one at a time, into per-frame counts (``cache.FrameStats``):
 
 * a completed training run: its held-out predictions (``app.services.training``);
   the authors' released model, never trained on ours, holds every frame out;
@@ -10,7 +10,9 @@ maps through one ``ScoreAccumulator`` per activity:
   inside each leave-one-activity-out fold, the centre prior, saliency, GBVS
   and the handled + viewed object (its hands: the labelled tactile objects);
 * a participant: the click soft masks of the frames they answered
-  (``app.services.studies``).
+  (``app.services.studies``), and an empty map for each trial they did not
+  answer (expired, or never reached once their session is over), flagged
+  so that a report can leave those out.
 
 Each returns ``({statistics name: Stats}, notes)``, what ``cache`` stores.
 """
@@ -27,14 +29,14 @@ import numpy as np
 from app.extensions import db
 from app.models import Activity, Annotation, Frame, InstanceKind
 from app.models import Sequence as FrameSequence
-from app.models.studies import Participant
+from app.models.studies import FrameKind, Outcome, Participant, StudyFrame, Trial
 from app.models.training import TrainingRun
 from app.services import ground_truth, media, training
 from app.services import studies as studies_service
-from app.services.scoring.cache import Stats
+from app.services.scoring.cache import Stats, StatsBuilder
 from egonet import io
 from egonet.baselines import CenterPrior, GraphSaliency, HandledViewedObject, SpectralResidualSaliency, aop_fold_priors
-from egonet.metrics import ScoreAccumulator
+from egonet.metrics import count_stats
 
 # Baseline keys, names and the predictors' settings (part of the cache key).
 BASELINE_NAMES = {
@@ -100,18 +102,16 @@ def load_truth() -> Truth:
 
 def _accumulate(
     pairs: Iterable[tuple[Frame, np.ndarray]], truth: Truth, thresholds: int, on_progress: Callable[[int], None]
-) -> tuple[Stats, int]:
-    """Score (frame, map) pairs per activity; return the stats and how many frames had no ground truth."""
-    stats: Stats = {}
+) -> tuple[StatsBuilder, int]:
+    """Count (frame, map) pairs; return the frames' counts and how many frames had no ground truth."""
+    stats = StatsBuilder(thresholds)
     missing = 0
     for frame, prob in pairs:
         mask = truth.mask(frame.id)
         if mask is None:
             missing += 1
             continue
-        activity = truth.activity[frame.id]
-        acc = stats.setdefault(activity, ScoreAccumulator(thresholds=thresholds))
-        acc.add(prob, mask, name=f"prob of frame {frame.id}")
+        stats.add(frame.id, truth.activity[frame.id], count_stats(prob, mask, thresholds=thresholds, name=f"prob of frame {frame.id}"))
         on_progress(1)
     return stats, missing
 
@@ -127,7 +127,7 @@ def run_stats(run: TrainingRun, truth: Truth, thresholds: int, on_progress: Call
     """Score a run's held-out predictions (frames without a ground truth any more become a note)."""
     stats, missing = _accumulate(training.held_out_predictions(run), truth, thresholds, on_progress)
     notes = [f"run {run.id}: {missing} held-out frames no longer have a ground truth and were left out."] if missing else []
-    return {"": stats}, notes
+    return {"": stats.build()}, notes
 
 
 def human_participants(
@@ -147,12 +147,38 @@ def human_participants(
     return sorted(rows, key=lambda row: (row[0].study_id, row[1], row[0].number))
 
 
-def participant_stats(participant: Participant, truth: Truth, thresholds: int, on_progress: Callable[[int], None]) -> Scored:
-    """Score a participant's soft masks of the frames they answered (the timed part's main trials)."""
+def unanswered_frames(participant: Participant, *, session_over: bool) -> list[Frame]:
+    """The frames of a participant's trials without an answer: expired ones, and once the session is over every trial left."""
+    unanswered = Trial.outcome == Outcome.EXPIRED
+    if session_over:
+        unanswered |= Trial.outcome.is_(None)
+    return list(
+        db.session.execute(
+            db.select(Frame)
+            .join(StudyFrame, StudyFrame.frame_id == Frame.id)
+            .join(Trial, Trial.study_frame_id == StudyFrame.id)
+            .where(Trial.participant_id == participant.id, StudyFrame.kind == FrameKind.MAIN, unanswered)
+            .order_by(Trial.position)
+        ).scalars()
+    )
+
+
+def participant_stats(
+    participant: Participant, truth: Truth, thresholds: int, on_progress: Callable[[int], None], *, session_over: bool
+) -> Scored:
+    """Score a participant's soft masks of the frames they answered, and an empty map for each trial they did not answer."""
     stats, missing = _accumulate(studies_service.participant_soft_masks(participant), truth, thresholds, on_progress)
+    for frame in unanswered_frames(participant, session_over=session_over):
+        mask = truth.mask(frame.id)
+        if mask is None:
+            missing += 1
+            continue
+        empty = np.zeros(mask.shape, np.float32)
+        stats.add(frame.id, truth.activity[frame.id], count_stats(empty, mask, thresholds=thresholds), answered=False)
+        on_progress(1)
     label = f"{participant.label} of study {participant.study_id}"
-    notes = [f"{label}: {missing} answered frames no longer have a ground truth and were left out."] if missing else []
-    return {"": stats}, notes
+    notes = [f"{label}: {missing} frames no longer have a ground truth and were left out."] if missing else []
+    return {"": stats.build()}, notes
 
 
 def baseline_stats(truth: Truth, thresholds: int, on_progress: Callable[[int], None]) -> Scored:
@@ -171,7 +197,7 @@ def baseline_stats(truth: Truth, thresholds: int, on_progress: Callable[[int], N
     saliency = SpectralResidualSaliency(**SALIENCY)
     gbvs = GraphSaliency(**GBVS)
     handled = HandledViewedObject(**{k: v for k, v in HANDLED.items() if k != "near"})
-    stats: dict[str, Stats] = {key: {} for key in BASELINE_NAMES}
+    stats = {key: StatsBuilder(thresholds) for key in BASELINE_NAMES}
     notes = []
     for activity, frames in by_activity.items():
         predictors = {"aop": folds[activity], "center": centre, "saliency": saliency, "gbvs": gbvs}
@@ -184,10 +210,10 @@ def baseline_stats(truth: Truth, thresholds: int, on_progress: Callable[[int], N
             maps = {key: predictor.predict(rgb, None) for key, predictor in predictors.items()}
             maps["handled"] = handled.predict(rgb, near=_tactile_mask(truth.annotations[frame.id], rgb.shape[:2]))
             for key, prob in maps.items():
-                acc = stats[key].setdefault(activity, ScoreAccumulator(thresholds=thresholds))
-                acc.add(prob, mask, name=f"prob of frame {frame.id}")
+                counts = count_stats(prob, mask, thresholds=thresholds, name=f"prob of frame {frame.id}")
+                stats[key].add(frame.id, activity, counts)
             on_progress(1)
-    return stats, notes
+    return {key: builder.build() for key, builder in stats.items() if len(builder)}, notes
 
 
 def _tactile_mask(annotation: Annotation, shape: tuple[int, int]) -> np.ndarray | None:

@@ -1,7 +1,7 @@
-"""Access rules of the scores area (see __init__): staff see the table and download it.
+"""Access rules of the scores area (see __init__): staff see the table, its figures and per-image scores, and download them.
 
-The page and the downloads need nothing in the database (an empty table
-renders), so ``url_values`` only names the download format.
+The pages and the downloads need nothing in the database (an empty table
+renders), so ``url_values`` only names the download formats.
 """
 
 from tests.app.access import STAFF
@@ -9,8 +9,11 @@ from tests.app.access import STAFF
 RULES = {
     "scores.index": (STAFF, 200),
     "scores.download": (STAFF, 200),
+    "scores.figure": (STAFF, 200),
+    "scores.frames": (STAFF, 200),
+    "scores.frames_csv": (STAFF, 200),
 }
 
 
 def url_values(app, tmp_path) -> dict:
-    return {"table_format": "csv"}
+    return {"table_format": "csv", "figure_format": "svg"}

@@ -1,31 +1,10 @@
-"""Maximum F-score (MF) and average precision (AP) of probability maps.
+"""Counting a map's confusion counts at every threshold, streaming maps, and scoring them in one call.
 
-The paper scores a probability map by thresholding it "at small intervals",
-building a precision/recall curve and reporting its best F-score (MF) and the
-area under it (AP). This module fixes the details (see
-``shared/docs/egonet-reference.md``, "Metrics"):
-
-* ``T`` thresholds ``t_k = k / (T + 1)`` for ``k = 1..T`` (99 thresholds
-  ``0.01 .. 0.99`` by default), each computed as a float64. A pixel is
-  predicted positive at ``t_k`` when ``prob >= t_k``; the comparison is exact
-  (a float32 probability is compared with the float64 threshold without
-  rounding either), so a probability exactly equal to ``t_k`` is positive at
-  ``t_k``.
-* Pooled mode (the default, as in the BSDS benchmark): ``TP_k``, ``FP_k`` and
-  ``FN_k`` are summed over every pixel of every map, then
-  ``P_k = TP_k / (TP_k + FP_k)``, or 1 when ``TP_k + FP_k = 0`` (nothing
-  predicted); ``R_k = TP_k / (TP_k + FN_k)``, or 0 when there are no positive
-  pixels.
-* ``F_k = (1 + beta2) P_k R_k / (beta2 P_k + R_k)``, or 0 when
-  ``P_k + R_k = 0``; ``MF = max_k F_k``.
-* ``AP = sum_k (R_k - R_{k+1}) P_k`` with the thresholds in increasing order
-  and ``R_{T+1} = 0``.
-* Per-image mode: the same counts per map, ``P_k`` and ``R_k`` computed per map
-  and averaged over the maps at each threshold, then F, MF and AP from those
-  averaged curves.
-
-Maps are never normalised before thresholding: a map whose values all lie
-below 0.01 predicts nothing.
+A pixel is predicted positive at ``t_k`` when ``prob >= t_k``; the
+comparison is exact (a float32 probability is compared with the float64
+threshold without rounding either), so a probability exactly equal to
+``t_k`` is positive at ``t_k``. Maps are never normalised before
+thresholding: a map whose values all lie below 0.01 predicts nothing.
 
 The work is split as in smp's ``get_stats`` / ``fbeta_score``: sufficient
 statistics first (:func:`count_stats` gives per-threshold TP/FP/FN of one map
@@ -47,77 +26,14 @@ Example:
 from __future__ import annotations
 
 from collections.abc import Iterable, Mapping
-from dataclasses import dataclass, field
-from functools import lru_cache
-from typing import NamedTuple
 
 import numpy as np
 
 from egonet.errors import EgonetError
+from egonet.metrics.curves import Score, curve_from_counts
+from egonet.metrics.thresholds import DEFAULT_THRESHOLDS, Counts, check_beta2, check_thresholds, thresholds_cached
 
-__all__ = [
-    "Counts",
-    "Score",
-    "ScoreAccumulator",
-    "count_stats",
-    "curve_from_counts",
-    "iso_f_curve",
-    "score_maps",
-    "threshold_values",
-]
-
-DEFAULT_THRESHOLDS = 99
 _STATE_KEYS = ("tp", "fp", "fn", "precision_sum", "recall_sum", "n_maps")
-
-
-class Counts(NamedTuple):
-    """Per-threshold confusion counts of one map or of several pooled maps.
-
-    Attributes:
-        tp: True positives at each threshold, int64 (T,).
-        fp: False positives at each threshold, int64 (T,).
-        fn: False negatives at each threshold, int64 (T,).
-    """
-
-    tp: np.ndarray
-    fp: np.ndarray
-    fn: np.ndarray
-
-
-def _check_thresholds(thresholds: int) -> int:
-    if isinstance(thresholds, bool) or not isinstance(thresholds, (int, np.integer)):
-        raise EgonetError(
-            f"thresholds must be a positive int (the number T of thresholds k/(T+1)), got {thresholds!r}", field="thresholds"
-        )
-    if thresholds < 1 or thresholds > 1_000_000:
-        raise EgonetError(f"thresholds must be between 1 and 1000000, got {thresholds}", field="thresholds")
-    return int(thresholds)
-
-
-@lru_cache(maxsize=16)
-def _thresholds_cached(thresholds: int) -> np.ndarray:
-    t = np.arange(1, thresholds + 1, dtype=np.float64) / (thresholds + 1)
-    t.setflags(write=False)
-    return t
-
-
-def threshold_values(thresholds: int = DEFAULT_THRESHOLDS) -> np.ndarray:
-    """Return the thresholds ``t_k = k / (T + 1)``, ``k = 1..T``.
-
-    Args:
-        thresholds: The number T of thresholds.
-
-    Returns:
-        Increasing float64 thresholds, read-only, shape (T,).
-
-    Raises:
-        ValueError: If ``thresholds`` is not a positive int.
-
-    Example:
-        >>> threshold_values(3)
-        array([0.25, 0.5 , 0.75])
-    """
-    return _thresholds_cached(_check_thresholds(thresholds))
 
 
 def _bin_index(prob: np.ndarray, thresholds: int) -> np.ndarray:
@@ -153,7 +69,7 @@ def _bin_index(prob: np.ndarray, thresholds: int) -> np.ndarray:
     near &= nearest <= eps
     if near.any():
         where = np.flatnonzero(near)
-        exact = np.searchsorted(_thresholds_cached(thresholds), flat[where].astype(np.float64), side="right")
+        exact = np.searchsorted(thresholds_cached(thresholds), flat[where].astype(np.float64), side="right")
         bins[where] = exact
     np.minimum(bins, index_type(thresholds), out=bins)
     return bins
@@ -205,13 +121,14 @@ def _count(prob: np.ndarray, mask: np.ndarray, thresholds: int) -> Counts:
     return Counts(tp, fp, fn)
 
 
-def count_stats(prob: np.ndarray, mask: np.ndarray, *, thresholds: int = DEFAULT_THRESHOLDS) -> Counts:
+def count_stats(prob: np.ndarray, mask: np.ndarray, *, thresholds: int = DEFAULT_THRESHOLDS, name: str = "prob") -> Counts:
     """Count TP, FP and FN of one map at every threshold in one pass.
 
     Args:
         prob: Probability map in [0, 1], float (H, W). Not normalised.
         mask: Ground truth, bool (H, W).
         thresholds: The number T of thresholds ``k / (T + 1)``.
+        name: How error messages name the map (e.g. ``"prob of frame 3"``).
 
     Returns:
         :class:`Counts` with int64 arrays of shape (T,); sum several with
@@ -228,178 +145,14 @@ def count_stats(prob: np.ndarray, mask: np.ndarray, *, thresholds: int = DEFAULT
         >>> count_stats(prob, mask, thresholds=3).tp
         array([3, 3, 2])
     """
-    thresholds = _check_thresholds(thresholds)
-    prob = _as_prob(prob, "prob")
-    mask = _as_mask(mask, "mask", prob.shape)
+    thresholds = check_thresholds(thresholds)
+    prob = _as_prob(prob, name)
+    mask = _as_mask(mask, _mask_name(name), prob.shape)
     return _count(prob, mask, thresholds)
 
 
-def curve_from_counts(counts: Counts) -> tuple[np.ndarray, np.ndarray]:
-    """Precision and recall at each threshold from confusion counts.
-
-    ``P = TP / (TP + FP)``, or 1 where nothing is predicted;
-    ``R = TP / (TP + FN)``, or 0 where there are no positive pixels.
-
-    Args:
-        counts: Counts of one map or of pooled maps, arrays (T,).
-
-    Returns:
-        ``(precision, recall)``, float64 arrays (T,).
-    """
-    tp, fp, fn = (np.asarray(c, dtype=np.float64) for c in counts)
-    predicted = tp + fp
-    positives = tp + fn
-    precision = np.divide(tp, predicted, out=np.ones_like(tp), where=predicted > 0)
-    recall = np.divide(tp, positives, out=np.zeros_like(tp), where=positives > 0)
-    return precision, recall
-
-
-def iso_f_curve(f: float, *, beta2: float = 1.0, points: int = 40) -> tuple[np.ndarray, np.ndarray]:
-    """The precision-recall points where the F-score equals ``f`` (to draw under PR curves).
-
-    Solving ``F = (1 + beta2) P R / (beta2 P + R)`` for P gives
-    ``P = F R / ((1 + beta2) R - beta2 F)``, which lies in [0, 1] from
-    ``R = beta2 F / (1 + beta2 - F)`` (where P = 1) up to R = 1 (where P is
-    smallest).
-
-    Args:
-        f: The F-score, in (0, 1).
-        beta2: Weight of recall in F (beta squared), > 0.
-        points: How many points, evenly spaced in recall, >= 2.
-
-    Returns:
-        ``(recall, precision)``, float64 arrays (points,), recall increasing.
-
-    Raises:
-        EgonetError: If ``f`` is not in (0, 1) or ``points`` is below 2.
-
-    Example:
-        >>> recall, precision = iso_f_curve(0.5, points=3)
-        >>> recall.round(3).tolist(), precision.round(3).tolist()
-        ([0.333, 0.667, 1.0], [1.0, 0.4, 0.333])
-    """
-    beta2 = _check_beta2(beta2)
-    if isinstance(f, bool) or not isinstance(f, (int, float, np.integer, np.floating)) or not 0 < f < 1:
-        raise EgonetError(f"f: must be an F-score between 0 and 1 (exclusive), got {f!r}", field="f")
-    if isinstance(points, bool) or not isinstance(points, (int, np.integer)) or points < 2:
-        raise EgonetError(f"points: must be an int of at least 2, got {points!r}", field="points")
-    recall = np.linspace(beta2 * f / (1 + beta2 - f), 1.0, int(points))
-    precision = f * recall / ((1 + beta2) * recall - beta2 * f)
-    return recall, precision
-
-
-def _readonly(a: np.ndarray) -> np.ndarray:
-    a = np.array(a, dtype=np.float64)
-    a.setflags(write=False)
-    return a
-
-
-def _check_beta2(beta2: float) -> float:
-    if isinstance(beta2, bool) or not isinstance(beta2, (int, float, np.integer, np.floating)):
-        raise EgonetError(f"beta2 must be a positive number, got {beta2!r}", field="beta2")
-    if not np.isfinite(beta2) or beta2 <= 0:
-        raise EgonetError(f"beta2 must be a positive finite number, got {beta2}", field="beta2")
-    return float(beta2)
-
-
-@dataclass(frozen=True, eq=False)
-class Score:
-    """A precision/recall curve and its summary numbers.
-
-    Attributes:
-        max_f: Maximum F-score over the thresholds (MF).
-        ap: Average precision, ``sum_k (R_k - R_{k+1}) P_k``.
-        best_threshold: The threshold where F reaches ``max_f`` (the lowest
-            one on ties; ``t_1`` when every F is 0).
-        thresholds: Thresholds ``t_k``, increasing, float64 (T,).
-        precision: Precision at each threshold, float64 (T,).
-        recall: Recall at each threshold, float64 (T,).
-        f: F-score at each threshold, float64 (T,).
-        beta2: The beta squared the F-scores use.
-        per_image: Whether the curves are averages over maps (True) or come
-            from pooled counts (False).
-        n_maps: The number of maps scored.
-    """
-
-    max_f: float
-    ap: float
-    best_threshold: float
-    thresholds: np.ndarray = field(repr=False)
-    precision: np.ndarray = field(repr=False)
-    recall: np.ndarray = field(repr=False)
-    f: np.ndarray = field(repr=False)
-    beta2: float = 1.0
-    per_image: bool = False
-    n_maps: int = 0
-
-    @classmethod
-    def from_curves(
-        cls,
-        precision: np.ndarray,
-        recall: np.ndarray,
-        *,
-        beta2: float = 1.0,
-        per_image: bool = False,
-        n_maps: int = 0,
-    ) -> Score:
-        """Reduce a precision/recall curve to F, MF and AP.
-
-        Args:
-            precision: Precision at each threshold, increasing thresholds (T,).
-            recall: Recall at each threshold (T,).
-            beta2: Weight of recall in F (beta squared), > 0.
-            per_image: Recorded on the result: whether the curves are
-                per-map averages.
-            n_maps: Recorded on the result: how many maps were scored.
-
-        Returns:
-            The :class:`Score`.
-
-        Raises:
-            ValueError: If the curves are not 1-D of equal length or
-                ``beta2`` is not positive.
-        """
-        beta2 = _check_beta2(beta2)
-        p = np.asarray(precision, dtype=np.float64)
-        r = np.asarray(recall, dtype=np.float64)
-        if p.ndim != 1 or p.shape != r.shape or p.size == 0:
-            raise EgonetError(
-                f"precision and recall must be non-empty 1-D arrays of equal length, got {p.shape} and {r.shape}",
-                field="precision",
-            )
-        denom = beta2 * p + r
-        f = np.divide((1.0 + beta2) * p * r, denom, out=np.zeros_like(p), where=(p + r) > 0)
-        best = int(np.argmax(f))
-        next_recall = np.append(r[1:], 0.0)
-        ap = float(np.sum((r - next_recall) * p))
-        t = threshold_values(p.size)
-        return cls(
-            max_f=float(f[best]),
-            ap=ap,
-            best_threshold=float(t[best]),
-            thresholds=t,
-            precision=_readonly(p),
-            recall=_readonly(r),
-            f=_readonly(f),
-            beta2=beta2,
-            per_image=bool(per_image),
-            n_maps=int(n_maps),
-        )
-
-    @classmethod
-    def from_counts(cls, counts: Counts, *, beta2: float = 1.0, n_maps: int = 0) -> Score:
-        """Score pooled counts (dataset-level precision and recall).
-
-        Args:
-            counts: TP/FP/FN summed over maps, arrays (T,).
-            beta2: Weight of recall in F (beta squared), > 0.
-            n_maps: Recorded on the result: how many maps were pooled.
-
-        Returns:
-            The pooled :class:`Score`.
-        """
-        precision, recall = curve_from_counts(counts)
-        return cls.from_curves(precision, recall, beta2=beta2, per_image=False, n_maps=n_maps)
+def _mask_name(name: str) -> str:
+    return name.replace("prob", "mask", 1) if name.startswith("prob") else f"mask of {name}"
 
 
 class ScoreAccumulator:
@@ -421,7 +174,7 @@ class ScoreAccumulator:
     """
 
     def __init__(self, *, thresholds: int = DEFAULT_THRESHOLDS) -> None:
-        self.thresholds = _check_thresholds(thresholds)
+        self.thresholds = check_thresholds(thresholds)
         zeros = np.zeros(self.thresholds, dtype=np.int64)
         self.counts = Counts(zeros, zeros.copy(), zeros.copy())
         self.precision_sum = np.zeros(self.thresholds, dtype=np.float64)
@@ -443,8 +196,7 @@ class ScoreAccumulator:
             ValueError: As :func:`count_stats`.
         """
         prob = _as_prob(prob, name)
-        mask_name = name.replace("prob", "mask", 1) if name.startswith("prob") else f"mask of {name}"
-        mask = _as_mask(mask, mask_name, prob.shape)
+        mask = _as_mask(mask, _mask_name(name), prob.shape)
         counts = _count(prob, mask, self.thresholds)
         self.add_counts(counts)
         return counts
@@ -618,7 +370,7 @@ def score_maps(
         >>> s.max_f, s.best_threshold
         (1.0, 0.21)
     """
-    beta2 = _check_beta2(beta2)
+    beta2 = check_beta2(beta2)
     acc = ScoreAccumulator(thresholds=thresholds)
     prob_iter, mask_iter = iter(probs), iter(masks)
     sentinel = object()
