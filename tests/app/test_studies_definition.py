@@ -229,3 +229,18 @@ def test_the_click_width_is_scaled_to_the_frames_by_default(ctx, tmp_path):
     expected = egonet_clicks.soft_mask((240, 320), [(159.5, 119.5)], sigma=15.0, labels=studies.superpixel_labels(state.trial.frame, scaled.superpixels))
     np.testing.assert_array_equal(studies.trial_soft_mask(state.trial), expected)
     assert studies.export_json(scaled)["participants"][0]["trials"][0]["sigma_px"] == 15.0
+
+
+def test_the_hierarchical_regions_round_trip_through_a_definition(app, admin_client, tmp_path):
+    with app.app_context():
+        build_study(tmp_path, frames=3, participants=0)
+        study = studies.study_from_definition({**DEFINITION, "regions": {"method": "hierarchical", "fine_regions": 500, "level": 0.5}})
+        study_id, regions = study.id, dict(study.superpixels)
+    assert regions["method"] == "hierarchical" and regions["fine_regions"] == 500 and regions["level"] == 0.5
+    response = admin_client.get(f"/studies/{study_id}/export/definition.json")
+    upload = admin_client.post("/studies/import", data={"definition": (io.BytesIO(response.data), "again.json")},
+                               content_type="multipart/form-data")  # fmt: skip
+    assert upload.status_code == 302
+    with app.app_context():
+        again = db.session.execute(db.select(Study).order_by(Study.id.desc())).scalars().first()
+        assert again.id != study_id and dict(again.superpixels) == regions

@@ -29,7 +29,7 @@ from typing import Any
 from app.extensions import db
 from app.models import Activity, User
 from app.models.studies import FrameKind, Study
-from app.services.studies.building import DEFAULT_CONSENT, DEFAULT_INSTRUCTIONS, create_study
+from app.services.studies.building import DEFAULT_CONSENT, DEFAULT_INSTRUCTIONS, OPTION_RULES, create_study
 from app.services.studies.common import StudyProblem, check_bool, check_int, check_keys, check_number
 
 KEYS = (
@@ -42,6 +42,8 @@ SERVICE_FIELDS = {
     "time_limit_s": "time_limit_minutes",
     "trial_limit_s": "trial_limit_seconds",
     "superpixel_method": "regions.method",
+    "fine_regions": "regions.fine_regions",
+    "level": "regions.level",
     "n_segments": "regions.n_segments",
     "compactness": "regions.compactness",
     "scale": "regions.scale",
@@ -69,7 +71,7 @@ def _settings(doc: Any) -> dict[str, Any]:
     if doc.get("sigma_px") is not None:
         settings["sigma_px"] = check_number(doc["sigma_px"], "sigma_px", 0.5, 10_000)
     if doc.get("regions") is not None:
-        settings["superpixels"] = check_keys(doc["regions"], "regions", ("method", "n_segments", "compactness", "scale", "min_size", "max_side"))
+        settings["superpixels"] = check_keys(doc["regions"], "regions", ("method", *OPTION_RULES, "max_side"))
     settings["instructions"] = doc.get("instructions", DEFAULT_INSTRUCTIONS)
     settings["consent"] = doc.get("consent", DEFAULT_CONSENT)
     for key in ("practice_trials", "catch_trials", "comprehension", "conditions", "open_link", "completion", "display", "activity_order"):
