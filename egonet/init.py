@@ -268,15 +268,23 @@ def load_init(path: str | Path) -> InitWeights:
     return InitWeights(path.name, sha256, "torchvision-vgg16", vgg16_to_deeplab(state, source=path.name))
 
 
-def _read_caffemodel(path: Path) -> Mapping[str, Sequence[np.ndarray]]:
-    """The caffemodel's blobs by layer name, through ``egonet.caffe`` (the project's one Caffe reader)."""
-    try:
-        from egonet.caffe import read_caffemodel
-    except ImportError:
-        raise EgonetError(
-            f"{path.name}: reading .caffemodel files needs egonet.caffe, which this installation lacks", field="init"
-        ) from None
-    return read_caffemodel(path)
+def _read_caffemodel(path: Path) -> dict[str, list[np.ndarray]]:
+    """The caffemodel's blobs by layer name, through ``egonet.caffe`` (the project's one Caffe reader).
+
+    An inner product's weight comes back 2-D (legacy files store it as
+    ``(1, 1, O, I)``), so a plain VGG16's dense fc6/fc7 convert as torchvision's do.
+    """
+    from egonet.caffe import read_caffemodel
+
+    blobs = {}
+    for name, layer in read_caffemodel(path).items():
+        if not layer.blobs:
+            continue
+        found = list(layer.blobs)
+        if layer.type == "InnerProduct" and found[0].ndim == 4 and found[0].shape[:2] == (1, 1):
+            found[0] = found[0].reshape(found[0].shape[2:])
+        blobs[name] = found
+    return blobs
 
 
 def _sha256(path: Path) -> str:

@@ -848,7 +848,7 @@ def build_single_stream(
     )
 
 
-def build_deeplab_rgb(*, dropout: float = 0.5) -> TwoStreamEgoNet:
+def build_deeplab_rgb(*, dropout: float = 0.5, width_divisor: int = 1) -> TwoStreamEgoNet:
     """Baseline: DeepLab on RGB, one VGG stream and a 1x1 classifier on fc7; 65,062,722 parameters.
 
     The paper's "DeepLab on RGB": no DHG, no coordinate maps, no fc9
@@ -856,19 +856,29 @@ def build_deeplab_rgb(*, dropout: float = 0.5) -> TwoStreamEgoNet:
 
     Args:
         dropout: Dropout after fc6 and fc7.
+        width_divisor: Divide every width by this (1: the paper's network).
     """
-    return _two_stream_vgg("deeplab-rgb", rgb=True, dhg=False, coords=None, embed=False, dropout=dropout)
+    return _two_stream_vgg(
+        "deeplab-rgb", rgb=True, dhg=False, coords=None, embed=None, dropout=dropout, width_divisor=width_divisor
+    )
 
 
-def build_deeplab_dhg(*, dropout: float = 0.5) -> TwoStreamEgoNet:
+def build_deeplab_dhg(
+    *, dhg_order: DHGOrder = "gray-height-depth", dropout: float = 0.5, width_divisor: int = 1
+) -> TwoStreamEgoNet:
     """Baseline: DeepLab on DHG (the RGB stream's architecture on the DHG image); 65,062,722 parameters.
 
     ``rgb`` is still required (it fixes the frame size) but its values are unused.
 
     Args:
+        dhg_order: ``"gray-height-depth"`` or ``"depth-height-gray"``.
         dropout: Dropout after fc6 and fc7.
+        width_divisor: Divide every width by this (1: the paper's network).
     """
-    return _two_stream_vgg("deeplab-dhg", rgb=False, dhg=True, coords=None, embed=False, dropout=dropout)
+    return _two_stream_vgg(
+        "deeplab-dhg", rgb=False, dhg=True, coords=None, embed=None, dropout=dropout,
+        width_divisor=width_divisor, dhg_order=dhg_order,
+    )
 
 
 def build_egonet_lite(

@@ -34,7 +34,7 @@ TINY_RELEASES: tuple[Release, ...] = tuple(
 TINY = {r.key: r for r in TINY_RELEASES}
 FULL = {r.key: r for r in RELEASES}
 
-_V1_TYPES = {"Convolution": 4, "ReLU": 18, "Data": 5}
+_V1_TYPES = {"Convolution": 4, "ReLU": 18, "Data": 5, "InnerProduct": 14}
 
 
 def _varint(value: int) -> bytes:

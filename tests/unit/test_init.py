@@ -272,3 +272,43 @@ def test_an_egonet_caffemodel_gives_the_dhg_stream_its_own_layers():
     assert check_init(rgb_only, weights) == ["rgb_stream"]  # the RGB layers fit
     with pytest.raises(ValueError, match=r"egonet's dhg_stream.conv1_1 needs \(64, 3, 3, 3\)"):
         check_init(with_dhg, weights)  # the DHG stream reads the dhg_ layers
+
+
+@pytest.mark.parametrize("legacy", [False, True])
+def test_a_deeplab_caffemodel_file_initialises_both_streams(tmp_path, legacy):
+    """A hand-built DeepLab file (1/64 widths, both layouts) read by egonet.caffe goes into every VGG stream."""
+    from egonet.caffe import model_layers
+    from tests.caffe_files import write_caffemodel
+
+    model = build_model("egonet", width_divisor=64).requires_grad_(False)
+    convs = {name: conv for name, conv in model_layers(model).items() if not name.startswith(("dhg_", "fc9", "fc10"))}
+    g = torch.Generator().manual_seed(3)
+    values = {name: (torch.randn(conv.weight.shape, generator=g), torch.randn(conv.bias.shape, generator=g))
+              for name, conv in convs.items()}
+    layers = [(name, "Convolution", [w.numpy(), b.numpy()]) for name, (w, b) in values.items()]
+    path = write_caffemodel(tmp_path / "deeplab.caffemodel", layers, legacy=legacy, packed=not legacy)
+    weights = initialise(model, path)
+    assert weights.kind == "deeplab-caffemodel" and weights.sha256 == hashlib.sha256(path.read_bytes()).hexdigest()
+    for stream in (model.rgb_stream, model.dhg_stream):
+        for name, (w, b) in values.items():
+            torch.testing.assert_close(getattr(stream.layers, name).weight, w)
+            torch.testing.assert_close(getattr(stream.layers, name).bias, b)
+
+
+def test_a_legacy_vgg16_caffemodel_with_dense_fc_layers_is_converted(tmp_path):
+    """A plain VGG16 .caffemodel (legacy layout: inner products stored (1, 1, O, I)) converts like torchvision's."""
+    from tests.caffe_files import write_caffemodel
+
+    sd = tiny_vgg16()
+    layers = []
+    for name, index in zip(DEEPLAB_LAYERS[:13], TORCHVISION_CONVS, strict=True):
+        layers.append((name, "Convolution", [sd[f"features.{index}.weight"].numpy(), sd[f"features.{index}.bias"].numpy()]))
+    for name, key in (("fc6", "classifier.0"), ("fc7", "classifier.3")):
+        weight = sd[f"{key}.weight"].numpy()
+        layers.append((name, "InnerProduct", [weight.reshape(1, 1, *weight.shape), sd[f"{key}.bias"].numpy()]))
+    path = write_caffemodel(tmp_path / "vgg16.caffemodel", layers, legacy=True)
+    got = load_init(path)
+    fc6 = got.layers["fc6"][0]
+    assert tuple(fc6.shape) == (6, 4, 4, 4)
+    torch.testing.assert_close(fc6, sd["classifier.0.weight"].reshape(6, 4, 7, 7)[:, :, ::2, ::2])
+    assert tuple(got.layers["fc7"][0].shape) == (6, 6, 1, 1)

@@ -91,7 +91,8 @@ def test_deeplab_baselines_are_one_stream_without_coordinates_or_embedding(name)
     assert model.head.fc10.in_channels == 4096
     assert (model.rgb_stream is None) == (name == "deeplab-dhg")
     assert model.uses_dhg == (name == "deeplab-dhg")
-    assert model.config.options == {"dropout": 0.5}
+    expected = {"dropout": 0.5, "width_divisor": 1} | ({"dhg_order": "gray-height-depth"} if name == "deeplab-dhg" else {})
+    assert model.config.options == expected
 
 
 @pytest.mark.parametrize("name", sorted(EXPECTED_PARAMETERS))
@@ -264,7 +265,7 @@ def test_every_model_takes_the_released_orders_by_default(name):
     with torch.device("meta"):
         model = build_model(name)
     options = model.config.options
-    if name != "no-coords":
+    if model.coords is not None:  # no-coords and the DeepLab baselines have no coordinate maps
         assert options["coord_order"] == "rows-first"
     if model.uses_dhg:
         assert options["dhg_order"] == "gray-height-depth" and model.dhg_order == "gray-height-depth"
