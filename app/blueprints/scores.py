@@ -6,7 +6,8 @@ bookmarked and its downloads repeat it:
 * what to score: ``chosen``, ``runs``, ``studies``, ``baselines`` (without
   ``chosen``: every completed run, every study and the baselines);
 * how: ``metric`` (``pooled``, ``per-image``, ``ods-ois``), ``frames``
-  (``shared``, ``each``), ``answered_only``;
+  (``shared``, ``each``), ``answered_only``, ``exclude_failed_checks``,
+  ``by_condition``;
 * ``compare_a`` / ``compare_b``: two row keys to compare;
 * ``plotted`` and ``plot``: the rows the precision-recall plots draw.
 """
@@ -41,11 +42,13 @@ def _choice() -> dict:
 
 
 def _view() -> dict:
-    """How to score: the convention, the frames, and whether people's unanswered trials are left out."""
+    """How to score: the convention, the frames, and which of the people's trials and participants count, and how split."""
     return {
         "metric": request.args.get("metric", "pooled"),
         "frames": request.args.get("frames", "shared"),
         "answered_only": request.args.get("answered_only") == "1",
+        "exclude_failed_checks": request.args.get("exclude_failed_checks") == "1",
+        "by_condition": request.args.get("by_condition") == "1",
     }
 
 
@@ -76,8 +79,9 @@ def _query(choice: dict, view: dict, runs: list, studies: list) -> dict:
     }
     if choice["baselines"]:
         query["baselines"] = 1
-    if view["answered_only"]:
-        query["answered_only"] = 1
+    for flag in ("answered_only", "exclude_failed_checks", "by_condition"):
+        if view[flag]:
+            query[flag] = 1
     return query
 
 

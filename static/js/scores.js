@@ -4,7 +4,7 @@
 import { seedsLabel, withPlotRows } from "./scores_links.js";
 
 const choice = document.getElementById("score-choice");
-for (const input of choice?.querySelectorAll("fieldset.view input, input[name=answered_only]") ?? []) {
+for (const input of choice?.querySelectorAll("fieldset.view input, input[name=answered_only], input[name=exclude_failed_checks], input[name=by_condition]") ?? []) {
   input.addEventListener("change", () => choice.requestSubmit());
 }
 

@@ -269,3 +269,22 @@ def test_scorer_splits_people_by_condition(ctx, tmp_path):
     assert [r.name for r in plain.rows] == ["P01", "P02", "P03", "P04"]
     rows = list(csv.DictReader(io.StringIO(studies.export_csv(study, "trials"))))
     assert {(r["participant"], r["condition"]) for r in rows} == {("P01", "slow"), ("P02", "fast"), ("P03", "slow"), ("P04", "fast")}
+
+
+def test_the_scores_page_splits_people_by_condition_and_keeps_the_choice(app, admin_client, tmp_path):
+    with app.app_context():
+        ids = build_study(tmp_path, participants=2, conditions=[{"name": "slow"}, {"name": "fast", "trial_limit_seconds": 9}])
+        study = db.session.get(Study, ids["study"])
+        for person in study.participants:
+            studies.answer_consent(person, agree=True)
+            studies.start_session(person)
+            state = studies.session_state(person)
+            while state.trial is not None:
+                state = studies.submit(person, state.trial, studies.Answer(clicks=[(15.0, 15.0, 200.0)]))
+    html = admin_client.get(f"/scores/?chosen=1&studies={ids['study']}&by_condition=1&exclude_failed_checks=1").get_data(as_text=True)
+    assert "P02 [fast]" in html and "P01 [slow]" in html
+    assert 'name="by_condition" value="1" checked' in html and 'name="exclude_failed_checks" value="1" checked' in html
+    assert "Participants who failed a check are left out." in html
+    assert "by_condition=1" in html and "exclude_failed_checks=1" in html  # the downloads repeat the choice
+    csv_text = admin_client.get(f"/scores/table.csv?chosen=1&studies={ids['study']}&by_condition=1").get_data(as_text=True)
+    assert "P02 [fast]" in csv_text
