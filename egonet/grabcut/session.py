@@ -19,7 +19,7 @@ import cv2
 import numpy as np
 
 from egonet.errors import EgonetError
-from egonet.grabcut.cut import _box_cut, _box_labels, _depth_box_cut, _depth_recut, _recut
+from egonet.grabcut.cut import _box_cut, _box_labels, _depth_box_cut, _recut, _Terms
 from egonet.grabcut.depth import _check_depth, _DepthGuide
 from egonet.grabcut.geometry import _clip_to_box, _downsample, _Geometry, _grow_box
 from egonet.grabcut.refine import _BAND, _GF_RADIUS, _Guide, _upsample_mask
@@ -127,7 +127,8 @@ class GrabCutSession:
     @property
     def nbytes(self) -> int:
         """Bytes held in the session's arrays: the frame's copy, the mask, the
-        ROI's guide, the undo levels and the cached stroke footprints."""
+        ROI's guide (with the cut's links), the undo levels and the cached
+        stroke footprints."""
         arrays = [self._image, self._mask, self._depth]
         if self._depth_guide is not None:
             d = self._depth_guide
@@ -135,6 +136,7 @@ class GrabCutSession:
         if self._guide is not None:
             g = self._guide
             arrays += [g.image, g.colour, g.mean, g.inverse]
+            arrays += [*g.__dict__.get("links", ()), g.__dict__.get("pixels")]  # made on first use
             arrays += [hit[0] for hit in g._footprints.values() if hit is not None]
         for snap in self._history + [self._now]:
             arrays += [snap.models, snap.low, snap.mask_bits] + [s.points for s in snap.strokes]
@@ -228,9 +230,10 @@ class GrabCutSession:
         # In a new ROI the cut starts from the current mask (the models carry over either way).
         prior = _downsample(self._mask, guide.geom) if new_roi else prev.low
         if self._depth is None:
-            low, models = _recut(guide, prev.models, strokes, prior)
+            low, models = _recut(_Terms.colour(guide), guide, prev.models, strokes, prior)
         else:
-            low, models = _depth_recut(self._depth_guide_for(guide), prev.models, strokes, prior, guide)
+            low, models = _recut(_Terms.depth(self._depth_guide_for(guide)), guide, prev.models, strokes, prior,
+                                 reach=None)
         snap = _Snapshot(box=box, strokes=strokes, models=models, low=low)
         if new_roi:
             # Both masks honour every stroke, so their union does too.
