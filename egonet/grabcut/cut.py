@@ -379,3 +379,53 @@ def _depth_box_cut(frame: np.ndarray, depth: np.ndarray, guide: _DepthGuide,
     held = np.stack([bgd, initial[1]])
     rescued = _cut(_Terms.depth(guide), start, held, 1, frozen=True)
     return max([(low, models), rescued], key=lambda c: np.count_nonzero(c[0]))
+
+
+# ------------------------------------------------------------- from a mask
+
+
+def _seed_labels(geom: _Geometry, seed: np.ndarray, band: int) -> np.ndarray:
+    """The GC_* labels of a cut from a mask: its edge may move by ``band`` grid pixels.
+
+    Inside the box, the seed is probable foreground and the rest probable
+    background; with ``band`` > 0, the seed eroded by ``band`` is sure
+    foreground and what lies beyond it dilated by ``band`` sure background.
+    Outside the box everything is background.
+    """
+    rows, cols = geom.box_low()
+    inside = np.where(seed, cv2.GC_PR_FGD, cv2.GC_PR_BGD).astype(np.uint8)
+    if band > 0:
+        kernel = cv2.getStructuringElement(cv2.MORPH_ELLIPSE, (2 * band + 1, 2 * band + 1))
+        u8 = seed.view(np.uint8)
+        inside[cv2.erode(u8, kernel, borderType=cv2.BORDER_REPLICATE).view(bool)] = cv2.GC_FGD
+        inside[~cv2.dilate(u8, kernel).view(bool)] = cv2.GC_BGD
+    gc = np.full(seed.shape, cv2.GC_BGD, np.uint8)
+    gc[rows, cols] = inside[rows, cols]
+    return gc
+
+
+def _seed_cut(terms: _Terms, geom: _Geometry, seed: np.ndarray, band: int,
+              first: Callable[[np.ndarray], np.ndarray]) -> tuple[np.ndarray, np.ndarray]:
+    """Models (and, with ``band`` > 0, a cut) for an object given as a mask.
+
+    The models start from k-means on each side of the seed (``first``, given
+    labels with the seed as ``GC_PR_FGD`` and the rest as ``GC_BGD``) and
+    take one learning step on it, so the next stroke re-cuts with models of
+    this object. With ``band`` > 0 the cut then runs from the seed as a box's
+    does (``_seed_labels``), so its edge can move to the image's.
+
+    Args:
+        terms: The ROI's terms.
+        geom: The ROI's geometry.
+        seed: bool ``(low_h, low_w)``, the mask on the grid (both sides non-empty).
+        band: How far the cut may move the seed's edge, grid pixels (0: not at all).
+        first: First models from such labels.
+
+    Returns:
+        ``(label, models)``: the seed itself when ``band`` is 0.
+    """
+    models = first(np.where(seed, cv2.GC_PR_FGD, cv2.GC_BGD).astype(np.uint8))
+    models = terms.learn(seed.ravel(), models)
+    if band <= 0:
+        return seed.copy(), models
+    return _cut(terms, _seed_labels(geom, seed, band), models, _BOX_ITERATIONS)

@@ -54,14 +54,15 @@ def _check_depth(depth: object, shape: tuple[int, int]) -> np.ndarray | None:
         raise EgonetError(f"depth: expected a float (H, W) = {tuple(shape)} array in metres (0 or NaN where "
                           f"missing), got {depth.dtype} {depth.shape}{hint}", field="depth")
     z = depth.astype(np.float32)  # always a copy
-    missing = np.isnan(z)
-    if np.isinf(z).any() or (z[~missing] < 0).any():
+    # fmin/fmax skip NaN (missing); one pass each over the frame.
+    lo, hi = (float(np.fmin.reduce(z, axis=None)), float(np.fmax.reduce(z, axis=None))) if z.size else (0.0, 0.0)
+    if lo < 0 or math.isinf(hi):
         raise EgonetError("depth: values must be metres >= 0 (0 or NaN where missing), got negative or "
                           "infinite ones", field="depth")
-    z[z == 0] = np.nan
-    if np.nanmax(z, initial=0.0) > 1000:
-        raise EgonetError(f"depth: expected metres, got values up to {np.nanmax(z):.0f} (millimetres? divide "
+    if hi > 1000:
+        raise EgonetError(f"depth: expected metres, got values up to {hi:.0f} (millimetres? divide "
                           "by 1000)", field="depth")
+    z[z == 0] = np.nan
     return z
 
 
