@@ -268,6 +268,25 @@ def grabcut_box(frame: Frame, user: User, key: str, box: tuple[int, int, int, in
                     use_depth=has_depth if use_depth is None else use_depth)
 
 
+def grabcut_seed(frame: Frame, user: User, key: str, mask: np.ndarray, *, band: float = 0.0,
+                 use_depth: bool | None = None) -> GrabCutResult:
+    """Start (or restart) the object ``key`` from a mask, as a box would
+    (``GrabCutSession.seed_mask``): kept exactly (``band`` 0) or refined
+    within ``band`` pixels of its edge; strokes correct it at once.
+
+    Args:
+        mask: bool ``(H, W)`` of the frame's size, not empty.
+        band: How far GrabCut may move the mask's edge, pixels.
+        use_depth: As for ``grabcut_box``.
+    """
+    has_depth = frame.depth_path is not None
+    if use_depth and not has_depth:
+        raise Problem(f"use_depth: frame {frame.id} has no depth; send use_depth false (or leave it out)",
+                      fields={"use_depth": "this frame has no depth"})
+    return _operate(frame, user, key, lambda s: s.seed_mask(mask, band=band), create=True,
+                    use_depth=has_depth if use_depth is None else use_depth)
+
+
 def grabcut_stroke(frame: Frame, user: User, key: str, *, points: list, label: str, radius: float) -> GrabCutResult:
     """Add a corrective fg/bg stroke to the object ``key``; see ``check_stroke``.
     The object's strokes in all may sweep at most GRABCUT_MAX_STROKE_PIXELS."""
@@ -313,8 +332,8 @@ def _operate(frame: Frame, user: User, key: str, apply: Callable[[GrabCutSession
 
 def _operate_locked(frame: Frame, user: User, key: str, apply: Callable[[GrabCutSession], np.ndarray], *,
                     create: bool, use_depth: bool) -> GrabCutResult:
-    """``create``: the operation is a box, which may start a session (with
-    depth when ``use_depth``); otherwise it continues the saved one."""
+    """``create``: the operation is a box (or a mask), which may start a
+    session (with depth when ``use_depth``); otherwise it continues the saved one."""
     for _ in range(3):
         row = _state_row(frame, user, key, lock=True)
         try:
