@@ -191,41 +191,52 @@ def _first_model(x: np.ndarray, valid: np.ndarray, fallback_z: float, rng: np.ra
 
 
 def _component_scores(model: np.ndarray, x: np.ndarray, valid: np.ndarray) -> np.ndarray:
-    """``log(weight_k * N_k(x))`` for every sample and component ``(N, 5)``.
+    """``log(weight_k * N_k(x))`` for every sample and component, float32 ``(N, 5)``.
 
     Samples with depth use all four features, the others the colour
-    marginal (the first three).
+    marginal (the first three). The per-pixel products run in float32
+    (twice as fast; the scores only rank components and feed the cut's
+    weights).
     """
     weights, means, covs = _unpack_model(model)
-    out = np.full((len(x), _COMPONENTS), -np.inf)
+    out = np.full((len(x), _COMPONENTS), -np.inf, np.float32)
     live = np.flatnonzero(weights > 0)
+    if not len(live):
+        return out
     for rows, dims in ((valid, _FEATURES), (~valid, 3)):
-        if not rows.any() or not len(live):
+        every = bool(rows.all())
+        picked = None if every else np.flatnonzero(rows)
+        if picked is not None and not len(picked):
             continue
         # Whitening: with C = L L^T, the Mahalanobis distance is |L^-1 (x - mu)|^2.
         # All components in one product: (n, dims) @ (dims, k * dims).
         chol = np.linalg.cholesky(covs[live][:, :dims, :dims])
         whiten = np.linalg.inv(chol)  # (k, dims, dims)
         shift = np.einsum("kij,kj->ki", whiten, means[live, :dims])
-        # float32 for the per-pixel products (twice as fast; the scores only
-        # rank components and feed the cut's weights).
-        y = x[rows, :dims].astype(np.float32) @ whiten.transpose(2, 0, 1).reshape(dims, -1).astype(np.float32)
+        samples = x[:, :dims] if every else x[picked, :dims]
+        y = samples.astype(np.float32) @ whiten.transpose(2, 0, 1).reshape(dims, -1).astype(np.float32)
         y -= shift.ravel().astype(np.float32)
         y *= y
         # Sum each component's squares with one product: (n, k * dims) @ (k * dims, k).
-        maha = y @ np.repeat(np.eye(len(live), dtype=np.float32), dims, axis=0)
-        const = (np.log(weights[live]) - np.log(np.diagonal(chol, axis1=1, axis2=2)).sum(axis=1)
-                 - 0.5 * dims * math.log(2 * math.pi))
-        block = np.full((len(y), _COMPONENTS), -np.inf)
-        block[:, live] = const - 0.5 * maha.astype(np.float64)
-        out[rows] = block
+        scores = y @ np.repeat(np.eye(len(live), dtype=np.float32), dims, axis=0)
+        scores *= np.float32(-0.5)
+        scores += (np.log(weights[live]) - np.log(np.diagonal(chol, axis1=1, axis2=2)).sum(axis=1)
+                   - 0.5 * dims * math.log(2 * math.pi)).astype(np.float32)
+        if every and len(live) == _COMPONENTS:
+            return scores
+        if every:
+            out[:, live] = scores
+        else:
+            out[np.ix_(picked, live)] = scores
     return out
 
 
 def _neg_log_likelihood(scores: np.ndarray) -> np.ndarray:
-    """``-log p(x)`` of a mixture from its component scores ``(N, 5)``."""
+    """``-log p(x)`` (float64) of a mixture from its component scores ``(N, 5)``."""
     top = scores.max(axis=1)
-    return -(top + np.log(np.exp(scores - top[:, None]).sum(axis=1)))
+    shifted = scores - top[:, None]
+    np.exp(shifted, out=shifted)
+    return -(top.astype(np.float64) + np.log(shifted.sum(axis=1), dtype=np.float64))
 
 
 def _fallback_z(guide: _DepthGuide) -> float:

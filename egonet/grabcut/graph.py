@@ -40,7 +40,8 @@ def _links(colour: np.ndarray, z: np.ndarray | None = None) -> tuple[np.ndarray,
 
     Returns:
         ``(p, q, weight)``: int32 flat pixel indices ``(M,)`` of each linked
-        pair (each pair once) and its float64 weight ``(M,)``.
+        pair (each pair once) and its float64 weight ``(M,)`` (computed in
+        float32).
     """
     h, w = colour.shape[:2]
     c = colour.astype(np.float32)
@@ -52,22 +53,24 @@ def _links(colour: np.ndarray, z: np.ndarray | None = None) -> tuple[np.ndarray,
     diffs = []
     for a, b, _ in shifts:
         d = c[a] - c[b]
-        diffs.append(np.einsum("...k,...k->...", d, d, dtype=np.float64))
-    total = sum(float(d.sum()) for d in diffs)
+        diffs.append(np.einsum("...k,...k->...", d, d))  # float32: exact for 8-bit colours
+    total = sum(float(d.sum(dtype=np.float64)) for d in diffs)
     count = sum(d.size for d in diffs)
     beta = 0.0 if total <= 0 else 1.0 / (2.0 * total / count)
     ps, qs, weights = [], [], []
     for (a, b, dist), d2 in zip(shifts, diffs):
-        weight = (_GAMMA / dist) * np.exp(-beta * d2)
+        d2 *= np.float32(-beta)
+        weight = np.exp(d2, out=d2)
+        weight *= np.float32(_GAMMA / dist)
         if z is not None:
             near = np.fmin(z[a], z[b])
             jump = np.abs(z[a] - z[b]) / (_JUMP * np.maximum(near, 1e-3))
             # NaN where either pixel lacks depth: no depth factor there.
-            weight *= np.where(np.isnan(jump), 1.0, np.exp(-np.nan_to_num(jump) ** 2))
+            weight *= np.where(np.isnan(jump), 1.0, np.exp(-np.nan_to_num(jump) ** 2)).astype(np.float32)
         ps.append(index[a].ravel())
         qs.append(index[b].ravel())
         weights.append(weight.ravel())
-    return np.concatenate(ps), np.concatenate(qs), np.concatenate(weights)
+    return np.concatenate(ps), np.concatenate(qs), np.concatenate(weights).astype(np.float64)
 
 
 class _CutGraph:
