@@ -83,8 +83,14 @@ class _Terms:
                    lambda models, pixels: _depth_costs(guide, models, pixels))
 
 
+def _graph_for(terms: _Terms, gc: np.ndarray) -> _CutGraph:
+    """The graph of ``gc``'s undecided pixels (``GC_PR_*``), the others fixed as they are."""
+    flat = gc.reshape(-1)
+    return _CutGraph(terms.links, (flat & 1).astype(bool), np.flatnonzero(flat >= cv2.GC_PR_BGD))
+
+
 def _cut(terms: _Terms, gc: np.ndarray, models: np.ndarray, iterations: int, *,
-         frozen: bool = False) -> tuple[np.ndarray, np.ndarray]:
+         frozen: bool = False, graph: _CutGraph | None = None) -> tuple[np.ndarray, np.ndarray]:
     """Iterate re-estimation and the minimum cut, as ``cv2.grabCut`` in ``GC_EVAL`` mode.
 
     Each iteration re-estimates the models from the current labels
@@ -101,13 +107,17 @@ def _cut(terms: _Terms, gc: np.ndarray, models: np.ndarray, iterations: int, *,
         models: The two models, background first.
         iterations: Most iterations to run.
         frozen: Keep ``models`` as given (no re-estimation).
+        graph: A graph of the same grid made for the same undecided pixels
+            and fixed labels (``_graph_for``), already cut with other costs:
+            its flow is reused. None makes a new one.
 
     Returns:
         ``(label, models)``: the bool foreground label and the new models.
     """
     flat = gc.reshape(-1)
     free = np.flatnonzero(flat >= cv2.GC_PR_BGD)
-    graph = _CutGraph(terms.links, (flat & 1).astype(bool), free)
+    if graph is None:
+        graph = _graph_for(terms, gc)
     for _ in range(iterations):
         is_fg = (flat & 1).astype(bool)
         learn = not frozen and is_fg.any() and not is_fg.all()
@@ -147,7 +157,7 @@ def _upsampled_labels(geom: _Geometry, coarse_low: np.ndarray) -> np.ndarray:
 
 
 def _coarse_to_fine(fine: _Terms, geom: _Geometry, gc: np.ndarray, coarse: _Terms, coarse_gc: np.ndarray,
-                    models: np.ndarray, iterations: int) -> tuple[np.ndarray, np.ndarray]:
+                    models: np.ndarray, iterations: int) -> tuple[np.ndarray, np.ndarray, _CutGraph]:
     """A box's iterations: all but the last on the coarse grid, the last on the full one.
 
     While the models settle, a cut on a quarter of the pixels does as well;
@@ -162,10 +172,15 @@ def _coarse_to_fine(fine: _Terms, geom: _Geometry, gc: np.ndarray, coarse: _Term
         coarse_gc: The coarse grid's box labels; updated in place.
         models: The models to start from.
         iterations: Iterations in all.
+
+    Returns:
+        ``(label, models, graph)``: with the full grid's graph, the box's
+        pixels undecided, cut once.
     """
     coarse_low, models = _cut(coarse, coarse_gc, models, iterations - 1)
     gc[...] = _upsampled_labels(geom, coarse_low)
-    return _cut(fine, gc, models, 1)
+    graph = _graph_for(fine, gc)
+    return (*_cut(fine, gc, models, 1, graph=graph), graph)
 
 
 def _box_cut(frame: np.ndarray, guide: _Guide, gc: np.ndarray, work_size: int) -> tuple[np.ndarray, np.ndarray]:
@@ -186,17 +201,19 @@ def _box_cut(frame: np.ndarray, guide: _Guide, gc: np.ndarray, work_size: int) -
     # (plain grabCut runs k-means on every pixel, which is most of its cost).
     start = gc.copy()
     coarse = _coarse(geom)
+    terms = _Terms.colour(guide)
     if coarse is None:
         initial = _first_models(guide.image, gc, np.random.default_rng(0))
-        low, models = _cut(_Terms.colour(guide), gc, initial, _BOX_ITERATIONS)
+        graph = _graph_for(terms, gc)
+        low, models = _cut(terms, gc, initial, _BOX_ITERATIONS, graph=graph)
     else:
         small_geom, small_gc = coarse
         image = _resize(frame, small_geom)
         initial = _first_models(image, small_gc, np.random.default_rng(0))
-        low, models = _coarse_to_fine(_Terms.colour(guide), geom, gc, _Terms.of_image(image), small_gc, initial,
-                                      _BOX_ITERATIONS)
+        low, models, graph = _coarse_to_fine(terms, geom, gc, _Terms.of_image(image), small_gc, initial,
+                                             _BOX_ITERATIONS)
     if low[rows, cols].mean() < _SPARSE:
-        low, models = _rescue(frame, guide, start, low, models, work_size)
+        low, models = _rescue(frame, guide, start, low, models, work_size, graph)
     return low, models
 
 
@@ -217,7 +234,7 @@ def _outside_sample(frame: np.ndarray, geom: _Geometry) -> np.ndarray:
 
 
 def _rescue(frame: np.ndarray, guide: _Guide, start: np.ndarray, low: np.ndarray, models: np.ndarray,
-            work_size: int) -> tuple[np.ndarray, np.ndarray]:
+            work_size: int, graph: _CutGraph) -> tuple[np.ndarray, np.ndarray]:
     """Cut a box whose first cut kept little of it again; the cut that keeps most wins.
 
     That usually happens when the box cuts through an object that goes on
@@ -226,7 +243,9 @@ def _rescue(frame: np.ndarray, guide: _Guide, start: np.ndarray, low: np.ndarray
     frame outside the box, where that continuation is a small part. So:
     first one cut with such a background model held fixed (and a foreground
     model of the box); if that too keeps little, plain grabCut on the whole
-    frame at the work size, brought onto the ROI's grid.
+    frame at the work size, brought onto the ROI's grid. The first step is
+    tried on the coarse grid first and run on the full one only if it keeps
+    more there.
 
     Args:
         frame: Full frame, uint8 ``(H, W, 3)``.
@@ -235,6 +254,8 @@ def _rescue(frame: np.ndarray, guide: _Guide, start: np.ndarray, low: np.ndarray
         low: The first cut's label.
         models: The first cut's models.
         work_size: The session's work size.
+        graph: The first cut's last graph (the box's pixels undecided, as in
+            ``start``): the held cut reuses its flow.
     """
     geom = guide.geom
     rows, cols = geom.box_low()
@@ -244,9 +265,21 @@ def _rescue(frame: np.ndarray, guide: _Guide, start: np.ndarray, low: np.ndarray
     rng = np.random.default_rng(0)
     bgd = _fit_model(_outside_sample(frame, geom), rng)
     held = np.concatenate([bgd, fgd])
-    held_low = _cut(_Terms.colour(guide), start.copy(), held, 1, frozen=True)[0]
-    candidates = [(low, models), (held_low, held)]
-    if candidates[1][0][rows, cols].mean() < _SPARSE:
+    held_low = None
+    coarse = _coarse(geom)
+    if coarse is not None:
+        # The held cut on the full grid is slow (with models held fixed
+        # nothing settles first), and it matters only if it keeps more than
+        # the first cut: the coarse grid tells, at a quarter of the cost.
+        small_geom, small_gc = coarse
+        small_low = _cut(_Terms.of_image(_resize(frame, small_geom)), small_gc, held, 1, frozen=True)[0]
+        share = (geom.low_w * geom.low_h) / (small_geom.low_w * small_geom.low_h)
+        if np.count_nonzero(small_low) * share > np.count_nonzero(low):
+            held_low = _cut(_Terms.colour(guide), start.copy(), held, 1, frozen=True, graph=graph)[0]
+    else:
+        held_low = _cut(_Terms.colour(guide), start.copy(), held, 1, frozen=True, graph=graph)[0]
+    candidates = [(low, models)] if held_low is None else [(low, models), (held_low, held)]
+    if len(candidates) == 1 or candidates[1][0][rows, cols].mean() < _SPARSE:
         whole = _whole_frame_cut(frame, geom, work_size, rng)
         if whole is not None:
             candidates.append(whole)
@@ -364,11 +397,12 @@ def _depth_box_cut(frame: np.ndarray, depth: np.ndarray, guide: _DepthGuide,
         small_geom, small_gc = coarse
         small = _DepthGuide.build(small_geom, _resize(frame, small_geom), depth)
         initial = _depth_first_models(small, small_gc, rng)
-        low, models = _coarse_to_fine(_Terms.depth(guide), geom, gc, _Terms.depth(small), small_gc, initial,
-                                      _BOX_ITERATIONS)
+        low, models, graph = _coarse_to_fine(_Terms.depth(guide), geom, gc, _Terms.depth(small), small_gc, initial,
+                                             _BOX_ITERATIONS)
     else:
         initial = _depth_first_models(guide, gc, rng)
-        low, models = _cut(_Terms.depth(guide), gc, initial, _BOX_ITERATIONS)
+        graph = _graph_for(_Terms.depth(guide), gc)
+        low, models = _cut(_Terms.depth(guide), gc, initial, _BOX_ITERATIONS, graph=graph)
     if low[rows, cols].mean() >= _SPARSE:
         return low, models
     z = _outside_sample(depth[..., None], geom)[:, 0]
@@ -377,7 +411,7 @@ def _depth_box_cut(frame: np.ndarray, depth: np.ndarray, guide: _DepthGuide,
                         np.where(valid, z * _Z_SCALE, 0.0)[:, None]], axis=1)
     bgd = _first_model(x, valid, _fallback_z(guide), rng)
     held = np.stack([bgd, initial[1]])
-    rescued = _cut(_Terms.depth(guide), start, held, 1, frozen=True)
+    rescued = _cut(_Terms.depth(guide), start, held, 1, frozen=True, graph=graph)
     return max([(low, models), rescued], key=lambda c: np.count_nonzero(c[0]))
 
 
