@@ -129,7 +129,7 @@ def test_real_chair_rough_maps_refined_with_depth_are_no_worse():
     gains = []
     for name, rough in maps.items():
         ys, xs = np.nonzero(rough)
-        band = 0.06 * max(np.ptp(xs), np.ptp(ys))  # as Suggest sets it
+        band = 0.06 * max(np.ptp(xs), np.ptp(ys))  # the least band Suggest uses (REFINE_BAND)
         refined = GrabCutSession(image, depth).seed_mask(rough, band=band)
         assert _iou(refined, truth) >= _iou(rough, truth) - 0.005, name
         gains.append(_iou(refined, truth) - _iou(rough, truth))
