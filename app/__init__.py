@@ -135,13 +135,14 @@ def _default_config(instance: Path) -> dict:
         # points and so wide a brush (the labelling page's largest are 4000
         # and 200), and one object's strokes may sweep at most so many pixels
         # (labelling.stroke_pixels). GrabCut sessions and frames kept in a
-        # worker's memory are counted in bytes.
+        # worker's memory, and decoded frames shared on disk, are counted in bytes.
         MAX_FRAME_SIDE=4096,
         GRABCUT_MAX_STROKE_POINTS=4000,
         GRABCUT_MAX_RADIUS=256,
         GRABCUT_MAX_STROKE_PIXELS=250_000_000,
         GRABCUT_CACHE_BYTES=256 * 1024**2,
         GRABCUT_IMAGE_CACHE_BYTES=64 * 1024**2,
+        GRABCUT_DISK_CACHE_BYTES=1024**3,
         PRODUCTION=False,
     )
 

@@ -42,9 +42,10 @@ with a pasted object, at 640x480 and 1408x1408, each with a loose box, a
 tight box (2 px each side) and a box through the object, then up to 5
 strokes; plain ``cv2.grabCut`` on the same boxes.
 
-Latency runs with ``cv2.setNumThreads(1)`` (the target is per core) and is
-reported twice: wall clock, and this process's CPU time, which other load on a
-shared machine inflates far less.
+Latency runs on one thread (``cv2.setNumThreads(1)``, one BLAS thread; the
+target is per core) and is reported twice: wall clock, and this process's CPU
+time, which other load on a shared machine inflates far less; the load
+average is printed at the start and the end.
 
 Run from the repository root::
 
@@ -60,8 +61,13 @@ from __future__ import annotations
 import argparse
 import dataclasses
 import importlib.util
+import os
 import sys
 import time
+
+# One thread for numpy's BLAS too (set before numpy loads): the targets are per core.
+for _name in ("OMP_NUM_THREADS", "OPENBLAS_NUM_THREADS", "MKL_NUM_THREADS"):
+    os.environ.setdefault(_name, "1")
 from collections.abc import Callable
 from pathlib import Path
 
@@ -576,6 +582,18 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument("--no-real", action="store_true", help="skip the real-frame cases")
     args = parser.parse_args(argv)
     cv2.setNumThreads(1)
+    print(f"start: {_load()}")
+    try:
+        return _run(args)
+    finally:
+        print(f"end: {_load()}")
+
+
+def _load() -> str:
+    return "load average " + ", ".join(f"{v:.2f}" for v in os.getloadavg()) + f" on {os.cpu_count()} CPUs"
+
+
+def _run(args: argparse.Namespace) -> int:
     if args.real_only:
         real_cases(args.work_size, args.strokes, not args.no_plain, not args.no_large)
         return 0

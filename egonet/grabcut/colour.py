@@ -10,6 +10,8 @@ every pixel, which is most of its cost).
 
 from __future__ import annotations
 
+import math
+
 import cv2
 import numpy as np
 
@@ -30,15 +32,17 @@ def _kmeans_labels(x: np.ndarray, k: int, rng: np.random.Generator, iterations: 
         d2 = np.minimum(d2, ((x - centres[-1]) ** 2).sum(axis=1))
     c = np.array(centres)
     labels = np.full(len(x), -1, np.intp)
+    norms = np.einsum("nd,nd->n", x, x)[:, None]
     for _ in range(iterations):
-        new = ((x[:, None, :] - c[None, :, :]) ** 2).sum(axis=2).argmin(axis=1)
+        # |x - c|^2 = |x|^2 - 2 x.c + |c|^2, all centres in one product.
+        new = (norms - 2 * (x @ c.T) + np.einsum("kd,kd->k", c, c)).argmin(axis=1)
         if np.array_equal(new, labels):
             break
         labels = new
-        for j in range(len(c)):
-            members = x[labels == j]
-            if len(members):
-                c[j] = members.mean(axis=0)
+        counts = np.bincount(labels, minlength=len(c))
+        for d in range(x.shape[1]):
+            sums = np.bincount(labels, x[:, d], minlength=len(c))
+            c[counts > 0, d] = sums[counts > 0] / counts[counts > 0]
     return labels
 
 
@@ -69,3 +73,79 @@ def _first_models(image: np.ndarray, gc: np.ndarray, rng: np.random.Generator) -
     pixels = image.reshape(-1, 3)
     flat = gc.ravel()
     return np.concatenate([_fit_model(pixels[flat == cv2.GC_BGD], rng), _fit_model(pixels[flat == cv2.GC_PR_FGD], rng)])
+
+
+def _unpack_model(model: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """``(65,)`` -> weights ``(5,)``, means ``(5, 3)``, covariances ``(5, 3, 3)``."""
+    k = _COMPONENTS
+    return model[:k], model[k : 4 * k].reshape(k, 3), model[4 * k :].reshape(k, 3, 3)
+
+
+def _component_logs(model: np.ndarray, x: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """``log N_k(x)`` of every sample and non-empty component, and those components.
+
+    Without the mixture's weights and without the ``(2 pi)^-3/2`` every
+    component shares (OpenCV's ``GMM::operator()(ci, color)``, in logs).
+
+    Returns:
+        ``(logs, live)``: ``(N, k)`` in ``x``'s type and the indices ``(k,)``
+        of the components with weight (k >= 1 for a fitted model).
+    """
+    weights, means, covs = _unpack_model(model)
+    live = np.flatnonzero(weights > 0)
+    # With C = L L^T the Mahalanobis distance is |L^-1 (x - mu)|^2: all
+    # components in one product (N, 3) @ (3, 3k), squared and summed per
+    # component by a second one (N, 3k) @ (3k, k). The products run in the
+    # samples' type: float32 for the session's pixels (integers, so exact),
+    # twice as fast as float64.
+    chol = np.linalg.cholesky(covs[live])
+    whiten = np.linalg.inv(chol)  # (k, 3, 3)
+    y = x @ whiten.transpose(2, 0, 1).reshape(3, -1).astype(x.dtype)
+    y -= np.einsum("kij,kj->ki", whiten, means[live]).ravel().astype(x.dtype)
+    y *= y
+    logs = y @ np.repeat(np.eye(len(live), dtype=x.dtype), 3, axis=0)
+    log_det = 2 * np.log(np.diagonal(chol, axis1=1, axis2=2)).sum(axis=1)
+    logs += log_det.astype(x.dtype)
+    logs *= -0.5
+    return logs, live
+
+
+def _costs(model: np.ndarray, x: np.ndarray) -> np.ndarray:
+    """``-log p(x)`` (float64) of each sample ``(N, 3)`` under the mixture ``model`` (65,): cv2.grabCut's data term."""
+    logs, live = _component_logs(model, x)
+    logs += np.log(model[live]).astype(logs.dtype)
+    top = logs.max(axis=1)
+    logs -= top[:, None]
+    np.exp(logs, out=logs)
+    return -(top.astype(np.float64) + np.log(logs.sum(axis=1), dtype=np.float64))
+
+
+def _refit(x: np.ndarray, model: np.ndarray) -> np.ndarray:
+    """One side's mixture re-estimated from its samples ``x (N, 3)`` (``N`` > 0), starting from ``model``.
+
+    OpenCV grabCut's learning step: each sample joins its most likely
+    component (by density, not weighted), and each component is refitted
+    from its members; a component's covariance gets 0.01 on its diagonal
+    when it is (nearly) singular.
+    """
+    logs, live = _component_logs(model, x)
+    labels = live[logs.argmax(axis=1)]
+    counts = np.bincount(labels, minlength=_COMPONENTS).astype(np.float64)
+    weights = counts / len(x)
+    means = np.zeros((_COMPONENTS, 3))
+    covs = np.zeros((_COMPONENTS, 3, 3))
+    live = counts > 0
+    for i in range(3):
+        means[:, i] = np.bincount(labels, x[:, i], minlength=_COMPONENTS)
+        for j in range(i, 3):
+            covs[:, i, j] = covs[:, j, i] = np.bincount(labels, x[:, i] * x[:, j], minlength=_COMPONENTS)
+    means[live] /= counts[live, None]
+    covs[live] = covs[live] / counts[live, None, None] - means[live, :, None] * means[live, None, :]
+    singular = live & (np.linalg.det(covs) <= 1e-6)
+    covs[singular] += 0.01 * np.eye(3)
+    return np.concatenate([weights, means.ravel(), covs.ravel()])
+
+
+def _learn(x: np.ndarray, is_fg: np.ndarray, models: np.ndarray) -> np.ndarray:
+    """Both ``(2, 65)`` models re-estimated from the samples ``x (N, 3)`` split by ``is_fg`` (both sides non-empty)."""
+    return np.stack([_refit(x[~is_fg], models[0]), _refit(x[is_fg], models[1])])

@@ -1,30 +1,45 @@
 """The graph cut at the work size: a box's first cut, its rescue, and re-cuts.
 
-The cut runs on the ROI at low resolution (``_Guide.image``) with
-``cv2.grabCut`` in ``GC_EVAL`` mode and colour models the session keeps
-between calls, so a stroke costs one re-estimation and one cut. Results are
-bool labels on the ROI's low-resolution grid; ``refine`` brings them back to
-full resolution.
+The cut runs on the ROI at low resolution (``_Guide.image``) and minimises
+OpenCV grabCut's energy with the session's own minimum cut
+(``graph._CutGraph``), iterating as ``cv2.grabCut`` in ``GC_EVAL`` mode
+does: re-estimate the models from the current labels, cut. Results are bool
+labels on the ROI's low-resolution grid; ``refine`` brings them back to
+full resolution. With depth the same steps run on the colour-plus-depth
+models of ``depth``.
 
-With depth (``_depth_box_cut``, ``_depth_recut``) the same steps run on the
-colour-plus-depth models of ``depth`` with the session's own minimum cut
-(PyMaxflow), which is also faster where it can be: only undecided pixels are
-nodes, a box's first iterations run on a grid of half the size, and a stroke
-re-cuts only the side of the label it can change.
+What makes it faster than ``cv2.grabCut`` on the same grid, for the same
+energy:
+
+* only undecided pixels are nodes (the box's margin alone is a third of the
+  ROI);
+* a box's iterations cut the same graph again with new costs, reusing the
+  previous flow (``_CutGraph.cut``);
+* a box's first iterations, while the models settle, run on a grid of half
+  the size (a quarter of the pixels); the last one re-estimates and cuts on
+  the full grid, starting from the coarse label;
+* a stroke re-cuts only the side of the label it can change, and only near
+  the stroke (``_STROKE_REACH``); its models are re-estimated from the
+  whole ROI.
+
+On the real frames of ``bench/bench_grabcut.py --real-only`` the box's cut
+matches ``cv2.grabCut``'s label exactly when run the same way (all five
+iterations on the full grid); the coarse start and the stroke's reach are
+what change it (see the README's Benchmarks).
 """
 
 from __future__ import annotations
 
 import math
+from collections.abc import Callable
 
 import cv2
-import maxflow
 import numpy as np
 
-from egonet.grabcut.colour import _first_models, _fit_model
-from egonet.grabcut.depth import (_GAMMA, _Z_SCALE, _component_scores, _DepthGuide, _fallback_z, _first_model,
-                                  _fit_components, _neg_log_likelihood)
+from egonet.grabcut.colour import _costs, _first_models, _fit_model, _learn
+from egonet.grabcut.depth import (_Z_SCALE, _depth_costs, _DepthGuide, _fallback_z, _first_model, _learn_depth)
 from egonet.grabcut.geometry import _Geometry
+from egonet.grabcut.graph import _CutGraph, _links
 from egonet.grabcut.refine import _Guide
 from egonet.grabcut.strokes import _Stroke
 
@@ -33,37 +48,86 @@ _STROKE_ITERATIONS = 1  # re-estimation + cut per stroke
 _CONVERGED = 0.005  # stop iterating when a cut changes at most this fraction of undecided pixels
 _SPARSE = 0.25  # a box whose first cut keeps less than this fraction of it is cut again (``_rescue``)
 _OUTSIDE_SAMPLES = 100_000  # most frame pixels read for the background model of that cut
+_COARSE_MIN = 32  # a box's first iterations run at half the grid when that is at least this many pixels a side
+_STROKE_REACH = 56  # a stroke re-cuts the label within this many grid pixels of itself (a fifth of the work size)
+
+# The terms of one cut: ``learn(is_fg, models) -> models`` re-estimates both
+# models from the flat labels; ``costs(models, pixels) -> (cost_bg, cost_fg)``
+# are ``-log p`` of the flat pixels under each; ``links`` the pairwise links.
+_Learn = Callable[[np.ndarray, np.ndarray], np.ndarray]
+_Costs = Callable[[np.ndarray, np.ndarray], tuple[np.ndarray, np.ndarray]]
 
 
-def _cut(image: np.ndarray, gc: np.ndarray, models: np.ndarray, iterations: int) -> tuple[np.ndarray, np.ndarray]:
-    """Run the graph cut on the low-resolution ROI.
+class _Terms:
+    """What a cut needs of its grid: the pairwise links and the two models' learning and costs."""
 
-    Each iteration re-estimates the colour models from the current labels
-    (starting from ``models``, so their components carry over) and cuts.
-    Stops early once an iteration changes at most ``_CONVERGED`` of the
-    undecided pixels: later iterations only nudge the boundary.
+    def __init__(self, links: tuple[np.ndarray, np.ndarray, np.ndarray], learn: _Learn, costs: _Costs) -> None:
+        self.links, self.learn, self.costs = links, learn, costs
+
+    @classmethod
+    def colour(cls, guide: _Guide) -> _Terms:
+        x = guide.pixels
+        return cls(guide.links, lambda is_fg, models: _learn(x, is_fg, models),
+                   lambda models, pixels: (_costs(models[0], x[pixels]), _costs(models[1], x[pixels])))
+
+    @classmethod
+    def of_image(cls, image: np.ndarray) -> _Terms:
+        """Colour terms of a uint8 ``(h, w, 3)`` image that has no guide (a coarse grid, the whole frame)."""
+        x = image.reshape(-1, 3).astype(np.float32)
+        return cls(_links(image), lambda is_fg, models: _learn(x, is_fg, models),
+                   lambda models, pixels: (_costs(models[0], x[pixels]), _costs(models[1], x[pixels])))
+
+    @classmethod
+    def depth(cls, guide: _DepthGuide) -> _Terms:
+        return cls(guide.links, lambda is_fg, models: _learn_depth(guide, is_fg, models),
+                   lambda models, pixels: _depth_costs(guide, models, pixels))
+
+
+def _graph_for(terms: _Terms, gc: np.ndarray) -> _CutGraph:
+    """The graph of ``gc``'s undecided pixels (``GC_PR_*``), the others fixed as they are."""
+    flat = gc.reshape(-1)
+    return _CutGraph(terms.links, (flat & 1).astype(bool), np.flatnonzero(flat >= cv2.GC_PR_BGD))
+
+
+def _cut(terms: _Terms, gc: np.ndarray, models: np.ndarray, iterations: int, *,
+         frozen: bool = False, graph: _CutGraph | None = None) -> tuple[np.ndarray, np.ndarray]:
+    """Iterate re-estimation and the minimum cut, as ``cv2.grabCut`` in ``GC_EVAL`` mode.
+
+    Each iteration re-estimates the models from the current labels
+    (starting from ``models``, so their components carry over) and cuts the
+    undecided pixels (``GC_PR_*``; ``GC_BGD``/``GC_FGD`` ones stay). Stops
+    early once an iteration changes at most ``_CONVERGED`` of the undecided
+    pixels: later iterations only nudge the boundary. The models stay as
+    given when one side is empty (re-estimating from no pixels is undefined)
+    or ``frozen``.
 
     Args:
-        image: uint8 ``(h, w, 3)`` low-resolution ROI.
+        terms: The grid's links and the models' learning and costs.
         gc: uint8 ``(h, w)`` OpenCV GC_* labels; updated in place.
-        models: ``(2, 65)`` background and foreground models.
+        models: The two models, background first.
         iterations: Most iterations to run.
+        frozen: Keep ``models`` as given (no re-estimation).
+        graph: A graph of the same grid made for the same undecided pixels
+            and fixed labels (``_graph_for``), already cut with other costs:
+            its flow is reused. None makes a new one.
 
     Returns:
         ``(label, models)``: the bool foreground label and the new models.
     """
-    bgd = models[0:1].copy()
-    fgd = models[1:2].copy()
-    undecided = max(1, np.count_nonzero(gc >= cv2.GC_PR_BGD))
+    flat = gc.reshape(-1)
+    free = np.flatnonzero(flat >= cv2.GC_PR_BGD)
+    if graph is None:
+        graph = _graph_for(terms, gc)
     for _ in range(iterations):
-        is_fg = (gc & 1).astype(bool)
-        # Re-estimating a model from no pixels is undefined (OpenCV asserts),
-        # so the models stay fixed when one side is empty.
-        mode = cv2.GC_EVAL if is_fg.any() and not is_fg.all() else cv2.GC_EVAL_FREEZE_MODEL
-        cv2.grabCut(image, gc, None, bgd, fgd, 1, mode)
-        if mode != cv2.GC_EVAL or np.count_nonzero(is_fg != (gc & 1)) <= _CONVERGED * undecided:
+        is_fg = (flat & 1).astype(bool)
+        learn = not frozen and is_fg.any() and not is_fg.all()
+        if learn:
+            models = terms.learn(is_fg, models)
+        before = flat[free] & 1
+        flat[free] = np.where(graph.cut(*terms.costs(models, free)), cv2.GC_PR_FGD, cv2.GC_PR_BGD)
+        if not learn or np.count_nonzero(before != (flat[free] & 1)) <= _CONVERGED * max(1, len(free)):
             break
-    return (gc & 1).astype(bool), np.concatenate([bgd, fgd])
+    return (gc & 1).astype(bool), models
 
 
 def _box_labels(geom: _Geometry) -> np.ndarray:
@@ -72,6 +136,51 @@ def _box_labels(geom: _Geometry) -> np.ndarray:
     rows, cols = geom.box_low()
     gc[rows, cols] = cv2.GC_PR_FGD
     return gc
+
+
+def _coarse(geom: _Geometry) -> tuple[_Geometry, np.ndarray] | None:
+    """The half-size grid of ``geom`` and its box labels, or None when it would be too small."""
+    coarse = _Geometry(geom.box, geom.roi, max(1, round(geom.low_w / 2)), max(1, round(geom.low_h / 2)))
+    gc = _box_labels(coarse)
+    if min(coarse.low_w, coarse.low_h) < _COARSE_MIN or not (gc == cv2.GC_BGD).any():
+        return None
+    return coarse, gc
+
+
+def _upsampled_labels(geom: _Geometry, coarse_low: np.ndarray) -> np.ndarray:
+    """The full grid's GC_* labels from a coarse label: the box undecided, as the coarse cut says."""
+    rows, cols = geom.box_low()
+    up = cv2.resize(coarse_low.astype(np.float32), (geom.low_w, geom.low_h), interpolation=cv2.INTER_LINEAR)
+    gc = np.full((geom.low_h, geom.low_w), cv2.GC_BGD, np.uint8)
+    gc[rows, cols] = np.where(up[rows, cols] >= 0.5, cv2.GC_PR_FGD, cv2.GC_PR_BGD)
+    return gc
+
+
+def _coarse_to_fine(fine: _Terms, geom: _Geometry, gc: np.ndarray, coarse: _Terms, coarse_gc: np.ndarray,
+                    models: np.ndarray, iterations: int) -> tuple[np.ndarray, np.ndarray, _CutGraph]:
+    """A box's iterations: all but the last on the coarse grid, the last on the full one.
+
+    While the models settle, a cut on a quarter of the pixels does as well;
+    the last iteration re-estimates them and cuts on the full grid, from the
+    coarse label.
+
+    Args:
+        fine: The full grid's terms.
+        geom: The full grid's geometry.
+        gc: The full grid's box labels; updated in place.
+        coarse: The coarse grid's terms.
+        coarse_gc: The coarse grid's box labels; updated in place.
+        models: The models to start from.
+        iterations: Iterations in all.
+
+    Returns:
+        ``(label, models, graph)``: with the full grid's graph, the box's
+        pixels undecided, cut once.
+    """
+    coarse_low, models = _cut(coarse, coarse_gc, models, iterations - 1)
+    gc[...] = _upsampled_labels(geom, coarse_low)
+    graph = _graph_for(fine, gc)
+    return (*_cut(fine, gc, models, 1, graph=graph), graph)
 
 
 def _box_cut(frame: np.ndarray, guide: _Guide, gc: np.ndarray, work_size: int) -> tuple[np.ndarray, np.ndarray]:
@@ -86,52 +195,91 @@ def _box_cut(frame: np.ndarray, guide: _Guide, gc: np.ndarray, work_size: int) -
     Returns:
         ``(label, models)``: the bool low-resolution label and the ``(2, 65)`` models.
     """
-    rows, cols = guide.geom.box_low()
+    geom = guide.geom
+    rows, cols = geom.box_low()
     # Initial colour models from k-means on a fixed-seed sample of each side
     # (plain grabCut runs k-means on every pixel, which is most of its cost).
-    initial = _first_models(guide.image, gc, np.random.default_rng(0))
     start = gc.copy()
-    low, models = _cut(guide.image, gc, initial, _BOX_ITERATIONS)
+    coarse = _coarse(geom)
+    terms = _Terms.colour(guide)
+    if coarse is None:
+        initial = _first_models(guide.image, gc, np.random.default_rng(0))
+        graph = _graph_for(terms, gc)
+        low, models = _cut(terms, gc, initial, _BOX_ITERATIONS, graph=graph)
+    else:
+        small_geom, small_gc = coarse
+        image = _resize(frame, small_geom)
+        initial = _first_models(image, small_gc, np.random.default_rng(0))
+        low, models, graph = _coarse_to_fine(terms, geom, gc, _Terms.of_image(image), small_gc, initial,
+                                             _BOX_ITERATIONS)
     if low[rows, cols].mean() < _SPARSE:
-        low, models = _rescue(frame, guide, start, initial, low, models, work_size)
+        low, models = _rescue(frame, guide, start, low, models, work_size, graph)
     return low, models
 
 
-def _rescue(frame: np.ndarray, guide: _Guide, start: np.ndarray, initial: np.ndarray, low: np.ndarray,
-            models: np.ndarray, work_size: int) -> tuple[np.ndarray, np.ndarray]:
+def _resize(frame: np.ndarray, geom: _Geometry) -> np.ndarray:
+    """``geom``'s ROI of ``frame`` on its grid (area averaging)."""
+    rx0, ry0, rx1, ry1 = geom.roi
+    return cv2.resize(frame[ry0:ry1, rx0:rx1], (geom.low_w, geom.low_h), interpolation=cv2.INTER_AREA)
+
+
+def _outside_sample(frame: np.ndarray, geom: _Geometry) -> np.ndarray:
+    """Pixels of ``frame`` outside ``geom``'s box, on a regular grid (at most ~``_OUTSIDE_SAMPLES``), ``(n, C)``."""
+    h, w = frame.shape[:2]
+    box = geom.box
+    step = max(1, round(1 / min(geom.sx, geom.sy)), math.ceil(math.sqrt(h * w / _OUTSIDE_SAMPLES)))
+    outside = np.ones((h, w), bool)
+    outside[box[1] : box[3], box[0] : box[2]] = False
+    return frame[::step, ::step][outside[::step, ::step]]
+
+
+def _rescue(frame: np.ndarray, guide: _Guide, start: np.ndarray, low: np.ndarray, models: np.ndarray,
+            work_size: int, graph: _CutGraph) -> tuple[np.ndarray, np.ndarray]:
     """Cut a box whose first cut kept little of it again; the cut that keeps most wins.
 
     That usually happens when the box cuts through an object that goes on
     into the margin: the margin's colours, the background model, then
     include the object's. Plain grabCut takes its background from the whole
     frame outside the box, where that continuation is a small part. So:
-    first one cut with such a background model held fixed (and the box's
-    first foreground model); if that too keeps little, plain grabCut on the
-    whole frame at the work size, brought onto the ROI's grid.
+    first one cut with such a background model held fixed (and a foreground
+    model of the box); if that too keeps little, plain grabCut on the whole
+    frame at the work size, brought onto the ROI's grid. The first step is
+    tried on the coarse grid first and run on the full one only if it keeps
+    more there.
 
     Args:
         frame: Full frame, uint8 ``(H, W, 3)``.
         guide: The low-resolution guide of the box's ROI.
         start: The box's labels before the first cut.
-        initial: The first cut's initial ``(2, 65)`` models.
         low: The first cut's label.
         models: The first cut's models.
         work_size: The session's work size.
+        graph: The first cut's last graph (the box's pixels undecided, as in
+            ``start``): the held cut reuses its flow.
     """
     geom = guide.geom
-    box = geom.box
     rows, cols = geom.box_low()
-    h, w = frame.shape[:2]
+    # The box's first foreground model on the full grid, and a background
+    # model of the frame outside the box (both k-means with fixed seeds).
+    fgd = _first_models(guide.image, start, np.random.default_rng(0))[1:2]
     rng = np.random.default_rng(0)
-    step = max(1, round(1 / min(geom.sx, geom.sy)), math.ceil(math.sqrt(h * w / _OUTSIDE_SAMPLES)))
-    outside = np.ones((h, w), bool)
-    outside[box[1] : box[3], box[0] : box[2]] = False
-    bgd = _fit_model(frame[::step, ::step][outside[::step, ::step]], rng)
-    fgd = initial[1:2].copy()
-    gc = start.copy()
-    cv2.grabCut(guide.image, gc, None, bgd, fgd, 1, cv2.GC_EVAL_FREEZE_MODEL)
-    candidates = [(low, models), ((gc & 1).astype(bool), np.concatenate([bgd, fgd]))]
-    if candidates[1][0][rows, cols].mean() < _SPARSE:
+    bgd = _fit_model(_outside_sample(frame, geom), rng)
+    held = np.concatenate([bgd, fgd])
+    held_low = None
+    coarse = _coarse(geom)
+    if coarse is not None:
+        # The held cut on the full grid is slow (with models held fixed
+        # nothing settles first), and it matters only if it keeps more than
+        # the first cut: the coarse grid tells, at a quarter of the cost.
+        small_geom, small_gc = coarse
+        small_low = _cut(_Terms.of_image(_resize(frame, small_geom)), small_gc, held, 1, frozen=True)[0]
+        share = (geom.low_w * geom.low_h) / (small_geom.low_w * small_geom.low_h)
+        if np.count_nonzero(small_low) * share > np.count_nonzero(low):
+            held_low = _cut(_Terms.colour(guide), start.copy(), held, 1, frozen=True, graph=graph)[0]
+    else:
+        held_low = _cut(_Terms.colour(guide), start.copy(), held, 1, frozen=True, graph=graph)[0]
+    candidates = [(low, models)] if held_low is None else [(low, models), (held_low, held)]
+    if len(candidates) == 1 or candidates[1][0][rows, cols].mean() < _SPARSE:
         whole = _whole_frame_cut(frame, geom, work_size, rng)
         if whole is not None:
             candidates.append(whole)
@@ -149,31 +297,17 @@ def _whole_frame_cut(frame: np.ndarray, geom: _Geometry, work_size: int,
     h, w = frame.shape[:2]
     scale = min(1.0, work_size / max(h, w))
     whole = _Geometry(geom.box, (0, 0, w, h), max(1, round(w * scale)), max(1, round(h * scale)))
-    image = cv2.resize(frame, (whole.low_w, whole.low_h), interpolation=cv2.INTER_AREA)
+    image = _resize(frame, whole)
     gc = _box_labels(whole)
     if not (gc == cv2.GC_BGD).any():
         return None
-    cut, whole_models = _cut(image, gc, _first_models(image, gc, rng), _BOX_ITERATIONS)
+    terms = _Terms.of_image(image)
+    cut, whole_models = _cut(terms, gc, _first_models(image, gc, rng), _BOX_ITERATIONS)
     full = cv2.resize(cut.view(np.uint8), (w, h), interpolation=cv2.INTER_NEAREST)
     rx0, ry0, rx1, ry1 = geom.roi
     share = cv2.resize(full[ry0:ry1, rx0:rx1] * np.uint8(255), (geom.low_w, geom.low_h),
                        interpolation=cv2.INTER_AREA)
     return share >= 128, whole_models
-
-
-def _recut(guide: _Guide, models: np.ndarray, strokes: tuple[_Stroke, ...],
-           prior: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-    """Cut again with ``strokes`` as hard labels, starting from the label ``prior``.
-
-    Returns:
-        ``(label, models)``. The label moves only the last stroke's way from
-        ``prior`` (see ``GrabCutSession.stroke``).
-    """
-    gc = _stroke_labels(guide, strokes, prior)
-    low, models = _cut(guide.image, gc, models, _STROKE_ITERATIONS)
-    # A stroke only moves the label its own way (see ``GrabCutSession.stroke``).
-    low = (low | prior) if strokes[-1].fg else (low & prior)
-    return low, models
 
 
 def _stroke_labels(guide: _Guide, strokes: tuple[_Stroke, ...], prior: np.ndarray) -> np.ndarray:
@@ -191,101 +325,49 @@ def _stroke_labels(guide: _Guide, strokes: tuple[_Stroke, ...], prior: np.ndarra
     return gc
 
 
-# ------------------------------------------------------------- with depth
-#
-# ``cv2.grabCut`` takes 8-bit colour only, so with depth the session runs its
-# own graph cut (PyMaxflow) over the colour-plus-depth models of ``depth``,
-# in the same steps: iterations of re-estimation and cut for a box, one per
-# stroke.
+def _recut(terms: _Terms, guide: _Guide, models: np.ndarray, strokes: tuple[_Stroke, ...],
+           prior: np.ndarray, *, reach: int | None = _STROKE_REACH) -> tuple[np.ndarray, np.ndarray]:
+    """Cut again with ``strokes`` as hard labels, starting from the label ``prior``.
 
-_HARD = 9 * _GAMMA  # a terminal weight no cut pays (as OpenCV: 9 * gamma)
-_COARSE_MIN = 32  # a box's first iterations run at half the grid when that is at least this many pixels a side
-
-
-def _depth_cut(guide: _DepthGuide, gc: np.ndarray, models: np.ndarray, iterations: int,
-               *, frozen: bool = False) -> tuple[np.ndarray, np.ndarray]:
-    """``_cut`` with depth: re-estimate the colour-plus-depth models, then cut.
+    The label only moves the last stroke's way (see ``GrabCutSession.stroke``),
+    so the pixels on the other side stay fixed: a foreground stroke cuts only
+    the background pixels again, a background stroke only the foreground
+    ones, on a graph of those alone.
 
     Args:
-        guide: The ROI's features and pairwise weights.
-        gc: uint8 ``(h, w)`` OpenCV GC_* labels; updated in place. Only the
-            undecided pixels (``GC_PR_*``) are cut; ``GC_BGD``/``GC_FGD``
-            ones stay as they are.
-        models: ``(2, 105)`` background and foreground models.
-        iterations: Most iterations to run (stops early as ``_cut`` does).
-        frozen: Keep ``models`` as given (no re-estimation).
+        terms: The ROI's terms (colour, or with depth).
+        guide: The ROI's guide (the strokes' low-resolution pixels).
+        models: The current models.
+        strokes: The object's strokes, the new one last.
+        prior: The label before the stroke.
+        reach: Grid pixels around the stroke that may change, or None for
+            the whole box. Colour cuts on a white chair before a white wall
+            are slow to solve over the whole box; with depth the cut is
+            easy, and the whole box is cut.
 
     Returns:
-        ``(label, models)``: the bool foreground label and the new models.
+        ``(label, models)``.
     """
-    x = guide.features.reshape(-1, 4)
-    valid = guide.valid.ravel()
-    flat = gc.reshape(-1)
-    free = np.flatnonzero(flat >= cv2.GC_PR_BGD)
-    fallback = _fallback_z(guide)
-    bgd, fgd = models[0].copy(), models[1].copy()
-    for _ in range(iterations):
-        is_fg = (flat & 1).astype(bool)
-        learn = not frozen and is_fg.any() and not is_fg.all()
-        if learn:
-            # Each pixel joins its most likely component of its own side; the
-            # models are refitted from those (OpenCV's learning step).
-            bg, fg = ~is_fg, is_fg
-            bgd = _fit_components(x[bg], valid[bg], _component_scores(bgd, x[bg], valid[bg]).argmax(axis=1),
-                                  fallback)
-            fgd = _fit_components(x[fg], valid[fg], _component_scores(fgd, x[fg], valid[fg]).argmax(axis=1),
-                                  fallback)
-        before = flat[free] & 1
-        xf, vf = x[free], valid[free]
-        _maxflow(guide, flat, free, _neg_log_likelihood(_component_scores(bgd, xf, vf)),
-                 _neg_log_likelihood(_component_scores(fgd, xf, vf)))
-        if not learn or np.count_nonzero(before != (flat[free] & 1)) <= _CONVERGED * max(1, len(free)):
-            break
-    return (gc & 1).astype(bool), np.stack([bgd, fgd])
+    gc = _stroke_labels(guide, strokes, prior)
+    if strokes[-1].fg:
+        gc[gc == cv2.GC_PR_FGD] = cv2.GC_FGD
+    else:
+        gc[gc == cv2.GC_PR_BGD] = cv2.GC_BGD
+    hit = guide.footprint(strokes[-1])
+    if hit is not None and reach is not None:
+        # Only near the stroke: further away the label stays as it was.
+        crop, (y0, x0) = hit
+        r = reach
+        far = np.ones(gc.shape, bool)
+        far[max(0, y0 - r) : y0 + crop.shape[0] + r, max(0, x0 - r) : x0 + crop.shape[1] + r] = False
+        gc[far & (gc == cv2.GC_PR_FGD)] = cv2.GC_FGD
+        gc[far & (gc == cv2.GC_PR_BGD)] = cv2.GC_BGD
+    low, models = _cut(terms, gc, models, _STROKE_ITERATIONS)
+    low = (low | prior) if strokes[-1].fg else (low & prior)
+    return low, models
 
 
-def _maxflow(guide: _DepthGuide, flat: np.ndarray, free: np.ndarray, cost_bg: np.ndarray,
-             cost_fg: np.ndarray) -> None:
-    """One minimum cut over the pixels ``free``; they become GC_PR_FGD or GC_PR_BGD in ``flat``.
-
-    Only the free pixels are nodes: a link to a fixed neighbour always
-    costs its weight when the free pixel takes the other label, so it is
-    folded into that pixel's terminal weights (the same minimum cut on a
-    smaller graph; the box's margin alone is a third of the ROI).
-
-    Args:
-        guide: The ROI's pairwise links (``guide.links``).
-        flat: uint8 GC_* labels of the ROI, flattened; updated in place.
-        free: Flat indices of the pixels to cut.
-        cost_bg: ``-log p`` of each free pixel under the background model.
-        cost_fg: The same under the foreground model.
-    """
-    n = len(free)
-    if n == 0:
-        return
-    node = np.full(flat.size, -1, np.int64)
-    node[free] = np.arange(n)
-    # Source = foreground: a pixel cut from the source (background) pays its
-    # source capacity, so that is its cost as background, and vice versa.
-    shift = np.minimum(cost_bg, cost_fg)  # only the difference matters; keeps capacities small
-    source = cost_bg - shift
-    sink = cost_fg - shift
-    p, q, weight = guide.links
-    np_, nq = node[p], node[q]
-    both = (np_ >= 0) & (nq >= 0)
-    for a, b in ((np_, q), (nq, p)):
-        # A free pixel linked to a fixed one: pays the link if it takes the other label.
-        one = (a >= 0) & (node[b] < 0)
-        fixed_fg = (flat[b[one]] & 1).astype(bool)
-        source += np.bincount(a[one][fixed_fg], weight[one][fixed_fg], minlength=n)
-        sink += np.bincount(a[one][~fixed_fg], weight[one][~fixed_fg], minlength=n)
-    graph = maxflow.Graph[float](n, int(np.count_nonzero(both)))
-    ids = graph.add_nodes(n)
-    graph.add_edges(np_[both], nq[both], weight[both], weight[both])
-    graph.add_grid_tedges(ids, source, sink)
-    graph.maxflow()
-    is_bg = graph.get_grid_segments(ids)
-    flat[free] = np.where(is_bg, cv2.GC_PR_BGD, cv2.GC_PR_FGD)
+# ------------------------------------------------------------- with depth
 
 
 def _depth_first_models(guide: _DepthGuide, gc: np.ndarray, rng: np.random.Generator) -> np.ndarray:
@@ -310,52 +392,74 @@ def _depth_box_cut(frame: np.ndarray, depth: np.ndarray, guide: _DepthGuide,
     rows, cols = geom.box_low()
     rng = np.random.default_rng(0)
     start = gc.copy()
-    coarse = _Geometry(geom.box, geom.roi, max(1, round(geom.low_w / 2)), max(1, round(geom.low_h / 2)))
-    coarse_gc = _box_labels(coarse)
-    if min(coarse.low_w, coarse.low_h) >= _COARSE_MIN and (coarse_gc == cv2.GC_BGD).any():
-        # The models settle over the first iterations, on a grid of half the
-        # size (a quarter of the pixels); the last iteration re-estimates and
-        # cuts on the full grid, starting from the coarse label.
-        rx0, ry0, rx1, ry1 = geom.roi
-        image = cv2.resize(frame[ry0:ry1, rx0:rx1], (coarse.low_w, coarse.low_h), interpolation=cv2.INTER_AREA)
-        small = _DepthGuide.build(coarse, image, depth)
-        initial = _depth_first_models(small, coarse_gc, rng)
-        coarse_low, start_models = _depth_cut(small, coarse_gc, initial, _BOX_ITERATIONS - 1)
-        up = cv2.resize(coarse_low.astype(np.float32), (geom.low_w, geom.low_h), interpolation=cv2.INTER_LINEAR)
-        gc[rows, cols] = np.where(up[rows, cols] >= 0.5, cv2.GC_PR_FGD, cv2.GC_PR_BGD)
-        low, models = _depth_cut(guide, gc, start_models, 1)
+    coarse = _coarse(geom)
+    if coarse is not None:
+        small_geom, small_gc = coarse
+        small = _DepthGuide.build(small_geom, _resize(frame, small_geom), depth)
+        initial = _depth_first_models(small, small_gc, rng)
+        low, models, graph = _coarse_to_fine(_Terms.depth(guide), geom, gc, _Terms.depth(small), small_gc, initial,
+                                             _BOX_ITERATIONS)
     else:
         initial = _depth_first_models(guide, gc, rng)
-        low, models = _depth_cut(guide, gc, initial, _BOX_ITERATIONS)
+        graph = _graph_for(_Terms.depth(guide), gc)
+        low, models = _cut(_Terms.depth(guide), gc, initial, _BOX_ITERATIONS, graph=graph)
     if low[rows, cols].mean() >= _SPARSE:
         return low, models
-    h, w = frame.shape[:2]
-    box = geom.box
-    step = max(1, round(1 / min(geom.sx, geom.sy)), math.ceil(math.sqrt(h * w / _OUTSIDE_SAMPLES)))
-    outside = np.ones((h, w), bool)
-    outside[box[1] : box[3], box[0] : box[2]] = False
-    outside = outside[::step, ::step]
-    z = depth[::step, ::step][outside]
+    z = _outside_sample(depth[..., None], geom)[:, 0]
     valid = np.isfinite(z)
-    x = np.concatenate([frame[::step, ::step][outside].astype(np.float64),
+    x = np.concatenate([_outside_sample(frame, geom).astype(np.float64),
                         np.where(valid, z * _Z_SCALE, 0.0)[:, None]], axis=1)
     bgd = _first_model(x, valid, _fallback_z(guide), rng)
-    rescued = _depth_cut(guide, start, np.stack([bgd, initial[1]]), 1, frozen=True)
+    held = np.stack([bgd, initial[1]])
+    rescued = _cut(_Terms.depth(guide), start, held, 1, frozen=True, graph=graph)
     return max([(low, models), rescued], key=lambda c: np.count_nonzero(c[0]))
 
 
-def _depth_recut(guide: _DepthGuide, models: np.ndarray, strokes: tuple[_Stroke, ...], prior: np.ndarray,
-                 footprints: _Guide) -> tuple[np.ndarray, np.ndarray]:
-    """``_recut`` with depth (``footprints`` gives the strokes' low-resolution pixels)."""
-    gc = _stroke_labels(footprints, strokes, prior)
-    # The label only moves the stroke's way (see ``GrabCutSession.stroke``),
-    # so the pixels on the other side stay fixed: a foreground stroke cuts
-    # only the background pixels again, a background stroke only the
-    # foreground ones, on a graph of those alone.
-    if strokes[-1].fg:
-        gc[gc == cv2.GC_PR_FGD] = cv2.GC_FGD
-    else:
-        gc[gc == cv2.GC_PR_BGD] = cv2.GC_BGD
-    low, models = _depth_cut(guide, gc, models, _STROKE_ITERATIONS)
-    low = (low | prior) if strokes[-1].fg else (low & prior)
-    return low, models
+# ------------------------------------------------------------- from a mask
+
+
+def _seed_labels(geom: _Geometry, seed: np.ndarray, band: int) -> np.ndarray:
+    """The GC_* labels of a cut from a mask: its edge may move by ``band`` grid pixels.
+
+    Inside the box, the seed is probable foreground and the rest probable
+    background; with ``band`` > 0, the seed eroded by ``band`` is sure
+    foreground and what lies beyond it dilated by ``band`` sure background.
+    Outside the box everything is background.
+    """
+    rows, cols = geom.box_low()
+    inside = np.where(seed, cv2.GC_PR_FGD, cv2.GC_PR_BGD).astype(np.uint8)
+    if band > 0:
+        kernel = cv2.getStructuringElement(cv2.MORPH_ELLIPSE, (2 * band + 1, 2 * band + 1))
+        u8 = seed.view(np.uint8)
+        inside[cv2.erode(u8, kernel, borderType=cv2.BORDER_REPLICATE).view(bool)] = cv2.GC_FGD
+        inside[~cv2.dilate(u8, kernel).view(bool)] = cv2.GC_BGD
+    gc = np.full(seed.shape, cv2.GC_BGD, np.uint8)
+    gc[rows, cols] = inside[rows, cols]
+    return gc
+
+
+def _seed_cut(terms: _Terms, geom: _Geometry, seed: np.ndarray, band: int,
+              first: Callable[[np.ndarray], np.ndarray]) -> tuple[np.ndarray, np.ndarray]:
+    """Models (and, with ``band`` > 0, a cut) for an object given as a mask.
+
+    The models start from k-means on each side of the seed (``first``, given
+    labels with the seed as ``GC_PR_FGD`` and the rest as ``GC_BGD``) and
+    take one learning step on it, so the next stroke re-cuts with models of
+    this object. With ``band`` > 0 the cut then runs from the seed as a box's
+    does (``_seed_labels``), so its edge can move to the image's.
+
+    Args:
+        terms: The ROI's terms.
+        geom: The ROI's geometry.
+        seed: bool ``(low_h, low_w)``, the mask on the grid (both sides non-empty).
+        band: How far the cut may move the seed's edge, grid pixels (0: not at all).
+        first: First models from such labels.
+
+    Returns:
+        ``(label, models)``: the seed itself when ``band`` is 0.
+    """
+    models = first(np.where(seed, cv2.GC_PR_FGD, cv2.GC_BGD).astype(np.uint8))
+    models = terms.learn(seed.ravel(), models)
+    if band <= 0:
+        return seed.copy(), models
+    return _cut(terms, _seed_labels(geom, seed, band), models, _BOX_ITERATIONS)

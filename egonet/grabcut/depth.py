@@ -9,10 +9,10 @@ without depth is scored by the mixtures' colour marginals, i.e. by colour
 only. A session stores the pair as a ``(2, 105)`` array, background first:
 per component the weights (5), means (5x4) and covariances (5x4x4).
 
-The pairwise term (``_DepthGuide.edges``) is OpenCV grabCut's contrast term
-multiplied by a factor that falls towards 0 where depth jumps between
-neighbours, so the cut runs cheaply along depth edges even where the colours
-on both sides agree.
+The pairwise term (``_DepthGuide.links``, from ``graph._links``) is OpenCV
+grabCut's contrast term multiplied by a factor that falls towards 0 where
+depth jumps between neighbours, so the cut runs cheaply along depth edges
+even where the colours on both sides agree.
 """
 
 from __future__ import annotations
@@ -26,6 +26,7 @@ import numpy as np
 from egonet.errors import EgonetError
 from egonet.grabcut.colour import _COMPONENTS, _SAMPLES, _kmeans_labels
 from egonet.grabcut.geometry import _Geometry
+from egonet.grabcut.graph import _links
 
 _FEATURES = 4  # r, g, b, scaled depth
 _DEPTH_MODEL_SIZE = _COMPONENTS * (1 + _FEATURES + _FEATURES * _FEATURES)
@@ -33,8 +34,6 @@ _Z_SCALE = 200.0  # feature units per metre: 5 mm of depth weigh like one colour
 _Z_VAR_FLOOR = 4.0  # least depth variance per component (feature units^2): ~1 cm of sensor noise
 _Z_UNKNOWN_VAR = 1e4  # depth variance of a component fitted without depth samples (0.5 m)
 _MIN_DEPTH_SAMPLES = 8  # a component needs this many pixels with depth to model depth
-_GAMMA = 50.0  # weight of the pairwise term (OpenCV grabCut's)
-_JUMP = 0.02  # depth jump, as a fraction of the depth, at which the pairwise weight falls to 1/e
 _VALID_SHARE = 0.5  # a low-resolution pixel has depth when this share of its footprint has
 
 
@@ -55,14 +54,15 @@ def _check_depth(depth: object, shape: tuple[int, int]) -> np.ndarray | None:
         raise EgonetError(f"depth: expected a float (H, W) = {tuple(shape)} array in metres (0 or NaN where "
                           f"missing), got {depth.dtype} {depth.shape}{hint}", field="depth")
     z = depth.astype(np.float32)  # always a copy
-    missing = np.isnan(z)
-    if np.isinf(z).any() or (z[~missing] < 0).any():
+    # fmin/fmax skip NaN (missing); one pass each over the frame.
+    lo, hi = (float(np.fmin.reduce(z, axis=None)), float(np.fmax.reduce(z, axis=None))) if z.size else (0.0, 0.0)
+    if lo < 0 or math.isinf(hi):
         raise EgonetError("depth: values must be metres >= 0 (0 or NaN where missing), got negative or "
                           "infinite ones", field="depth")
-    z[z == 0] = np.nan
-    if np.nanmax(z, initial=0.0) > 1000:
-        raise EgonetError(f"depth: expected metres, got values up to {np.nanmax(z):.0f} (millimetres? divide "
+    if hi > 1000:
+        raise EgonetError(f"depth: expected metres, got values up to {hi:.0f} (millimetres? divide "
                           "by 1000)", field="depth")
+    z[z == 0] = np.nan
     return z
 
 
@@ -116,35 +116,6 @@ def _low_depth(depth: np.ndarray, geom: _Geometry) -> tuple[np.ndarray, np.ndarr
     valid = share >= _VALID_SHARE
     z = np.where(valid, total / np.maximum(share, 1e-6), 0.0).astype(np.float64)
     return z, valid
-
-
-def _links(colour: np.ndarray, z: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-    """Pairwise links of the 8-neighbour grid: flat indices ``p``, ``q`` and weights.
-
-    ``gamma * exp(-beta * |dc|^2) / distance`` as OpenCV's grabCut, with
-    ``beta`` from the mean squared colour difference, times
-    ``exp(-(dz / (_JUMP * z))^2)`` where both pixels have depth.
-    """
-    h, w = colour.shape[:2]
-    index = np.arange(h * w, dtype=np.int32).reshape(h, w)
-    shifts = (((slice(None), slice(0, w - 1)), (slice(None), slice(1, w)), 1.0),  # right
-              ((slice(0, h - 1), slice(None)), (slice(1, h), slice(None)), 1.0),  # below
-              ((slice(0, h - 1), slice(0, w - 1)), (slice(1, h), slice(1, w)), math.sqrt(2)),  # below right
-              ((slice(0, h - 1), slice(1, w)), (slice(1, h), slice(0, w - 1)), math.sqrt(2)))  # below left
-    diffs = [((colour[a] - colour[b]) ** 2).sum(axis=-1) for a, b, _ in shifts]
-    total = sum(float(d.sum()) for d in diffs)
-    count = sum(d.size for d in diffs)
-    beta = 0.0 if total <= 0 else 1.0 / (2.0 * total / count)
-    ps, qs, weights = [], [], []
-    for (a, b, dist), d2 in zip(shifts, diffs):
-        near = np.fmin(z[a], z[b])
-        jump = np.abs(z[a] - z[b]) / (_JUMP * np.maximum(near, 1e-3))
-        # NaN where either pixel lacks depth: no depth factor there.
-        factor = np.where(np.isnan(jump), 1.0, np.exp(-np.nan_to_num(jump) ** 2))
-        ps.append(index[a].ravel())
-        qs.append(index[b].ravel())
-        weights.append((_GAMMA / dist * np.exp(-beta * d2) * factor).ravel())
-    return np.concatenate(ps), np.concatenate(qs), np.concatenate(weights)
 
 
 # ------------------------------------------------------------------ models
@@ -220,42 +191,77 @@ def _first_model(x: np.ndarray, valid: np.ndarray, fallback_z: float, rng: np.ra
 
 
 def _component_scores(model: np.ndarray, x: np.ndarray, valid: np.ndarray) -> np.ndarray:
-    """``log(weight_k * N_k(x))`` for every sample and component ``(N, 5)``.
+    """``log(weight_k * N_k(x))`` for every sample and component, float32 ``(N, 5)``.
 
     Samples with depth use all four features, the others the colour
-    marginal (the first three).
+    marginal (the first three). The per-pixel products run in float32
+    (twice as fast; the scores only rank components and feed the cut's
+    weights).
     """
     weights, means, covs = _unpack_model(model)
-    out = np.full((len(x), _COMPONENTS), -np.inf)
+    out = np.full((len(x), _COMPONENTS), -np.inf, np.float32)
     live = np.flatnonzero(weights > 0)
+    if not len(live):
+        return out
     for rows, dims in ((valid, _FEATURES), (~valid, 3)):
-        if not rows.any() or not len(live):
+        every = bool(rows.all())
+        picked = None if every else np.flatnonzero(rows)
+        if picked is not None and not len(picked):
             continue
         # Whitening: with C = L L^T, the Mahalanobis distance is |L^-1 (x - mu)|^2.
         # All components in one product: (n, dims) @ (dims, k * dims).
         chol = np.linalg.cholesky(covs[live][:, :dims, :dims])
         whiten = np.linalg.inv(chol)  # (k, dims, dims)
         shift = np.einsum("kij,kj->ki", whiten, means[live, :dims])
-        # float32 for the per-pixel products (twice as fast; the scores only
-        # rank components and feed the cut's weights).
-        y = x[rows, :dims].astype(np.float32) @ whiten.transpose(2, 0, 1).reshape(dims, -1).astype(np.float32)
+        samples = x[:, :dims] if every else x[picked, :dims]
+        y = samples.astype(np.float32) @ whiten.transpose(2, 0, 1).reshape(dims, -1).astype(np.float32)
         y -= shift.ravel().astype(np.float32)
         y *= y
         # Sum each component's squares with one product: (n, k * dims) @ (k * dims, k).
-        maha = y @ np.repeat(np.eye(len(live), dtype=np.float32), dims, axis=0)
-        const = (np.log(weights[live]) - np.log(np.diagonal(chol, axis1=1, axis2=2)).sum(axis=1)
-                 - 0.5 * dims * math.log(2 * math.pi))
-        block = np.full((len(y), _COMPONENTS), -np.inf)
-        block[:, live] = const - 0.5 * maha.astype(np.float64)
-        out[rows] = block
+        scores = y @ np.repeat(np.eye(len(live), dtype=np.float32), dims, axis=0)
+        scores *= np.float32(-0.5)
+        scores += (np.log(weights[live]) - np.log(np.diagonal(chol, axis1=1, axis2=2)).sum(axis=1)
+                   - 0.5 * dims * math.log(2 * math.pi)).astype(np.float32)
+        if every and len(live) == _COMPONENTS:
+            return scores
+        if every:
+            out[:, live] = scores
+        else:
+            out[np.ix_(picked, live)] = scores
     return out
 
 
 def _neg_log_likelihood(scores: np.ndarray) -> np.ndarray:
-    """``-log p(x)`` of a mixture from its component scores ``(N, 5)``."""
+    """``-log p(x)`` (float64) of a mixture from its component scores ``(N, 5)``."""
     top = scores.max(axis=1)
-    return -(top + np.log(np.exp(scores - top[:, None]).sum(axis=1)))
+    shifted = scores - top[:, None]
+    np.exp(shifted, out=shifted)
+    return -(top.astype(np.float64) + np.log(shifted.sum(axis=1), dtype=np.float64))
 
 
 def _fallback_z(guide: _DepthGuide) -> float:
     return float(guide.features[..., 3][guide.valid].mean()) if guide.valid.any() else 0.0
+
+
+def _learn_depth(guide: _DepthGuide, is_fg: np.ndarray, models: np.ndarray) -> np.ndarray:
+    """Both ``(2, 105)`` models re-estimated from the ROI's pixels split by ``is_fg`` (flat, both sides non-empty).
+
+    Each pixel joins its most likely component of its own side and the
+    models are refitted from those (OpenCV's learning step, with depth).
+    """
+    x = guide.features.reshape(-1, _FEATURES)
+    valid = guide.valid.ravel()
+    fallback = _fallback_z(guide)
+    out = []
+    for model, side in ((models[0], ~is_fg), (models[1], is_fg)):
+        xs, vs = x[side], valid[side]
+        out.append(_fit_components(xs, vs, _component_scores(model, xs, vs).argmax(axis=1), fallback))
+    return np.stack(out)
+
+
+def _depth_costs(guide: _DepthGuide, models: np.ndarray, pixels: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """``-log p`` of the flat ``pixels`` under the background and the foreground model."""
+    x = guide.features.reshape(-1, _FEATURES)[pixels]
+    valid = guide.valid.ravel()[pixels]
+    return (_neg_log_likelihood(_component_scores(models[0], x, valid)),
+            _neg_log_likelihood(_component_scores(models[1], x, valid)))

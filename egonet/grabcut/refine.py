@@ -11,6 +11,7 @@ not depend on the label.
 from __future__ import annotations
 
 import dataclasses
+import functools
 import math
 import weakref
 
@@ -18,6 +19,7 @@ import cv2
 import numpy as np
 
 from egonet.grabcut.geometry import _Geometry
+from egonet.grabcut.graph import _links
 from egonet.grabcut.strokes import _polyline_distance_mask, _Stroke
 
 _GF_RADIUS = 4  # guided-filter window radius, low-resolution pixels
@@ -47,6 +49,16 @@ class _Guide:
     mean: np.ndarray
     inverse: np.ndarray
     _footprints: weakref.WeakKeyDictionary = dataclasses.field(default_factory=weakref.WeakKeyDictionary)
+
+    @functools.cached_property
+    def pixels(self) -> np.ndarray:
+        """float32 ``(low_h * low_w, 3)``: ``image``'s colours, flat (the colour cut's samples)."""
+        return self.image.reshape(-1, 3).astype(np.float32)
+
+    @functools.cached_property
+    def links(self) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """The colour cut's pairwise links of ``image`` (``graph._links``), made on first use."""
+        return _links(self.image)
 
     def footprint(self, stroke: _Stroke) -> tuple[np.ndarray, tuple[int, int]] | None:
         """The stroke's pixels on the low-resolution grid (cached), or None.

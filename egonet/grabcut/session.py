@@ -19,7 +19,8 @@ import cv2
 import numpy as np
 
 from egonet.errors import EgonetError
-from egonet.grabcut.cut import _box_cut, _box_labels, _depth_box_cut, _depth_recut, _recut
+from egonet.grabcut.colour import _first_models
+from egonet.grabcut.cut import _box_cut, _box_labels, _depth_box_cut, _depth_first_models, _recut, _seed_cut, _Terms
 from egonet.grabcut.depth import _check_depth, _DepthGuide
 from egonet.grabcut.geometry import _clip_to_box, _downsample, _Geometry, _grow_box
 from egonet.grabcut.refine import _BAND, _GF_RADIUS, _Guide, _upsample_mask
@@ -35,6 +36,21 @@ def _check_image(image: object) -> np.ndarray:
     if image.shape[0] < 2 or image.shape[1] < 2:
         raise EgonetError(f"image: needs at least 2x2 pixels, got {image.shape[1]}x{image.shape[0]}", field="image")
     return np.ascontiguousarray(image).copy()
+
+
+def _check_seed(mask: object, shape: tuple[int, int]) -> np.ndarray:
+    if not isinstance(mask, np.ndarray):
+        raise EgonetError(f"mask: expected a numpy array, got {type(mask).__name__}", field="mask")
+    if mask.shape != tuple(shape) or not (mask.dtype == bool or np.issubdtype(mask.dtype, np.integer)):
+        raise EgonetError(f"mask: expected a bool (H, W) = {tuple(shape)} array, got {mask.dtype} {mask.shape}",
+                          field="mask")
+    if mask.dtype != bool:
+        if ((mask != 0) & (mask != 1)).any():
+            raise EgonetError("mask: integer masks must hold only 0 and 1", field="mask")
+        mask = mask != 0
+    if not mask.any():
+        raise EgonetError("mask: is empty; there is no object to start from (draw a box)", field="mask")
+    return mask
 
 
 def _as_int(value: object, name: str) -> int:
@@ -75,12 +91,17 @@ class GrabCutSession:
 
     def __init__(self, image: np.ndarray, depth: np.ndarray | None = None, *, work_size: int = 272,
                  max_undo: int = 20) -> None:
-        self._image = _check_image(image)
-        self._depth = _check_depth(depth, self._image.shape[:2])
+        checked = _check_image(image)
+        self._setup(checked, _check_depth(depth, checked.shape[:2]), work_size, max_undo)
+
+    def _setup(self, image: np.ndarray, depth: np.ndarray | None, work_size: int, max_undo: int) -> None:
+        """``__init__`` on an image and depth already checked (and copied)."""
         if isinstance(work_size, bool) or not isinstance(work_size, (int, np.integer)) or work_size < 32:
             raise EgonetError(f"work_size: expected an integer >= 32, got {work_size!r}", field="work_size")
         if isinstance(max_undo, bool) or not isinstance(max_undo, (int, np.integer)) or max_undo < 0:
             raise EgonetError(f"max_undo: expected an integer >= 0, got {max_undo!r}", field="max_undo")
+        self._image = image
+        self._depth = depth
         self._work_size = int(work_size)
         self._max_undo = int(max_undo)
         self._history: list[_Snapshot] = []
@@ -127,7 +148,8 @@ class GrabCutSession:
     @property
     def nbytes(self) -> int:
         """Bytes held in the session's arrays: the frame's copy, the mask, the
-        ROI's guide, the undo levels and the cached stroke footprints."""
+        ROI's guide (with the cut's links), the undo levels and the cached
+        stroke footprints."""
         arrays = [self._image, self._mask, self._depth]
         if self._depth_guide is not None:
             d = self._depth_guide
@@ -135,6 +157,7 @@ class GrabCutSession:
         if self._guide is not None:
             g = self._guide
             arrays += [g.image, g.colour, g.mean, g.inverse]
+            arrays += [*g.__dict__.get("links", ()), g.__dict__.get("pixels")]  # made on first use
             arrays += [hit[0] for hit in g._footprints.values() if hit is not None]
         for snap in self._history + [self._now]:
             arrays += [snap.models, snap.low, snap.mask_bits] + [s.points for s in snap.strokes]
@@ -180,6 +203,79 @@ class GrabCutSession:
             low, models = _depth_box_cut(self._image, self._depth, self._depth_guide_for(guide), gc)
         snap = _Snapshot(box=box, strokes=(), models=models, low=low)
         self._commit(guide, snap, self._full_mask(guide, snap))
+        return self.mask
+
+    def seed_mask(self, mask: np.ndarray, *, band: float = 0) -> np.ndarray:
+        """Start a new object from a mask (a propagated one, a model's proposal) and return its first mask.
+
+        Like ``box``, it clears the strokes and models of the previous object
+        (``undo`` brings them back), and strokes correct the new one at once:
+        the object's box is the mask's bounds plus ``band`` and 2 pixels, and
+        its models are learnt from the mask, so a stroke re-cuts as it would
+        after a box. With ``band`` 0 the mask is kept exactly; with ``band``
+        > 0 GrabCut refines it first, moving its edge by at most ``band``
+        pixels (the mask eroded by ``band`` stays in, what lies beyond it
+        dilated by ``band`` stays out), so a mask that is roughly right (a
+        blurry prediction, a mask carried from the previous frame) snaps to
+        the object's edges without straying far from it.
+
+        Args:
+            mask: Bool (or 0/1 integer) ``(H, W)``, the object; not empty,
+                and leaving some of the frame out.
+            band: How far refinement may move the mask's edge, pixels (0:
+                keep the mask as it is).
+
+        Returns:
+            Bool ``(H, W)`` mask.
+
+        Raises:
+            ValueError: If ``mask`` is not ``(H, W)`` bool or 0/1, is empty or
+                covers the frame, or ``band`` is negative.
+
+        Example:
+            >>> import numpy as np
+            >>> image = np.full((90, 120, 3), 30, np.uint8)
+            >>> image[30:60, 40:80] = 220
+            >>> rough = np.zeros((90, 120), bool)
+            >>> rough[33:57, 44:76] = True  # a little inside the object
+            >>> s = GrabCutSession(image)
+            >>> int(s.seed_mask(rough).sum()), int(s.seed_mask(rough, band=6).sum())
+            (768, 1200)
+            >>> bool(s.stroke([(60, 45)], "bg", 3)[45, 60])
+            False
+        """
+        m = _check_seed(mask, self.shape)
+        if isinstance(band, bool) or not isinstance(band, (int, float, np.integer, np.floating)) or not (
+                math.isfinite(float(band)) and band >= 0):
+            raise EgonetError(f"band: expected a number of pixels >= 0, got {band!r}", field="band")
+        h, w = self.shape
+        rows, cols = np.flatnonzero(m.any(axis=1)), np.flatnonzero(m.any(axis=0))
+        pad = math.ceil(float(band)) + 2
+        box = (max(0, int(cols[0]) - pad), max(0, int(rows[0]) - pad), min(w, int(cols[-1]) + 1 + pad),
+               min(h, int(rows[-1]) + 1 + pad))
+        guide = self._guide_for(box)
+        geom = guide.geom
+        rx0, ry0, rx1, ry1 = geom.roi
+        share = cv2.resize(m[ry0:ry1, rx0:rx1].astype(np.float32), (geom.low_w, geom.low_h),
+                           interpolation=cv2.INTER_AREA)
+        # A part smaller than a grid pixel still gives the models a sample.
+        seed = share > 0.5 if (share > 0.5).any() else share > 0
+        if seed.all():
+            raise EgonetError("mask: covers the whole frame; leave some background, or draw a box", field="mask")
+        band_low = round(float(band) * 0.5 * (geom.sx + geom.sy))
+        if band > 0:
+            band_low = max(1, band_low)
+        rng = np.random.default_rng(0)
+        if self._depth is None:
+            terms = _Terms.colour(guide)
+            first = lambda sides: _first_models(guide.image, sides, rng)  # noqa: E731
+        else:
+            depth_guide = self._depth_guide_for(guide)
+            terms = _Terms.depth(depth_guide)
+            first = lambda sides: _depth_first_models(depth_guide, sides, rng)  # noqa: E731
+        low, models = _seed_cut(terms, geom, seed, band_low, first)
+        snap = _Snapshot(box=box, strokes=(), models=models, low=low)
+        self._commit(guide, snap, m.copy() if band_low == 0 else self._full_mask(guide, snap))
         return self.mask
 
     def stroke(self, points: Sequence[Sequence[float]] | np.ndarray, label: str, radius: float) -> np.ndarray:
@@ -228,9 +324,10 @@ class GrabCutSession:
         # In a new ROI the cut starts from the current mask (the models carry over either way).
         prior = _downsample(self._mask, guide.geom) if new_roi else prev.low
         if self._depth is None:
-            low, models = _recut(guide, prev.models, strokes, prior)
+            low, models = _recut(_Terms.colour(guide), guide, prev.models, strokes, prior)
         else:
-            low, models = _depth_recut(self._depth_guide_for(guide), prev.models, strokes, prior, guide)
+            low, models = _recut(_Terms.depth(self._depth_guide_for(guide)), guide, prev.models, strokes, prior,
+                                 reach=None)
         snap = _Snapshot(box=box, strokes=strokes, models=models, low=low)
         if new_roi:
             # Both masks honour every stroke, so their union does too.
@@ -308,11 +405,11 @@ class GrabCutSession:
             True
         """
         checked = _check_image(image)
-        _check_depth(depth, checked.shape[:2])
+        checked_depth = _check_depth(depth, checked.shape[:2])
         if not isinstance(state, Mapping):
             raise EgonetError(f"state: expected the dict from GrabCutSession.state(), got {type(state).__name__}", field="state")
         try:
-            return cls._from_state(image, state, depth)
+            return cls._from_state(checked, state, checked_depth)
         except (KeyError, IndexError, TypeError, ValueError) as exc:
             if isinstance(exc, EgonetError) and exc.field in ("state", "depth"):
                 raise
@@ -331,7 +428,8 @@ class GrabCutSession:
             raise EgonetError("depth: this state was made " + (
                 "with depth; pass the frame's depth (H, W) in metres" if uses_depth else
                 "without depth; resume it without depth (or start a new session with depth)"), field="depth")
-        session = cls(image, depth, work_size=int(scalar("work_size")), max_undo=int(scalar("max_undo")))
+        session = cls.__new__(cls)
+        session._setup(image, depth, int(scalar("work_size")), int(scalar("max_undo")))
         h, w = session.shape
         if (int(scalar("height")), int(scalar("width"))) != (h, w):
             raise EgonetError(f"state: made on a {scalar('width')}x{scalar('height')} frame, the image is {w}x{h}", field="state")

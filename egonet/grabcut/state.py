@@ -15,7 +15,7 @@ from collections.abc import Mapping, Sequence
 import numpy as np
 
 from egonet.errors import EgonetError
-from egonet.grabcut.colour import _MODEL_SIZE
+from egonet.grabcut.colour import _COMPONENTS, _MODEL_SIZE
 from egonet.grabcut.depth import _DEPTH_MODEL_SIZE
 from egonet.grabcut.strokes import _Stroke
 
@@ -111,6 +111,11 @@ def _decode_levels(state: Mapping[str, object], height: int, width: int, *,
     model_size = _DEPTH_MODEL_SIZE if uses_depth else _MODEL_SIZE
     if n < 1 or a["models"].shape != (n, 2, model_size) or a["low_shape"].shape != (n, 2):
         raise EgonetError("state: its arrays disagree on the number of undo levels", field="state")
+    weights = a["models"][..., :_COMPONENTS]
+    boxed = a["box"][:, 0] >= 0
+    if not np.isfinite(a["models"]).all() or (weights < 0).any() or not (weights[boxed].sum(axis=-1) > 0).all():
+        raise EgonetError("state: its models are not mixtures (weights must be >= 0, some > 0, all finite)",
+                          field="state")
     points, p_off = a["stroke_points"].astype(np.float64), a["stroke_point_offsets"]
     strokes = [_Stroke(points[p_off[i] : p_off[i + 1]].copy(), bool(a["stroke_fg"][i]),
                        float(a["stroke_radius"][i])) for i in range(len(p_off) - 1)]

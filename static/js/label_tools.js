@@ -151,7 +151,7 @@ function onPointerUp() {
   } else if (done.type === "stroke") {
     const inst = selected();
     if (!inst || !inst.engine) {
-      showMessage("Draw a box around the object first (B): GrabCut strokes refine a box.", "error");
+      showMessage("Draw a box around the object first (B): GrabCut strokes refine a box, a proposal or a propagated object, not one painted by hand.", "error");
     } else {
       // Points far off the frame change nothing inside it; the server refuses them.
       const r = ui.brushRadius;

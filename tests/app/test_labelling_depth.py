@@ -18,7 +18,7 @@ from app.services.labelling import grabcut as grabcut_service
 from egonet import io
 from egonet.grabcut import GrabCutSession
 from tests.app.test_labelling_grabcut import call, forget_everything, iou
-from tests.realdata import PRIMESENSE
+from tests.realdata import PRIMESENSE, chair_truth
 
 
 H, W = 120, 160
@@ -172,8 +172,11 @@ def test_real_chair_backrest_comes_in_with_the_imported_depth(app, annotator, mo
         results[key] = first, final
     depth_box, depth_final = results["depth"]
     rgb_box, rgb_final = results["rgb"]
-    # Colour alone leaves the white backrest out; the frame's depth brings it in from the box alone.
-    assert not rgb_box[150, 420] and not rgb_final[150, 420]
+    # Colour alone cannot tell the white backrest from the white wall (it
+    # leaves it out or takes the wall in too); the frame's depth brings it in
+    # from the box alone.
+    truth = chair_truth()
+    assert iou(rgb_final, truth) < 0.65 < 0.8 < iou(depth_final, truth)
     for x, y in ((420, 150), (370, 130), (470, 180), (450, 270)):
         assert depth_box[y, x] and depth_final[y, x], (x, y)
     # The wall between the right armrest and the backrest, and under the seat, stays out.

@@ -7,6 +7,7 @@ import numpy as np
 import pytest
 
 from app.extensions import db
+from app.models import Frame
 from app.models.annotations import GrabCutState
 from app.services.labelling import grabcut as grabcut_service
 from egonet import io
@@ -191,3 +192,30 @@ def test_sessions_end_with_their_objects(app, annotator, make_user):
     reviewer.post(f"/api/label/annotations/{done['id']}/review", json={"version": done["version"], "decision": "accept"})
     with app.app_context():
         assert db.session.execute(db.select(GrabCutState)).scalars().all() == []
+
+
+def test_workers_share_decoded_frames_on_disk_within_a_budget(app, annotator, monkeypatch):
+    frame_ids = make_frames(app, n=3)
+    forget_everything(app, monkeypatch)  # every request as if in a new worker
+    folder = grabcut_service.Path(app.config["CACHE_ROOT"]) / "grabcut-frames"
+    call(annotator, "box", frame_id=frame_ids[0], instance="a", box=BOX)
+    (copy,) = folder.glob("*.npy")
+    with app.app_context():
+        frame = db.session.get(Frame, frame_ids[0])
+        assert np.array_equal(np.load(copy), io.read_image(grabcut_service.media.absolute_path(frame.rgb_path)))
+
+    # A worker that has not seen the frame loads the shared copy: no decoding.
+    def no_decoding(*args, **kwargs):
+        raise AssertionError("decoded the frame again")
+
+    monkeypatch.setattr(grabcut_service.egonet_io, "read_image", no_decoding)
+    status, mask = call(annotator, "stroke", frame_id=frame_ids[0], instance="a", points=[[60, 60]], label="bg", radius=3)
+    assert status == "1" and not mask[60, 60]
+    monkeypatch.undo()
+    forget_everything(app, monkeypatch)
+
+    # The copies stay within GRABCUT_DISK_CACHE_BYTES: the least recently used go first.
+    monkeypatch.setitem(app.config, "GRABCUT_DISK_CACHE_BYTES", int(1.5 * copy.stat().st_size))
+    call(annotator, "box", frame_id=frame_ids[1], instance="a", box=BOX)
+    call(annotator, "box", frame_id=frame_ids[2], instance="a", box=BOX)
+    assert len(list(folder.glob("*.npy"))) == 1 and not copy.exists()

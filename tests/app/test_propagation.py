@@ -13,6 +13,7 @@ from app.services.importing import FrameItem, add_frames, import_path
 from app.services.labelling import propagation
 from egonet import io
 from tests.app.test_labelling import get_png, rle
+from tests.app.test_labelling_grabcut import call, forget_everything
 from tests.realdata import PRIMESENSE
 
 H, W = 120, 160
@@ -89,6 +90,30 @@ def test_propagate_to_next_frame_makes_an_in_progress_annotation_that_follows_th
     assert (cup & cup_at(0)).any()  # overlapping the source's, the frames being alike
     # The page reads it as the user's annotation of the next frame.
     assert annotator.get(f"/api/label/frames/{f1}/annotation").get_json()["version"] == 1
+
+
+def test_propagated_objects_take_strokes_at_once_without_a_box(app, annotator, monkeypatch):
+    f0, f1, _ = moving_frames(app)
+    annotate(annotator, f0, cup_at(0), lid())
+    forget_everything(app, monkeypatch)  # every request restores sessions from the database
+    new = annotator.post(f"/api/label/frames/{f0}/propagate", json={}).get_json()
+    carried = get_png(annotator, new["instances"][0]["mask_url"])
+    # Each carried object has a GrabCut session, which the page loads with the annotation ...
+    assert annotator.get(f"/api/label/frames/{f1}/annotation").get_json()["grabcut"] == ["k0", "k1"]
+    with annotator.get(f"/api/label/grabcut/mask.png?frame_id={f1}&instance=k0") as response:
+        assert response.status_code == 200
+        np.testing.assert_array_equal(io.decode_mask(response.data), carried)  # ... and it starts from the saved mask
+    # A background stroke across the cup's middle, no box first: it takes the cup's pixels out there only.
+    can_undo, mask = call(annotator, "stroke", frame_id=f1, instance="k0", points=[[50, 60], [70, 60]],
+                          label="bg", radius=3)
+    assert can_undo == "1" and not mask[60, 60] and (mask & carried == mask).all()
+    assert mask.sum() > 0.8 * carried.sum()
+    # An object stroke on the table beside the cup adds it, as after a box; undo goes back to the carried mask.
+    _, mask = call(annotator, "stroke", frame_id=f1, instance="k0", points=[[30, 60]], label="fg", radius=3)
+    assert mask[60, 30]
+    call(annotator, "undo", frame_id=f1, instance="k0")
+    _, mask = call(annotator, "undo", frame_id=f1, instance="k0")
+    np.testing.assert_array_equal(mask, carried)
 
 
 def test_copy_from_previous_frame_fills_this_frame(app, annotator):

@@ -3,7 +3,8 @@
 The shared rgbd-primesense frames (three consecutive 640x480 frames of a
 room with a white chair before a white wall) are imported as a user would.
 The annotator boxes the chair on frame 1 with depth on, propagates it to
-frame 2, goes back to frame 0 through the filmstrip, accepts a model's
+frame 2 and corrects it there with a stroke (no box: the carried object has
+its GrabCut session), goes back to frame 0 through the filmstrip, accepts a model's
 proposal there, marks the three frames done and downloads the export: the
 zip holds one mask per frame, each the chair.
 
@@ -74,6 +75,16 @@ def test_label_a_real_rgbd_video_propagate_accept_a_suggestion_and_export(live_a
     assert page.locator("#status-badge").text_content() == "in progress"
     assert iou(carried, boxed) > 0.85 and carried[y, x]
     screenshot(page, "video-2-propagated")
+    # The carried chair has a GrabCut session already: a background stroke across the seat corrects it, no box.
+    assert page.evaluate("window.labelPage.instances()[0].hasEngine")
+    page.keyboard.press("g")
+    drag(page, [(430, 268), (470, 268)])
+    page.wait_for_function(f"() => window.labelPage.instances()[0].area < {int(carried.sum())}")
+    settle(page)
+    stroked = mask_on_page(page)
+    assert not stroked[268, 450] and (stroked & ~carried).sum() == 0 and stroked.sum() > 0.9 * carried.sum()
+    screenshot(page, "video-2b-propagated-stroke")
+    carried = stroked
 
     # Back to frame 0 through the filmstrip; the model proposes the chair, the annotator accepts it.
     page.click(f".film-frame[data-id='{f0}']")
@@ -87,9 +98,11 @@ def test_label_a_real_rgbd_video_propagate_accept_a_suggestion_and_export(live_a
     settle(page)
     proposed = mask_on_page(page)
     screenshot(page, "video-3-suggestion-accepted")
-    # The map alone overlaps the chair at 0.83; GrabCut's refinement (box + core stroke, with depth)
-    # takes some of the white wall on this frame (0.46): issue 14's notes.
-    assert proposed[y, x] and iou(proposed, chair) > 0.4
+    # GrabCut refines the map's region from its mask, its edge moving only as far as the map blurs
+    # it (with depth): no worse than the map itself (a box and a core stroke took the wall in: 0.46).
+    raw = network_like(chair, shift=(4, -4)) >= 0.5
+    print(f"suggestion on the real chair: map {iou(raw, chair):.3f}, proposal {iou(proposed, chair):.3f}")
+    assert proposed[y, x] and iou(proposed, chair) >= iou(raw, chair) - 0.01
 
     # Done, frame by frame; the filmstrip shows it.
     for frame_id in (f0, f1, f2):

@@ -330,6 +330,11 @@ def test_from_state_rejects_another_frame_or_format(session):
     del state["models"]
     with pytest.raises(ValueError, match="state"):
         GrabCutSession.from_state(np.zeros((150, 200, 3), np.uint8), state)
+    for broken in (np.nan, 0.0, -1.0):  # models that are no mixtures: refused now, not at the next stroke
+        state = session.state()
+        state["models"][-1, 1, :5] = broken
+        with pytest.raises(ValueError, match="models"):
+            GrabCutSession.from_state(np.zeros((150, 200, 3), np.uint8), state)
 
 
 # -------------------------------------------------------------- bad input

@@ -26,7 +26,9 @@ proposal mark (``suggest``).
 
 import contextlib
 import fcntl
+import hashlib
 import io
+import os
 import threading
 import zlib
 from collections import OrderedDict
@@ -109,7 +111,8 @@ class _Recent:
 _sessions = _Recent()
 # Decoded frames and depth maps by their (content-addressed, so never stale)
 # media path, within GRABCUT_IMAGE_CACHE_BYTES: a session restored in another
-# worker then only needs its state decoded.
+# worker then only needs its state decoded (and ``_decoded`` shares them on
+# disk between workers).
 _images = _Recent()
 
 
@@ -122,22 +125,56 @@ def _dump_state(session: GrabCutSession) -> bytes:
 
 
 def _frame_image(frame: Frame) -> np.ndarray:
-    image = _images.get(frame.rgb_path)
-    if image is None:
-        image = egonet_io.read_image(media.absolute_path(frame.rgb_path))
-        _images.put(frame.rgb_path, image, nbytes=image.nbytes, budget=current_app.config["GRABCUT_IMAGE_CACHE_BYTES"])
-    return image
+    return _decoded(frame.rgb_path, lambda: egonet_io.read_image(media.absolute_path(frame.rgb_path)))
 
 
 def _frame_depth(frame: Frame) -> np.ndarray | None:
     """The frame's depth (float32 metres, ``(H, W)``, 0 where missing), or None without one."""
     if frame.depth_path is None:
         return None
-    depth = _images.get(frame.depth_path)
-    if depth is None:
-        depth = frames_service.frame_depth(frame)
-        _images.put(frame.depth_path, depth, nbytes=depth.nbytes, budget=current_app.config["GRABCUT_IMAGE_CACHE_BYTES"])
-    return depth
+    return _decoded(frame.depth_path, lambda: frames_service.frame_depth(frame))
+
+
+def _decoded(relative: str, decode: Callable[[], np.ndarray]) -> np.ndarray:
+    """A frame's image or depth, decoded: from this worker's memory, else from
+    the decoded copy on disk that the workers share (``.npy`` under
+    CACHE_ROOT/grabcut-frames, within GRABCUT_DISK_CACHE_BYTES), else decoded
+    from the media file and shared. Loading a copy costs a few milliseconds
+    where decoding a 1408x1408 PNG costs 40-50, so a session restored in a
+    worker that has not seen the frame yet stays cheap. Media paths are
+    content-addressed: a copy is never stale."""
+    array = _images.get(relative)
+    if array is not None:
+        return array
+    folder = Path(current_app.config["CACHE_ROOT"]) / "grabcut-frames"
+    path = folder / f"{hashlib.sha256(relative.encode()).hexdigest()[:32]}.npy"
+    try:
+        array = np.load(path, allow_pickle=False)
+        os.utime(path)  # recently used: the last to go
+    except (OSError, ValueError):  # none yet (or a foreign file): decode and share
+        array = decode()
+        buffer = io.BytesIO()
+        np.save(buffer, array)
+        egonet_io.write_atomic(path, buffer.getvalue())
+        _trim(folder, current_app.config["GRABCUT_DISK_CACHE_BYTES"])
+    _images.put(relative, array, nbytes=array.nbytes, budget=current_app.config["GRABCUT_IMAGE_CACHE_BYTES"])
+    return array
+
+
+def _trim(folder: Path, budget: int) -> None:
+    """Delete the least recently used decoded copies until they fit in ``budget`` bytes."""
+    files = []
+    for entry in os.scandir(folder):
+        with contextlib.suppress(OSError):  # another worker's trim got there first
+            stat = entry.stat()
+            files.append((stat.st_mtime, stat.st_size, entry.path))
+    total = sum(size for _, size, _ in files)
+    for _, size, file in sorted(files):
+        if total <= budget:
+            break
+        with contextlib.suppress(OSError):
+            os.unlink(file)
+        total -= size
 
 
 def _keep(revision: str, session: GrabCutSession) -> None:
@@ -268,6 +305,25 @@ def grabcut_box(frame: Frame, user: User, key: str, box: tuple[int, int, int, in
                     use_depth=has_depth if use_depth is None else use_depth)
 
 
+def grabcut_seed(frame: Frame, user: User, key: str, mask: np.ndarray, *, band: float = 0.0,
+                 use_depth: bool | None = None) -> GrabCutResult:
+    """Start (or restart) the object ``key`` from a mask, as a box would
+    (``GrabCutSession.seed_mask``): kept exactly (``band`` 0) or refined
+    within ``band`` pixels of its edge; strokes correct it at once.
+
+    Args:
+        mask: bool ``(H, W)`` of the frame's size, not empty.
+        band: How far GrabCut may move the mask's edge, pixels.
+        use_depth: As for ``grabcut_box``.
+    """
+    has_depth = frame.depth_path is not None
+    if use_depth and not has_depth:
+        raise Problem(f"use_depth: frame {frame.id} has no depth; send use_depth false (or leave it out)",
+                      fields={"use_depth": "this frame has no depth"})
+    return _operate(frame, user, key, lambda s: s.seed_mask(mask, band=band), create=True,
+                    use_depth=has_depth if use_depth is None else use_depth)
+
+
 def grabcut_stroke(frame: Frame, user: User, key: str, *, points: list, label: str, radius: float) -> GrabCutResult:
     """Add a corrective fg/bg stroke to the object ``key``; see ``check_stroke``.
     The object's strokes in all may sweep at most GRABCUT_MAX_STROKE_PIXELS."""
@@ -313,8 +369,8 @@ def _operate(frame: Frame, user: User, key: str, apply: Callable[[GrabCutSession
 
 def _operate_locked(frame: Frame, user: User, key: str, apply: Callable[[GrabCutSession], np.ndarray], *,
                     create: bool, use_depth: bool) -> GrabCutResult:
-    """``create``: the operation is a box, which may start a session (with
-    depth when ``use_depth``); otherwise it continues the saved one."""
+    """``create``: the operation is a box (or a mask), which may start a
+    session (with depth when ``use_depth``); otherwise it continues the saved one."""
     for _ in range(3):
         row = _state_row(frame, user, key, lock=True)
         try:

@@ -5,8 +5,9 @@ the sequence's filmstrip.
 a frame to the next frame of the same sequence (by ``Frame.index``), each
 mask refined there by ``egonet.grabcut.propagate`` (with the frames' stored
 depth when they have it), and saves them as the user's in-progress
-annotation of that frame. "Copy from previous frame" is the same move the
-other way round, into the frame the user is on.
+annotation of that frame, each with a GrabCut session started from its
+mask, so strokes correct it at once. "Copy from previous frame" is the same
+move the other way round, into the frame the user is on.
 
 Existing work is never overwritten silently: a target annotation of the
 user's that has instances (or says "no action-object") is refused with 409
@@ -29,7 +30,7 @@ from app.models import Annotation, Frame, Status, User
 from app.services import frames as frames_service
 from app.services import media
 from app.services.labelling.annotations import InstanceSpec, _write, stale, user_annotation
-from app.services.labelling.grabcut import forget_sessions
+from app.services.labelling.grabcut import forget_sessions, grabcut_seed
 from egonet import io as egonet_io
 from egonet.errors import EgonetError
 from egonet.grabcut import propagate
@@ -128,8 +129,24 @@ def carry(source: Frame, target: Frame, user: User, *, replace: bool, version: i
                                   mask_path=media.store(egonet_io.encode_png(mask), ".png"), mask=mask))
     # The target's old GrabCut sessions belong to the work being replaced.
     forget_sessions(target, user, keep=set())
-    return _write(target, user, version=current, specs=specs, no_action_object=False,
-                  status=Status.IN_PROGRESS, time_delta_s=0.0)
+    annotation = _write(target, user, version=current, specs=specs, no_action_object=False,
+                        status=Status.IN_PROGRESS, time_delta_s=0.0)
+    _seed_sessions(target, user, specs)
+    return annotation
+
+
+def _seed_sessions(target: Frame, user: User, specs: list[InstanceSpec]) -> None:
+    """A GrabCut session for each carried object, started from its mask as it
+    was saved (``grabcut_seed``), so strokes correct it at once, no box needed.
+    An object GrabCut cannot start from (empty, or covering the frame) keeps
+    no session: a stroke on it asks for a box, as on one painted by hand."""
+    for spec in specs:
+        if not spec.mask.any():
+            continue
+        try:
+            grabcut_seed(target, user, spec.key, spec.mask)
+        except Problem:
+            continue
 
 
 def _check_target(target: Frame, user: User, *, replace: bool, version: int | None) -> int:

@@ -12,10 +12,11 @@ and turns each connected region above it into an instance: regions smaller
 than ``MIN_AREA_FRACTION`` of the frame are specks and dropped, regions
 over ``MAX_AREA_FRACTION`` mean the map is not selective there and are
 dropped too. Each region is refined by GrabCut through the user's own
-GrabCut session for the new instance (a box around the region with a
-margin, then an object stroke on the region's core: the disk around its
-point furthest from its edge), so the annotator can go on correcting it
-with strokes; the session passes the frame's depth when the GrabCut
+GrabCut session for the new instance, started from the region's mask
+(``GrabCutSession.seed_mask``): its edge may move by ``REFINE_BAND`` of the
+region's size, so it snaps to the object's edge without straying onto a
+background of the object's colour, and the annotator can go on correcting
+it with strokes; the session passes the frame's depth when the GrabCut
 service does.
 
 The proposals become the user's in-progress annotation of the frame, each
@@ -59,7 +60,7 @@ from app.services.labelling.annotations import (
     stale,
     user_annotation,
 )
-from app.services.labelling.grabcut import grabcut_box, grabcut_stroke
+from app.services.labelling.grabcut import grabcut_seed
 from app.services.labelling.review import _unlabelled_for
 from egonet import io as egonet_io
 
@@ -71,12 +72,12 @@ MAX_PROPOSALS = 5
 """At most this many regions per frame, the most probable first (sum of probability over the region)."""
 DEFAULT_THRESHOLD = 0.5
 """When a checkpoint stores no best-F threshold."""
-BOX_MARGIN = 0.15
-"""GrabCut's box is the region's box grown by this share of its size on each side (at least
-MIN_BOX_MARGIN_PX): the map is blurry at its low resolution and may stop short of the object."""
-MIN_BOX_MARGIN_PX = 4
-SEED_FRACTION = 0.5
-"""The object stroke is a disk at the region's innermost point, of this share of its distance to the edge."""
+REFINE_BAND = 0.06
+"""GrabCut may move a region's edge at least by this share of its long side (and MIN_REFINE_BAND_PX),
+further where the map blurs it (``_band``), at most by MAX_REFINE_BAND of it: the map is
+blurry at its low resolution, so its edge is near the object's, not on it."""
+MIN_REFINE_BAND_PX = 3
+MAX_REFINE_BAND = 0.25
 SAME_OBJECT_IOU = 0.5
 """A proposal overlapping an instance the annotator drew this much is that object again: left out."""
 FAST_MODELS = ("egonet-lite",)
@@ -93,17 +94,15 @@ class Region:
 
     Attributes:
         mask: bool ``(H, W)``.
-        box: GrabCut's box ``(x0, y0, x1, y1)`` (x1, y1 exclusive): the region's box with a margin.
-        seed: ``(x, y)`` of the region's innermost pixel.
-        seed_radius: Radius of the object stroke there, in pixels.
+        box: The region's box ``(x0, y0, x1, y1)`` (x1, y1 exclusive).
+        band: How far GrabCut may move its edge, pixels (``REFINE_BAND``).
         area: Pixels in the region.
         mass: Sum of the probability over the region (how the regions are ranked).
     """
 
     mask: np.ndarray
     box: tuple[int, int, int, int]
-    seed: tuple[int, int]
-    seed_radius: float
+    band: float
     area: int
     mass: float
 
@@ -323,8 +322,8 @@ def proposal_regions(
     Example:
         >>> p = np.zeros((40, 60), np.float32); p[10:20, 10:30] = 0.9
         >>> regions, notes = proposal_regions(p, 0.5)
-        >>> [(r.area, r.box) for r in regions], notes
-        ([(200, (6, 6, 34, 24))], [])
+        >>> [(r.area, r.box, r.band) for r in regions], notes
+        ([(200, (10, 10, 30, 20), 3.0)], [])
     """
     h, w = probability.shape
     binary = (probability >= threshold).astype(np.uint8)
@@ -355,22 +354,36 @@ def proposal_regions(
 
 
 def _region(mask: np.ndarray, probability: np.ndarray, stat: np.ndarray, area: int) -> Region:
-    h, w = mask.shape
     x, y, bw, bh = (int(v) for v in stat[:4])
-    mx, my = max(MIN_BOX_MARGIN_PX, round(BOX_MARGIN * bw)), max(MIN_BOX_MARGIN_PX, round(BOX_MARGIN * bh))
-    box = (max(0, x - mx), max(0, y - my), min(w, x + bw + mx), min(h, y + bh + my))
-    # The innermost pixel: furthest from the region's edge (the frame's edge counts as inside).
-    inside = np.pad(mask, 1, mode="edge").astype(np.uint8)
-    distance = cv2.distanceTransform(inside, cv2.DIST_L2, 5)[1:-1, 1:-1]
-    sy, sx = np.unravel_index(int(np.argmax(distance)), distance.shape)
     return Region(
         mask=mask,
-        box=box,
-        seed=(int(sx), int(sy)),
-        seed_radius=max(1.0, SEED_FRACTION * float(distance[sy, sx])),
+        box=(x, y, x + bw, y + bh),
+        band=_band(mask, probability, max(bw, bh)),
         area=area,
         mass=float(probability[mask].sum()),
     )
+
+
+def _band(mask: np.ndarray, probability: np.ndarray, size: int) -> float:
+    """How far GrabCut may move a region's edge: about as far as the map blurs it.
+
+    The map's rise across the edge (the region's mean probability less that
+    of a ring around it) over its slope on the edge is the width of the
+    blur: a map at 1/8 of the frame's size blurs an edge over several of
+    the frame's pixels, a sharp one over one or two. At least
+    ``REFINE_BAND`` of the region's long side (and ``MIN_REFINE_BAND_PX``),
+    at most ``MAX_REFINE_BAND`` of it.
+    """
+    u8 = mask.view(np.uint8)
+    edge = cv2.morphologyEx(u8, cv2.MORPH_GRADIENT, np.ones((3, 3), np.uint8)).view(bool)
+    reach = max(3, round(MAX_REFINE_BAND * size))
+    ring = cv2.dilate(u8, cv2.getStructuringElement(cv2.MORPH_ELLIPSE, (2 * reach + 1, 2 * reach + 1))).view(bool) & ~mask
+    p = probability.astype(np.float32)
+    # Sobel's 3x3 weights sum to 8 across a unit ramp: slope per pixel.
+    slope = np.hypot(cv2.Sobel(p, cv2.CV_32F, 1, 0), cv2.Sobel(p, cv2.CV_32F, 0, 1))[edge].mean() / 8
+    rise = float(p[mask].mean() - (p[ring].mean() if ring.any() else 0.0))
+    width = rise / slope if slope > 0 else 0.0
+    return float(min(max(width, REFINE_BAND * size, MIN_REFINE_BAND_PX), MAX_REFINE_BAND * size))
 
 
 def _iou(a: np.ndarray, b: np.ndarray) -> float:
@@ -479,16 +492,19 @@ def _check_open(existing: Annotation | None, version: int | None) -> None:
 
 
 def _refine(frame: Frame, user: User, key: str, region: Region, notes: list[str]) -> np.ndarray:
-    """GrabCut from the region, in the user's session for ``key``; the region itself when GrabCut cannot run."""
-    h, w = region.mask.shape
-    if region.box == (0, 0, w, h):
+    """GrabCut from the region, in the user's session for ``key``; the region itself when GrabCut cannot run.
+
+    The session starts from the region's mask (``grabcut_seed``): GrabCut
+    snaps its edge to the image's within ``region.band`` pixels (with the
+    frame's depth when the GrabCut service uses it), and strokes correct it
+    at once.
+    """
+    if region.mask.all():
         notes.append("a region spanning the frame kept as the map drew it (no room for GrabCut's background)")
         return region.mask
     try:
-        grabcut_box(frame, user, key, region.box)
-        x, y = region.seed
-        return grabcut_stroke(frame, user, key, points=[[x, y]], label="fg", radius=region.seed_radius).mask
-    except Problem as exc:  # a frame over GrabCut's size limit, a box it cannot cut
+        return grabcut_seed(frame, user, key, region.mask, band=region.band).mask
+    except Problem as exc:  # a frame over GrabCut's size limit
         _forget(frame, user, [key])
         notes.append(f"a region kept as the map drew it (GrabCut: {exc.message})")
         return region.mask
