@@ -34,6 +34,17 @@ def pytest_collection_modifyitems(config, items):
             item.add_marker(skip)
 
 
+@pytest.fixture
+def one_thread():
+    """One torch thread: on a shared two-core machine, small models run several times faster so."""
+    import torch
+
+    threads = torch.get_num_threads()
+    torch.set_num_threads(1)
+    yield
+    torch.set_num_threads(threads)
+
+
 @pytest.fixture(scope="session")
 def full_rgb_caffemodel(tmp_path_factory):
     """A full-size file of the authors' RGB release (270 MB, zeros but fc9's bias), written once a session.

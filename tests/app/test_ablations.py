@@ -26,18 +26,7 @@ BUDGET = ["--folds", "single", "--epochs", "1", "--size", "16x12", "--batch-size
           "--activities", "cooking", "--activities", "dining"]
 
 
-@pytest.fixture(autouse=True)
-def one_thread():
-    threads = torch.get_num_threads()
-    torch.set_num_threads(1)
-    yield
-    torch.set_num_threads(threads)
-
-
-@pytest.fixture
-def app(app, tmp_path):
-    app.config["CHECKPOINT_ROOT"] = str(tmp_path / "checkpoints")
-    return app
+pytestmark = pytest.mark.usefixtures("one_thread")  # tests/conftest.py
 
 
 @pytest.fixture

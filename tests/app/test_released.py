@@ -11,7 +11,6 @@ from pathlib import Path
 
 import numpy as np
 import pytest
-import torch
 
 from app.extensions import db
 from app.models import Frame
@@ -25,18 +24,7 @@ from egonet.train import load_checkpoint
 from tests.caffe_files import TINY, TINY_RELEASES, release_layers, write_caffemodel
 
 
-@pytest.fixture(autouse=True)
-def one_thread():
-    threads = torch.get_num_threads()
-    torch.set_num_threads(1)
-    yield
-    torch.set_num_threads(threads)
-
-
-@pytest.fixture
-def app(app, tmp_path):
-    app.config["CHECKPOINT_ROOT"] = str(tmp_path / "checkpoints")
-    return app
+pytestmark = pytest.mark.usefixtures("one_thread")  # tests/conftest.py
 
 
 @pytest.fixture

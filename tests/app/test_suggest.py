@@ -11,7 +11,6 @@ the whole path, not the model.
 import cv2
 import numpy as np
 import pytest
-import torch
 
 from app.extensions import db
 from app.models import Activity, Annotation, Frame, Instance, Status, User
@@ -26,12 +25,7 @@ from tests.app.test_labelling import H, OBJECT, W, body, make_frames, rle, squar
 TINY = {"model": "egonet-lite", "epochs": 1, "width": 32, "height": 24, "batch_size": 2, "device": "cpu"}
 
 
-@pytest.fixture(autouse=True)
-def one_thread():
-    threads = torch.get_num_threads()
-    torch.set_num_threads(1)  # small models run several times faster so on a shared two-core machine
-    yield
-    torch.set_num_threads(threads)
+pytestmark = pytest.mark.usefixtures("one_thread")  # tests/conftest.py
 
 
 @pytest.fixture

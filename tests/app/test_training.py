@@ -8,7 +8,6 @@ import re
 
 import numpy as np
 import pytest
-import torch
 
 from app.extensions import db
 from app.models import Activity, Frame
@@ -20,18 +19,7 @@ from egonet.train import load_checkpoint
 TINY = {"model": "egonet-lite", "epochs": 1, "width": 32, "height": 24, "batch_size": 2, "device": "cpu"}
 
 
-@pytest.fixture(autouse=True)
-def one_thread():
-    threads = torch.get_num_threads()
-    torch.set_num_threads(1)  # small models run several times faster so on a shared two-core machine
-    yield
-    torch.set_num_threads(threads)
-
-
-@pytest.fixture
-def app(app, tmp_path):
-    app.config["CHECKPOINT_ROOT"] = str(tmp_path / "checkpoints")
-    return app
+pytestmark = pytest.mark.usefixtures("one_thread")  # tests/conftest.py
 
 
 @pytest.fixture

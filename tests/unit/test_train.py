@@ -33,13 +33,7 @@ from egonet.train import (
 ROOT = Path(__file__).resolve().parents[2]
 
 
-@pytest.fixture(autouse=True)
-def one_thread():
-    """One torch thread: on a shared two-core machine, small models run several times faster so."""
-    threads = torch.get_num_threads()
-    torch.set_num_threads(1)
-    yield
-    torch.set_num_threads(threads)
+pytestmark = pytest.mark.usefixtures("one_thread")  # tests/conftest.py
 
 # The smallest setting that still trains: tiny frames, the lite model, batch 2, CPU.
 TINY = {"model": "egonet-lite", "height": 24, "width": 32, "batch_size": 2, "device": "cpu", "eval_every": 0}
