@@ -11,6 +11,7 @@ import secrets
 from datetime import timedelta
 from pathlib import Path
 
+import threadpoolctl
 from flask import Flask
 from werkzeug.routing import IntegerConverter
 
@@ -140,9 +141,14 @@ def _default_config(instance: Path) -> dict:
         GRABCUT_MAX_STROKE_POINTS=4000,
         GRABCUT_MAX_RADIUS=256,
         GRABCUT_MAX_STROKE_PIXELS=250_000_000,
-        GRABCUT_CACHE_BYTES=256 * 1024**2,
-        GRABCUT_IMAGE_CACHE_BYTES=64 * 1024**2,
+        GRABCUT_CACHE_BYTES=128 * 1024**2,
+        GRABCUT_IMAGE_CACHE_BYTES=192 * 1024**2,
         GRABCUT_DISK_CACHE_BYTES=1024**3,
+        # numpy's BLAS threads per process (None: the library's default, one
+        # per core). A request's GrabCut and scores run on one core: gunicorn's
+        # workers x threads already share the cores, and BLAS threads that wait
+        # for a busy core spin (a GrabCut stroke costs 2-4x the CPU so).
+        BLAS_THREADS=1,
         PRODUCTION=False,
     )
 
@@ -165,6 +171,8 @@ def _configure(app: Flask, test_config: dict | None) -> None:
     if not app.config.get("SECRET_KEY"):
         app.config["SECRET_KEY"] = instance_secret_key(instance)
     security.require_production_safety(app)
+    if app.config["BLAS_THREADS"] is not None:
+        threadpoolctl.threadpool_limits(limits=int(app.config["BLAS_THREADS"]), user_api="blas")
 
 
 def _init_extensions(app: Flask) -> None:

@@ -82,42 +82,63 @@ def _unpack_model(model: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray
 
 
 def _component_logs(model: np.ndarray, x: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-    """``log N_k(x)`` of every sample and non-empty component, and those components.
+    """``log N_k(x)`` of every non-empty component and sample, and those components.
 
     Without the mixture's weights and without the ``(2 pi)^-3/2`` every
     component shares (OpenCV's ``GMM::operator()(ci, color)``, in logs).
 
     Returns:
-        ``(logs, live)``: ``(N, k)`` in ``x``'s type and the indices ``(k,)``
-        of the components with weight (k >= 1 for a fitted model).
+        ``(logs, live)``: ``(k, N)`` in ``x``'s type, component-major, and
+        the indices ``(k,)`` of the components with weight (k >= 1 for a
+        fitted model).
     """
     weights, means, covs = _unpack_model(model)
     live = np.flatnonzero(weights > 0)
+    k = len(live)
     # With C = L L^T the Mahalanobis distance is |L^-1 (x - mu)|^2: all
-    # components in one product (N, 3) @ (3, 3k), squared and summed per
-    # component by a second one (N, 3k) @ (3k, k). The products run in the
+    # components in one product (3k, 3) @ (3, N). Component-major rows make
+    # the sums over a component's squares, and the maxima and sums over
+    # components, elementwise operations on whole rows (several times faster
+    # than reductions over a short last axis). The products run in the
     # samples' type: float32 for the session's pixels (integers, so exact),
     # twice as fast as float64.
     chol = np.linalg.cholesky(covs[live])
     whiten = np.linalg.inv(chol)  # (k, 3, 3)
-    y = x @ whiten.transpose(2, 0, 1).reshape(3, -1).astype(x.dtype)
-    y -= np.einsum("kij,kj->ki", whiten, means[live]).ravel().astype(x.dtype)
+    y = whiten.reshape(3 * k, 3).astype(x.dtype) @ x.T
+    y -= np.einsum("kij,kj->ki", whiten, means[live]).reshape(-1, 1).astype(x.dtype)
     y *= y
-    logs = y @ np.repeat(np.eye(len(live), dtype=x.dtype), 3, axis=0)
-    log_det = 2 * np.log(np.diagonal(chol, axis1=1, axis2=2)).sum(axis=1)
-    logs += log_det.astype(x.dtype)
+    y = y.reshape(k, 3, -1)
+    logs = y[:, 0] + y[:, 1]
+    logs += y[:, 2]
+    logs += (2 * np.log(np.diagonal(chol, axis1=1, axis2=2)).sum(axis=1)).astype(x.dtype)[:, None]
     logs *= -0.5
     return logs, live
+
+
+def _best_rows(scores: np.ndarray) -> np.ndarray:
+    """``scores.argmax(axis=0)`` of a few rows ``(k, N)``, a row at a time (the first best wins ties, as argmax)."""
+    best = scores[0].copy()
+    index = np.zeros(scores.shape[1], np.intp)
+    for j in range(1, len(scores)):
+        better = scores[j] > best
+        index[better] = j
+        np.maximum(best, scores[j], out=best)
+    return index
+
+
+def _log_sum_exp(scores: np.ndarray) -> np.ndarray:
+    """``log(sum(exp(scores), axis=0))`` (float64) of component-major scores ``(k, N)``; changes ``scores``."""
+    top = scores.max(axis=0)
+    scores -= top
+    np.exp(scores, out=scores)
+    return top.astype(np.float64) + np.log(scores.sum(axis=0), dtype=np.float64)
 
 
 def _costs(model: np.ndarray, x: np.ndarray) -> np.ndarray:
     """``-log p(x)`` (float64) of each sample ``(N, 3)`` under the mixture ``model`` (65,): cv2.grabCut's data term."""
     logs, live = _component_logs(model, x)
-    logs += np.log(model[live]).astype(logs.dtype)
-    top = logs.max(axis=1)
-    logs -= top[:, None]
-    np.exp(logs, out=logs)
-    return -(top.astype(np.float64) + np.log(logs.sum(axis=1), dtype=np.float64))
+    logs += np.log(model[live]).astype(logs.dtype)[:, None]
+    return -_log_sum_exp(logs)
 
 
 def _refit(x: np.ndarray, model: np.ndarray) -> np.ndarray:
@@ -129,7 +150,7 @@ def _refit(x: np.ndarray, model: np.ndarray) -> np.ndarray:
     when it is (nearly) singular.
     """
     logs, live = _component_logs(model, x)
-    labels = live[logs.argmax(axis=1)]
+    labels = live[_best_rows(logs)]
     counts = np.bincount(labels, minlength=_COMPONENTS).astype(np.float64)
     weights = counts / len(x)
     means = np.zeros((_COMPONENTS, 3))

@@ -17,7 +17,9 @@ energy:
   previous flow (``_CutGraph.cut``);
 * a box's first iterations, while the models settle, run on a grid of half
   the size (a quarter of the pixels); the last one re-estimates and cuts on
-  the full grid, starting from the coarse label;
+  the full grid, starting from the coarse label, and only within
+  ``_FINE_BAND`` grid pixels of its edge (a banded cut: the rest keeps the
+  coarse label);
 * a stroke re-cuts only the side of the label it can change, and only near
   the stroke (``_STROKE_REACH``); its models are re-estimated from the
   whole ROI.
@@ -50,6 +52,7 @@ _SPARSE = 0.25  # a box whose first cut keeps less than this fraction of it is c
 _OUTSIDE_SAMPLES = 100_000  # most frame pixels read for the background model of that cut
 _COARSE_MIN = 32  # a box's first iterations run at half the grid when that is at least this many pixels a side
 _STROKE_REACH = 56  # a stroke re-cuts the label within this many grid pixels of itself (a fifth of the work size)
+_FINE_BAND = 6  # a box's cut on the full grid moves the coarse label's edge by at most this many grid pixels
 
 # The terms of one cut: ``learn(is_fg, models) -> models`` re-estimates both
 # models from the flat labels; ``costs(models, pixels) -> (cost_bg, cost_fg)``
@@ -148,21 +151,35 @@ def _coarse(geom: _Geometry) -> tuple[_Geometry, np.ndarray] | None:
 
 
 def _upsampled_labels(geom: _Geometry, coarse_low: np.ndarray) -> np.ndarray:
-    """The full grid's GC_* labels from a coarse label: the box undecided, as the coarse cut says."""
+    """The full grid's GC_* labels from a coarse label: the box undecided, as the coarse cut says.
+
+    Only the box's pixels within ``_FINE_BAND`` grid pixels of the coarse
+    label's edge stay undecided; the others keep the coarse label as
+    sure (a banded cut: the full grid only moves the edge, on a fraction of
+    the pixels).
+    """
     rows, cols = geom.box_low()
-    up = cv2.resize(coarse_low.astype(np.float32), (geom.low_w, geom.low_h), interpolation=cv2.INTER_LINEAR)
+    up = cv2.resize(coarse_low.astype(np.float32), (geom.low_w, geom.low_h), interpolation=cv2.INTER_LINEAR) >= 0.5
     gc = np.full((geom.low_h, geom.low_w), cv2.GC_BGD, np.uint8)
-    gc[rows, cols] = np.where(up[rows, cols] >= 0.5, cv2.GC_PR_FGD, cv2.GC_PR_BGD)
+    band = _FINE_BAND
+    if band is None:
+        gc[rows, cols] = np.where(up[rows, cols], cv2.GC_PR_FGD, cv2.GC_PR_BGD)
+        return gc
+    kernel = cv2.getStructuringElement(cv2.MORPH_ELLIPSE, (2 * band + 1, 2 * band + 1))
+    u8 = up.view(np.uint8)
+    near = (cv2.dilate(u8, kernel) != cv2.erode(u8, kernel, borderType=cv2.BORDER_REPLICATE))
+    gc[rows, cols] = np.where(near[rows, cols], np.where(up[rows, cols], cv2.GC_PR_FGD, cv2.GC_PR_BGD),
+                              np.where(up[rows, cols], cv2.GC_FGD, cv2.GC_BGD))
     return gc
 
 
 def _coarse_to_fine(fine: _Terms, geom: _Geometry, gc: np.ndarray, coarse: _Terms, coarse_gc: np.ndarray,
-                    models: np.ndarray, iterations: int) -> tuple[np.ndarray, np.ndarray, _CutGraph]:
+                    models: np.ndarray, iterations: int) -> tuple[np.ndarray, np.ndarray]:
     """A box's iterations: all but the last on the coarse grid, the last on the full one.
 
     While the models settle, a cut on a quarter of the pixels does as well;
     the last iteration re-estimates them and cuts on the full grid, from the
-    coarse label.
+    coarse label, only within ``_FINE_BAND`` of its edge.
 
     Args:
         fine: The full grid's terms.
@@ -174,13 +191,11 @@ def _coarse_to_fine(fine: _Terms, geom: _Geometry, gc: np.ndarray, coarse: _Term
         iterations: Iterations in all.
 
     Returns:
-        ``(label, models, graph)``: with the full grid's graph, the box's
-        pixels undecided, cut once.
+        ``(label, models)``.
     """
     coarse_low, models = _cut(coarse, coarse_gc, models, iterations - 1)
     gc[...] = _upsampled_labels(geom, coarse_low)
-    graph = _graph_for(fine, gc)
-    return (*_cut(fine, gc, models, 1, graph=graph), graph)
+    return _cut(fine, gc, models, 1)
 
 
 def _box_cut(frame: np.ndarray, guide: _Guide, gc: np.ndarray, work_size: int) -> tuple[np.ndarray, np.ndarray]:
@@ -202,6 +217,7 @@ def _box_cut(frame: np.ndarray, guide: _Guide, gc: np.ndarray, work_size: int) -
     start = gc.copy()
     coarse = _coarse(geom)
     terms = _Terms.colour(guide)
+    graph = None
     if coarse is None:
         initial = _first_models(guide.image, gc, np.random.default_rng(0))
         graph = _graph_for(terms, gc)
@@ -210,8 +226,7 @@ def _box_cut(frame: np.ndarray, guide: _Guide, gc: np.ndarray, work_size: int) -
         small_geom, small_gc = coarse
         image = _resize(frame, small_geom)
         initial = _first_models(image, small_gc, np.random.default_rng(0))
-        low, models, graph = _coarse_to_fine(terms, geom, gc, _Terms.of_image(image), small_gc, initial,
-                                             _BOX_ITERATIONS)
+        low, models = _coarse_to_fine(terms, geom, gc, _Terms.of_image(image), small_gc, initial, _BOX_ITERATIONS)
     if low[rows, cols].mean() < _SPARSE:
         low, models = _rescue(frame, guide, start, low, models, work_size, graph)
     return low, models
@@ -234,7 +249,7 @@ def _outside_sample(frame: np.ndarray, geom: _Geometry) -> np.ndarray:
 
 
 def _rescue(frame: np.ndarray, guide: _Guide, start: np.ndarray, low: np.ndarray, models: np.ndarray,
-            work_size: int, graph: _CutGraph) -> tuple[np.ndarray, np.ndarray]:
+            work_size: int, graph: _CutGraph | None) -> tuple[np.ndarray, np.ndarray]:
     """Cut a box whose first cut kept little of it again; the cut that keeps most wins.
 
     That usually happens when the box cuts through an object that goes on
@@ -244,8 +259,8 @@ def _rescue(frame: np.ndarray, guide: _Guide, start: np.ndarray, low: np.ndarray
     first one cut with such a background model held fixed (and a foreground
     model of the box); if that too keeps little, plain grabCut on the whole
     frame at the work size, brought onto the ROI's grid. The first step is
-    tried on the coarse grid first and run on the full one only if it keeps
-    more there.
+    tried on the coarse grid first and run on the full one (within
+    ``_FINE_BAND`` of the coarse cut's edge) only if it keeps more there.
 
     Args:
         frame: Full frame, uint8 ``(H, W, 3)``.
@@ -254,8 +269,8 @@ def _rescue(frame: np.ndarray, guide: _Guide, start: np.ndarray, low: np.ndarray
         low: The first cut's label.
         models: The first cut's models.
         work_size: The session's work size.
-        graph: The first cut's last graph (the box's pixels undecided, as in
-            ``start``): the held cut reuses its flow.
+        graph: Without a coarse grid, the first cut's graph (the box's
+            pixels undecided, as in ``start``): the held cut reuses its flow.
     """
     geom = guide.geom
     rows, cols = geom.box_low()
@@ -275,7 +290,7 @@ def _rescue(frame: np.ndarray, guide: _Guide, start: np.ndarray, low: np.ndarray
         small_low = _cut(_Terms.of_image(_resize(frame, small_geom)), small_gc, held, 1, frozen=True)[0]
         share = (geom.low_w * geom.low_h) / (small_geom.low_w * small_geom.low_h)
         if np.count_nonzero(small_low) * share > np.count_nonzero(low):
-            held_low = _cut(_Terms.colour(guide), start.copy(), held, 1, frozen=True, graph=graph)[0]
+            held_low = _cut(_Terms.colour(guide), _upsampled_labels(geom, small_low), held, 1, frozen=True)[0]
     else:
         held_low = _cut(_Terms.colour(guide), start.copy(), held, 1, frozen=True, graph=graph)[0]
     candidates = [(low, models)] if held_low is None else [(low, models), (held_low, held)]
@@ -393,12 +408,13 @@ def _depth_box_cut(frame: np.ndarray, depth: np.ndarray, guide: _DepthGuide,
     rng = np.random.default_rng(0)
     start = gc.copy()
     coarse = _coarse(geom)
+    graph = small = None
     if coarse is not None:
         small_geom, small_gc = coarse
         small = _DepthGuide.build(small_geom, _resize(frame, small_geom), depth)
         initial = _depth_first_models(small, small_gc, rng)
-        low, models, graph = _coarse_to_fine(_Terms.depth(guide), geom, gc, _Terms.depth(small), small_gc, initial,
-                                             _BOX_ITERATIONS)
+        low, models = _coarse_to_fine(_Terms.depth(guide), geom, gc, _Terms.depth(small), small_gc.copy(), initial,
+                                      _BOX_ITERATIONS)
     else:
         initial = _depth_first_models(guide, gc, rng)
         graph = _graph_for(_Terms.depth(guide), gc)
@@ -411,7 +427,12 @@ def _depth_box_cut(frame: np.ndarray, depth: np.ndarray, guide: _DepthGuide,
                         np.where(valid, z * _Z_SCALE, 0.0)[:, None]], axis=1)
     bgd = _first_model(x, valid, _fallback_z(guide), rng)
     held = np.stack([bgd, initial[1]])
-    rescued = _cut(_Terms.depth(guide), start, held, 1, frozen=True, graph=graph)
+    if small is None:
+        rescued = _cut(_Terms.depth(guide), start, held, 1, frozen=True, graph=graph)
+    else:
+        # On the coarse grid first, then within ``_FINE_BAND`` of its edge on the full one.
+        small_low = _cut(_Terms.depth(small), coarse[1], held, 1, frozen=True)[0]
+        rescued = _cut(_Terms.depth(guide), _upsampled_labels(geom, small_low), held, 1, frozen=True)
     return max([(low, models), rescued], key=lambda c: np.count_nonzero(c[0]))
 
 

@@ -24,7 +24,7 @@ import cv2
 import numpy as np
 
 from egonet.errors import EgonetError
-from egonet.grabcut.colour import _COMPONENTS, _SAMPLES, _kmeans_labels
+from egonet.grabcut.colour import _COMPONENTS, _SAMPLES, _best_rows, _kmeans_labels, _log_sum_exp
 from egonet.grabcut.geometry import _Geometry
 from egonet.grabcut.graph import _links
 
@@ -191,15 +191,15 @@ def _first_model(x: np.ndarray, valid: np.ndarray, fallback_z: float, rng: np.ra
 
 
 def _component_scores(model: np.ndarray, x: np.ndarray, valid: np.ndarray) -> np.ndarray:
-    """``log(weight_k * N_k(x))`` for every sample and component, float32 ``(N, 5)``.
+    """``log(weight_k * N_k(x))`` for every component and sample, float32 ``(5, N)``, component-major.
 
     Samples with depth use all four features, the others the colour
     marginal (the first three). The per-pixel products run in float32
     (twice as fast; the scores only rank components and feed the cut's
-    weights).
+    weights). Component-major as ``colour._component_logs``.
     """
     weights, means, covs = _unpack_model(model)
-    out = np.full((len(x), _COMPONENTS), -np.inf, np.float32)
+    out = np.full((_COMPONENTS, len(x)), -np.inf, np.float32)
     live = np.flatnonzero(weights > 0)
     if not len(live):
         return out
@@ -209,34 +209,31 @@ def _component_scores(model: np.ndarray, x: np.ndarray, valid: np.ndarray) -> np
         if picked is not None and not len(picked):
             continue
         # Whitening: with C = L L^T, the Mahalanobis distance is |L^-1 (x - mu)|^2.
-        # All components in one product: (n, dims) @ (dims, k * dims).
+        # All components in one product: (k * dims, dims) @ (dims, n).
         chol = np.linalg.cholesky(covs[live][:, :dims, :dims])
         whiten = np.linalg.inv(chol)  # (k, dims, dims)
         shift = np.einsum("kij,kj->ki", whiten, means[live, :dims])
         samples = x[:, :dims] if every else x[picked, :dims]
-        y = samples.astype(np.float32) @ whiten.transpose(2, 0, 1).reshape(dims, -1).astype(np.float32)
-        y -= shift.ravel().astype(np.float32)
+        y = whiten.reshape(-1, dims).astype(np.float32) @ samples.astype(np.float32).T
+        y -= shift.reshape(-1, 1).astype(np.float32)
         y *= y
-        # Sum each component's squares with one product: (n, k * dims) @ (k * dims, k).
-        scores = y @ np.repeat(np.eye(len(live), dtype=np.float32), dims, axis=0)
+        y = y.reshape(len(live), dims, -1)
+        scores = y.sum(axis=1)
         scores *= np.float32(-0.5)
         scores += (np.log(weights[live]) - np.log(np.diagonal(chol, axis1=1, axis2=2)).sum(axis=1)
-                   - 0.5 * dims * math.log(2 * math.pi)).astype(np.float32)
+                   - 0.5 * dims * math.log(2 * math.pi)).astype(np.float32)[:, None]
         if every and len(live) == _COMPONENTS:
             return scores
         if every:
-            out[:, live] = scores
+            out[live] = scores
         else:
-            out[np.ix_(picked, live)] = scores
+            out[np.ix_(live, picked)] = scores
     return out
 
 
 def _neg_log_likelihood(scores: np.ndarray) -> np.ndarray:
-    """``-log p(x)`` (float64) of a mixture from its component scores ``(N, 5)``."""
-    top = scores.max(axis=1)
-    shifted = scores - top[:, None]
-    np.exp(shifted, out=shifted)
-    return -(top.astype(np.float64) + np.log(shifted.sum(axis=1), dtype=np.float64))
+    """``-log p(x)`` (float64) of a mixture from its component scores ``(5, N)`` (changed)."""
+    return -_log_sum_exp(scores)
 
 
 def _fallback_z(guide: _DepthGuide) -> float:
@@ -255,7 +252,7 @@ def _learn_depth(guide: _DepthGuide, is_fg: np.ndarray, models: np.ndarray) -> n
     out = []
     for model, side in ((models[0], ~is_fg), (models[1], is_fg)):
         xs, vs = x[side], valid[side]
-        out.append(_fit_components(xs, vs, _component_scores(model, xs, vs).argmax(axis=1), fallback))
+        out.append(_fit_components(xs, vs, _best_rows(_component_scores(model, xs, vs)), fallback))
     return np.stack(out)
 
 

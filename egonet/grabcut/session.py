@@ -21,21 +21,22 @@ import numpy as np
 from egonet.errors import EgonetError
 from egonet.grabcut.colour import _first_models
 from egonet.grabcut.cut import _box_cut, _box_labels, _depth_box_cut, _depth_first_models, _recut, _seed_cut, _Terms
-from egonet.grabcut.depth import _check_depth, _DepthGuide
+from egonet.grabcut.depth import _DepthGuide
+from egonet.grabcut.frame import GrabCutFrame
 from egonet.grabcut.geometry import _clip_to_box, _downsample, _Geometry, _grow_box
 from egonet.grabcut.refine import _BAND, _GF_RADIUS, _Guide, _upsample_mask
 from egonet.grabcut.state import STATE_FORMAT, _decode_levels, _encode_state, _Snapshot, _unpack
 from egonet.grabcut.strokes import LABELS, _check_points, _check_radius, _polyline_distance_mask, _Stroke
 
 
-def _check_image(image: object) -> np.ndarray:
-    if not isinstance(image, np.ndarray):
-        raise EgonetError(f"image: expected a numpy array, got {type(image).__name__}", field="image")
-    if image.dtype != np.uint8 or image.ndim != 3 or image.shape[2] != 3:
-        raise EgonetError(f"image: expected RGB uint8 of shape (H, W, 3), got {image.dtype} {image.shape}", field="image")
-    if image.shape[0] < 2 or image.shape[1] < 2:
-        raise EgonetError(f"image: needs at least 2x2 pixels, got {image.shape[1]}x{image.shape[0]}", field="image")
-    return np.ascontiguousarray(image).copy()
+def _frame_of(image: object, depth: object) -> tuple[GrabCutFrame, bool]:
+    """The session's frame and whether it is shared (given), or one of its own."""
+    if isinstance(image, GrabCutFrame):
+        if depth is not None:
+            raise EgonetError("depth: a GrabCutFrame holds the frame's depth; give it to GrabCutFrame, not here",
+                              field="depth")
+        return image, True
+    return GrabCutFrame(image, depth, max_guides=2), False
 
 
 def _check_seed(mask: object, shape: tuple[int, int]) -> np.ndarray:
@@ -65,7 +66,9 @@ class GrabCutSession:
     """Interactive GrabCut segmentation of one object in one RGB(-D) frame.
 
     Args:
-        image: RGB uint8 ``(H, W, 3)`` frame at full resolution (copied).
+        image: RGB uint8 ``(H, W, 3)`` frame at full resolution (copied), or
+            a :class:`~egonet.grabcut.frame.GrabCutFrame` that sessions of the
+            frame share (with its depth, if any: then ``depth`` stays None).
         depth: Optional float ``(H, W)`` depth of the same frame in metres,
             0 or NaN where missing (copied). With depth the cut models colour
             and depth together and prefers to cut where depth jumps (see
@@ -89,26 +92,25 @@ class GrabCutSession:
         1200
     """
 
-    def __init__(self, image: np.ndarray, depth: np.ndarray | None = None, *, work_size: int = 272,
+    def __init__(self, image: np.ndarray | GrabCutFrame, depth: np.ndarray | None = None, *, work_size: int = 272,
                  max_undo: int = 20) -> None:
-        checked = _check_image(image)
-        self._setup(checked, _check_depth(depth, checked.shape[:2]), work_size, max_undo)
+        self._setup(*_frame_of(image, depth), work_size, max_undo)
 
-    def _setup(self, image: np.ndarray, depth: np.ndarray | None, work_size: int, max_undo: int) -> None:
-        """``__init__`` on an image and depth already checked (and copied)."""
+    def _setup(self, frame: GrabCutFrame, shared: bool, work_size: int, max_undo: int) -> None:
+        """``__init__`` on a frame (``shared``: given by the caller, not made for this session)."""
         if isinstance(work_size, bool) or not isinstance(work_size, (int, np.integer)) or work_size < 32:
             raise EgonetError(f"work_size: expected an integer >= 32, got {work_size!r}", field="work_size")
         if isinstance(max_undo, bool) or not isinstance(max_undo, (int, np.integer)) or max_undo < 0:
             raise EgonetError(f"max_undo: expected an integer >= 0, got {max_undo!r}", field="max_undo")
-        self._image = image
-        self._depth = depth
+        self._frame, self._shared = frame, shared
+        self._image = frame.image
+        self._depth = frame.depth
         self._work_size = int(work_size)
         self._max_undo = int(max_undo)
         self._history: list[_Snapshot] = []
         self._now = _Snapshot()
         self._mask = np.zeros(self._image.shape[:2], bool)
-        self._guide: _Guide | None = None
-        self._depth_guide: _DepthGuide | None = None  # the current ROI's, with depth
+        self._guide: _Guide | None = None  # the current ROI's (the frame keeps others)
         # Full-resolution stroke footprints: (crop, origin), per stroke.
         self._footprints: weakref.WeakKeyDictionary[_Stroke, tuple[np.ndarray, tuple[int, int]] | None] = (
             weakref.WeakKeyDictionary())
@@ -147,23 +149,16 @@ class GrabCutSession:
 
     @property
     def nbytes(self) -> int:
-        """Bytes held in the session's arrays: the frame's copy, the mask, the
-        ROI's guide (with the cut's links), the undo levels and the cached
-        stroke footprints."""
-        arrays = [self._image, self._mask, self._depth]
-        if self._depth_guide is not None:
-            d = self._depth_guide
-            arrays += [d.features, d.valid, *d.links]
-        if self._guide is not None:
-            g = self._guide
-            arrays += [g.image, g.colour, g.mean, g.inverse]
-            arrays += [*g.__dict__.get("links", ()), g.__dict__.get("pixels")]  # made on first use
-            arrays += [hit[0] for hit in g._footprints.values() if hit is not None]
+        """Bytes held in the session's arrays: the mask, the undo levels and
+        the cached stroke footprints, and unless the frame was given as a
+        shared ``GrabCutFrame``, the frame's copy and its ROIs' guides (with
+        the cut's links)."""
+        arrays = [self._mask]
         for snap in self._history + [self._now]:
             arrays += [snap.models, snap.low, snap.mask_bits] + [s.points for s in snap.strokes]
         arrays += [hit[0] for hit in self._footprints.values() if hit is not None]
         unique = {id(a): a.nbytes for a in arrays if a is not None}  # undo levels share their strokes
-        return sum(unique.values())
+        return sum(unique.values()) + (0 if self._shared else self._frame.nbytes)
 
     def box(self, x0: float, y0: float, x1: float, y1: float) -> np.ndarray:
         """Start a new object from a box and return its first mask.
@@ -369,7 +364,7 @@ class GrabCutSession:
                              work_size=self._work_size, max_undo=self._max_undo, uses_depth=self.uses_depth)
 
     @classmethod
-    def from_state(cls, image: np.ndarray, state: Mapping[str, object],
+    def from_state(cls, image: np.ndarray | GrabCutFrame, state: Mapping[str, object],
                    depth: np.ndarray | None = None) -> GrabCutSession:
         """Resume a session from ``state()`` and the same image (and depth).
 
@@ -378,7 +373,9 @@ class GrabCutSession:
         only with depth, one made without only without.
 
         Args:
-            image: The RGB uint8 ``(H, W, 3)`` frame the state was made on.
+            image: The RGB uint8 ``(H, W, 3)`` frame the state was made on,
+                or a shared ``GrabCutFrame`` of it (holding its depth, if the
+                session was made with depth).
             state: A dict from ``state()``, possibly after ``np.savez`` and
                 ``np.load`` (0-d arrays are accepted for the scalars).
             depth: The frame's depth in metres ``(H, W)`` if the session was
@@ -404,32 +401,30 @@ class GrabCutSession:
             >>> bool((t.stroke([(50, 40)], "bg", 4) == s.stroke([(50, 40)], "bg", 4)).all())
             True
         """
-        checked = _check_image(image)
-        checked_depth = _check_depth(depth, checked.shape[:2])
+        frame, shared = _frame_of(image, depth)
         if not isinstance(state, Mapping):
             raise EgonetError(f"state: expected the dict from GrabCutSession.state(), got {type(state).__name__}", field="state")
         try:
-            return cls._from_state(checked, state, checked_depth)
+            return cls._from_state(frame, shared, state)
         except (KeyError, IndexError, TypeError, ValueError) as exc:
             if isinstance(exc, EgonetError) and exc.field in ("state", "depth"):
                 raise
             raise EgonetError(f"state: malformed GrabCut session state ({type(exc).__name__}: {exc})", field="state") from exc
 
     @classmethod
-    def _from_state(cls, image: np.ndarray, state: Mapping[str, object],
-                    depth: np.ndarray | None) -> GrabCutSession:
+    def _from_state(cls, frame: GrabCutFrame, shared: bool, state: Mapping[str, object]) -> GrabCutSession:
         def scalar(key: str) -> object:
             return np.asarray(state[key]).item()
 
         if scalar("format") != STATE_FORMAT:
             raise EgonetError(f"state: format {scalar('format')!r} is not {STATE_FORMAT!r}", field="state")
         uses_depth = bool(np.asarray(state.get("uses_depth", 0)).item())
-        if uses_depth != (depth is not None):
+        if uses_depth != (frame.depth is not None):
             raise EgonetError("depth: this state was made " + (
                 "with depth; pass the frame's depth (H, W) in metres" if uses_depth else
                 "without depth; resume it without depth (or start a new session with depth)"), field="depth")
         session = cls.__new__(cls)
-        session._setup(image, depth, int(scalar("work_size")), int(scalar("max_undo")))
+        session._setup(frame, shared, int(scalar("work_size")), int(scalar("max_undo")))
         h, w = session.shape
         if (int(scalar("height")), int(scalar("width"))) != (h, w):
             raise EgonetError(f"state: made on a {scalar('width')}x{scalar('height')} frame, the image is {w}x{h}", field="state")
@@ -445,13 +440,11 @@ class GrabCutSession:
         geom = _Geometry.for_box(box, *self.shape, self._work_size)
         if self._guide is not None and self._guide.geom == geom:
             return self._guide
-        return _Guide.build(geom, self._image)
+        return self._frame.guide(geom)
 
     def _depth_guide_for(self, guide: _Guide) -> _DepthGuide:
-        """The depth guide of ``guide``'s ROI (cached for the current one)."""
-        if self._depth_guide is None or self._depth_guide.geom != guide.geom:
-            self._depth_guide = _DepthGuide.build(guide.geom, guide.image, self._depth)
-        return self._depth_guide
+        """The depth guide of ``guide``'s ROI (the frame keeps it)."""
+        return self._frame.depth_guide(guide)
 
     def _full_mask(self, guide: _Guide, snap: _Snapshot) -> np.ndarray:
         """The full-resolution mask of ``snap``, computed over the whole ROI."""

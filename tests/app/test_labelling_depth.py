@@ -105,21 +105,32 @@ def test_a_session_keeps_its_choice_and_a_new_box_takes_a_new_one(app, annotator
     assert not undone.any()  # a session cannot change its kind, so nothing before that box
 
 
-def test_the_depth_is_cached_beside_the_image(app, annotator, monkeypatch):
-    monkeypatch.setattr(grabcut_service, "_images", grabcut_service._Recent())
+def test_the_frame_is_kept_with_its_depth_and_its_guides(app, annotator, monkeypatch):
+    """A worker keeps the frame for GrabCut (image, depth, its ROIs' guides): a session restored
+    from the database builds no guide again, and nothing is kept without room for it."""
+    from egonet.grabcut import frame as grabcut_frame
+
+    monkeypatch.setattr(grabcut_service, "_frames", grabcut_service._Recent())
     frame_id = make_frame(app, with_depth=True)
     call(annotator, "box", frame_id=frame_id, instance="a", box=BOX)
     with app.app_context():
         frame = db.session.get(Frame, frame_id)
-        assert set(grabcut_service._images.keys()) == {frame.rgb_path, frame.depth_path}
-        cached = grabcut_service._images.get(frame.depth_path)
-    assert cached.dtype == np.float32 and cached.shape == (H, W)
-    assert grabcut_service._images.nbytes == H * W * 3 + H * W * 4
+        key = (frame.rgb_path, frame.depth_path)
+    assert grabcut_service._frames.keys() == [key]
+    kept = grabcut_service._frames.get(key)
+    assert kept.depth.dtype == np.float32 and kept.depth.shape == (H, W) and kept.guides == 2  # colour and depth
+    assert grabcut_service._frames.nbytes == kept.nbytes > H * W * 3 + H * W * 4
+    built = []
+    for cls in (grabcut_frame._Guide, grabcut_frame._DepthGuide):
+        monkeypatch.setattr(cls, "build", lambda *a, _b=cls.build, **k: built.append(1) or _b(*a, **k))
+    monkeypatch.setattr(grabcut_service, "_sessions", grabcut_service._Recent())  # restored from its row
+    status, mask = call(annotator, "stroke", frame_id=frame_id, instance="a", points=[[60, 60]], label="bg", radius=3)
+    assert status == "1" and not mask[60, 60] and built == []
     # Without room for it, nothing is kept and the box still works.
-    monkeypatch.setattr(grabcut_service, "_images", grabcut_service._Recent())
+    monkeypatch.setattr(grabcut_service, "_frames", grabcut_service._Recent())
     monkeypatch.setitem(app.config, "GRABCUT_IMAGE_CACHE_BYTES", H * W * 3)
     _, mask = call(annotator, "box", frame_id=frame_id, instance="b", box=BOX)
-    assert iou(mask, truth()) > 0.95 and grabcut_service._images.nbytes <= H * W * 3
+    assert iou(mask, truth()) > 0.95 and grabcut_service._frames.keys() == [] and built
 
 
 @pytest.mark.parametrize(

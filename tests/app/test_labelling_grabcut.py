@@ -25,7 +25,7 @@ def annotator(client, make_user):
 def forget_everything(app, monkeypatch):
     """Every request from now on as if served by a new worker process: nothing kept in memory."""
     monkeypatch.setattr(grabcut_service, "_sessions", grabcut_service._Recent())
-    monkeypatch.setattr(grabcut_service, "_images", grabcut_service._Recent())
+    monkeypatch.setattr(grabcut_service, "_frames", grabcut_service._Recent())
     monkeypatch.setitem(app.config, "GRABCUT_CACHE_BYTES", 0)
     monkeypatch.setitem(app.config, "GRABCUT_IMAGE_CACHE_BYTES", 0)
 
@@ -219,3 +219,24 @@ def test_workers_share_decoded_frames_on_disk_within_a_budget(app, annotator, mo
     call(annotator, "box", frame_id=frame_ids[1], instance="a", box=BOX)
     call(annotator, "box", frame_id=frame_ids[2], instance="a", box=BOX)
     assert len(list(folder.glob("*.npy"))) == 1 and not copy.exists()
+
+
+def test_the_app_runs_numpy_blas_on_one_thread_unless_told(tmp_path):
+    """BLAS_THREADS: 1 by default (a request's GrabCut runs on one core), any other number when set."""
+    import threadpoolctl
+
+    from app import create_app
+
+    def blas_threads():
+        return {lib["num_threads"] for lib in threadpoolctl.threadpool_info() if lib["user_api"] == "blas"}
+
+    before = threadpoolctl.threadpool_limits(limits=2, user_api="blas")  # restored at the end
+    try:
+        create_app({"TESTING": True, "SECRET_KEY": "x" * 32}, instance_path=str(tmp_path / "a"))
+        assert blas_threads() == {1}
+        create_app({"TESTING": True, "SECRET_KEY": "x" * 32, "BLAS_THREADS": 2}, instance_path=str(tmp_path / "b"))
+        assert blas_threads() == {2}
+        create_app({"TESTING": True, "SECRET_KEY": "x" * 32, "BLAS_THREADS": None}, instance_path=str(tmp_path / "c"))
+        assert blas_threads() == {2}  # left as it was
+    finally:
+        before.restore_original_limits()

@@ -7,6 +7,7 @@ import pkgutil
 import subprocess
 import sys
 
+import cv2
 import numpy as np
 import pytest
 
@@ -419,3 +420,60 @@ def test_module_does_not_import_web_stack():
     code = "import sys, egonet.grabcut; print('flask' in sys.modules or 'sqlalchemy' in sys.modules)"
     out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, check=True)
     assert out.stdout.strip() == "False"
+
+
+def test_fine_cut_moves_only_a_band_along_the_coarse_edge():
+    """The full grid's last box iteration: undecided only within _FINE_BAND of the coarse label's edge."""
+    from egonet.grabcut import cut
+    from egonet.grabcut.geometry import _Geometry
+
+    geom = _Geometry.for_box((40, 30, 200, 150), 180, 240, 272)
+    coarse = np.zeros((round(geom.low_h / 2), round(geom.low_w / 2)), bool)
+    coarse[20:45, 25:60] = True
+    gc = cut._upsampled_labels(geom, coarse)
+    up = cv2.resize(coarse.astype(np.float32), (geom.low_w, geom.low_h)) >= 0.5
+    edge_distance = np.where(up, cv2.distanceTransform(up.view(np.uint8), cv2.DIST_L2, 5),
+                             cv2.distanceTransform((~up).view(np.uint8), cv2.DIST_L2, 5))
+    rows, cols = geom.box_low()
+    inside = np.zeros(gc.shape, bool)
+    inside[rows, cols] = True
+    free = gc >= cv2.GC_PR_BGD
+    assert free.any() and (free <= inside).all()
+    assert edge_distance[free].max() <= cut._FINE_BAND + 1
+    far = inside & (edge_distance > cut._FINE_BAND + 1)
+    assert far.any() and ((gc[far] == cv2.GC_FGD) == up[far]).all() and np.isin(gc[far], (cv2.GC_FGD, cv2.GC_BGD)).all()
+    assert ((gc & 1).astype(bool)[inside] == up[inside]).all()  # the labels start as the coarse cut's
+
+
+def test_component_likelihoods_match_the_mixture_by_hand():
+    """The component-major colour and depth scores against the Gaussian density written out per pixel."""
+    from egonet.grabcut import colour, depth
+
+    rng = np.random.default_rng(3)
+    x = rng.integers(0, 256, (500, 3)).astype(np.float32)
+    model = colour._fit_model(x.astype(np.float64), rng)[0]
+    weights, means, covs = colour._unpack_model(model)
+    live = np.flatnonzero(weights > 0)
+    by_hand = np.stack([-0.5 * (np.einsum("ni,ij,nj->n", x - means[k], np.linalg.inv(covs[k]), x - means[k])
+                                + np.log(np.linalg.det(covs[k]))) for k in live])
+    logs, got_live = colour._component_logs(model, x)
+    assert (got_live == live).all()
+    np.testing.assert_allclose(logs, by_hand, rtol=1e-4, atol=1e-3)
+    mixture = np.log(np.exp(by_hand + np.log(weights[live])[:, None]).sum(axis=0))
+    np.testing.assert_allclose(colour._costs(model, x), -mixture, rtol=1e-4, atol=1e-3)
+    assert (colour._best_rows(logs) == logs.argmax(axis=0)).all()
+
+    z = rng.uniform(0.5, 3.0, (500, 1)).astype(np.float32)
+    features = np.hstack([x, z * depth._Z_SCALE])
+    valid = rng.random(500) > 0.3
+    dmodel = depth._first_model(features.astype(np.float64), valid, 1.0, rng)
+    dw, dm, dc = depth._unpack_model(dmodel)
+    scores = depth._component_scores(dmodel, features, valid)
+    for n in (0, 1, 2, int(np.flatnonzero(~valid)[0])):
+        dims = 4 if valid[n] else 3
+        for k in np.flatnonzero(dw > 0):
+            d = features[n, :dims] - dm[k, :dims]
+            c = dc[k, :dims, :dims]
+            expected = (np.log(dw[k]) - 0.5 * d @ np.linalg.solve(c, d) - 0.5 * np.log(np.linalg.det(c))
+                        - 0.5 * dims * np.log(2 * np.pi))
+            assert scores[k, n] == pytest.approx(expected, rel=1e-4, abs=1e-2)

@@ -49,7 +49,7 @@ from app.services import frames as frames_service
 from app.services import media
 from egonet import io as egonet_io
 from egonet.errors import EgonetError
-from egonet.grabcut import GrabCutSession
+from egonet.grabcut import GrabCutFrame, GrabCutSession
 
 
 @dataclass
@@ -106,14 +106,17 @@ class _Recent:
 # every write, a cached session is used only while the database still holds
 # exactly its state. A client's keep-alive connection stays with one worker,
 # so an annotator's strokes usually find their session here. They are kept
-# within GRABCUT_CACHE_BYTES, counted by their arrays (8-10 MB each at
-# 1280x960: the frame's copy, the mask, the ROI's guide, the footprints).
+# within GRABCUT_CACHE_BYTES, counted by their own arrays (the mask, the undo
+# levels, the stroke footprints: 1-3 MB at 1280x960; the frame and its guides
+# are ``_frames``').
 _sessions = _Recent()
-# Decoded frames and depth maps by their (content-addressed, so never stale)
-# media path, within GRABCUT_IMAGE_CACHE_BYTES: a session restored in another
-# worker then only needs its state decoded (and ``_decoded`` shares them on
-# disk between workers).
-_images = _Recent()
+# Frames ready for GrabCut (``GrabCutFrame``: the decoded image, with or
+# without the depth, and the guides of the ROIs cut lately) by their
+# (content-addressed, so never stale) media paths, within
+# GRABCUT_IMAGE_CACHE_BYTES: a session restored in this worker then only needs
+# its state decoded, not the frame, nor its ROI's guides (5-25 ms), again.
+# ``_decoded`` shares the decoded frames on disk between workers.
+_frames = _Recent()
 
 
 def _dump_state(session: GrabCutSession) -> bytes:
@@ -124,28 +127,45 @@ def _dump_state(session: GrabCutSession) -> bytes:
     return zlib.compress(buffer.getvalue(), 1)
 
 
-def _frame_image(frame: Frame) -> np.ndarray:
-    return _decoded(frame.rgb_path, lambda: egonet_io.read_image(media.absolute_path(frame.rgb_path)))
+def _frame_key(frame: Frame, *, use_depth: bool) -> tuple[str, str | None]:
+    return frame.rgb_path, frame.depth_path if use_depth else None
 
 
-def _frame_depth(frame: Frame) -> np.ndarray | None:
-    """The frame's depth (float32 metres, ``(H, W)``, 0 where missing), or None without one."""
-    if frame.depth_path is None:
-        return None
-    return _decoded(frame.depth_path, lambda: frames_service.frame_depth(frame))
+def _grabcut_frame(frame: Frame, *, use_depth: bool) -> GrabCutFrame:
+    """The frame for GrabCut, with its depth when ``use_depth`` (it has one): kept by this worker."""
+    key = _frame_key(frame, use_depth=use_depth)
+    kept = _frames.get(key)
+    if kept is None:
+        image = _decoded(frame.rgb_path, lambda: egonet_io.read_image(media.absolute_path(frame.rgb_path)))
+        depth = _decoded(frame.depth_path, lambda: frames_service.frame_depth(frame)) if key[1] else None
+        try:
+            kept = GrabCutFrame(image, depth)
+        except EgonetError as exc:
+            raise Problem.from_egonet(exc) from None
+    _keep_frame(key, kept)
+    return kept
+
+
+def _keep_frame(key: tuple[str, str | None], kept: GrabCutFrame) -> None:
+    """Within GRABCUT_IMAGE_CACHE_BYTES, counted as it is now (again after an operation added guides)."""
+    _frames.put(key, kept, nbytes=kept.nbytes, budget=current_app.config["GRABCUT_IMAGE_CACHE_BYTES"])
+
+
+def _recount_frame(frame: Frame, session: GrabCutSession) -> None:
+    key = _frame_key(frame, use_depth=session.uses_depth)
+    kept = _frames.get(key)
+    if kept is not None:
+        _keep_frame(key, kept)
 
 
 def _decoded(relative: str, decode: Callable[[], np.ndarray]) -> np.ndarray:
-    """A frame's image or depth, decoded: from this worker's memory, else from
-    the decoded copy on disk that the workers share (``.npy`` under
-    CACHE_ROOT/grabcut-frames, within GRABCUT_DISK_CACHE_BYTES), else decoded
-    from the media file and shared. Loading a copy costs a few milliseconds
-    where decoding a 1408x1408 PNG costs 40-50, so a session restored in a
-    worker that has not seen the frame yet stays cheap. Media paths are
-    content-addressed: a copy is never stale."""
-    array = _images.get(relative)
-    if array is not None:
-        return array
+    """A frame's image or depth (float32 metres, ``(H, W)``, 0 where missing),
+    decoded: from the decoded copy on disk that the workers share (``.npy``
+    under CACHE_ROOT/grabcut-frames, within GRABCUT_DISK_CACHE_BYTES), else
+    decoded from the media file and shared. Loading a copy costs a few
+    milliseconds where decoding a 1408x1408 PNG costs 40-50, so a session
+    restored in a worker that has not seen the frame yet stays cheap. Media
+    paths are content-addressed: a copy is never stale."""
     folder = Path(current_app.config["CACHE_ROOT"]) / "grabcut-frames"
     path = folder / f"{hashlib.sha256(relative.encode()).hexdigest()[:32]}.npy"
     try:
@@ -157,7 +177,6 @@ def _decoded(relative: str, decode: Callable[[], np.ndarray]) -> np.ndarray:
         np.save(buffer, array)
         egonet_io.write_atomic(path, buffer.getvalue())
         _trim(folder, current_app.config["GRABCUT_DISK_CACHE_BYTES"])
-    _images.put(relative, array, nbytes=array.nbytes, budget=current_app.config["GRABCUT_IMAGE_CACHE_BYTES"])
     return array
 
 
@@ -186,18 +205,17 @@ def _load_session(frame: Frame, blob: bytes) -> GrabCutSession:
         state = dict(arrays)
     # A session made with depth resumes with the frame's depth, one made without without it.
     uses_depth = bool(np.asarray(state.get("uses_depth", 0)).item())
-    depth = _frame_depth(frame) if uses_depth else None
-    if uses_depth and depth is None:
+    if uses_depth and frame.depth_path is None:
         raise Problem("box: this object's GrabCut session used the frame's depth, which is gone; draw its box again",
                       status=409, fields={"box": "draw the box again"})
     try:
-        return GrabCutSession.from_state(_frame_image(frame), state, depth)
+        return GrabCutSession.from_state(_grabcut_frame(frame, use_depth=uses_depth), state)
     except EgonetError as exc:
         raise Problem.from_egonet(exc) from None
 
 
 def _new_session(frame: Frame, *, use_depth: bool) -> GrabCutSession:
-    return GrabCutSession(_frame_image(frame), _frame_depth(frame) if use_depth else None)
+    return GrabCutSession(_grabcut_frame(frame, use_depth=use_depth and frame.depth_path is not None))
 
 
 # --------------------------------------------------------------------------
@@ -403,6 +421,7 @@ def _operate_locked(frame: Frame, user: User, key: str, apply: Callable[[GrabCut
             db.session.rollback()
             continue
         _keep(row.revision, session)
+        _recount_frame(frame, session)
         _clear_proposal(frame, user, key)
         return GrabCutResult(mask, session.can_undo)
     raise Problem("another GrabCut operation on this object is still running; try again", status=409,
