@@ -82,10 +82,10 @@ Example:
     (True, False)
 """
 
-from egonet.grabcut.frame import GrabCutFrame
+from egonet.grabcut.frame import GrabCutFrame, GuideStore
 from egonet.grabcut.propagation import propagate
 from egonet.grabcut.session import GrabCutSession
 from egonet.grabcut.state import STATE_FORMAT
 from egonet.grabcut.strokes import LABELS, stroke_footprint
 
-__all__ = ["GrabCutSession", "GrabCutFrame", "stroke_footprint", "LABELS", "STATE_FORMAT", "propagate"]
+__all__ = ["GrabCutSession", "GrabCutFrame", "GuideStore", "stroke_footprint", "LABELS", "STATE_FORMAT", "propagate"]

@@ -53,7 +53,10 @@ def _check_depth(depth: object, shape: tuple[int, int]) -> np.ndarray | None:
         hint = " (integer depth is usually millimetres: divide by 1000)" if integer else ""
         raise EgonetError(f"depth: expected a float (H, W) = {tuple(shape)} array in metres (0 or NaN where "
                           f"missing), got {depth.dtype} {depth.shape}{hint}", field="depth")
-    z = depth.astype(np.float32)  # always a copy
+    # A read-only float32 array (a memory-mapped file, say) is taken as it is
+    # unless it has zeros to mark as missing; anything else is copied.
+    shared = depth.dtype == np.float32 and not depth.flags.writeable and depth.flags.c_contiguous
+    z = depth if shared else depth.astype(np.float32)
     # fmin/fmax skip NaN (missing); one pass each over the frame.
     lo, hi = (float(np.fmin.reduce(z, axis=None)), float(np.fmax.reduce(z, axis=None))) if z.size else (0.0, 0.0)
     if lo < 0 or math.isinf(hi):
@@ -62,7 +65,11 @@ def _check_depth(depth: object, shape: tuple[int, int]) -> np.ndarray | None:
     if hi > 1000:
         raise EgonetError(f"depth: expected metres, got values up to {hi:.0f} (millimetres? divide "
                           "by 1000)", field="depth")
-    z[z == 0] = np.nan
+    zeros = z == 0
+    if zeros.any():
+        if z is depth:
+            z = z.copy()
+        z[zeros] = np.nan
     return z
 
 

@@ -230,3 +230,93 @@ def test_random_frames_with_holes_in_depth(seed):
     t = GrabCutSession.from_state(image, state, depth)
     np.testing.assert_array_equal(t.stroke([(x0, y0)], "bg", 1.5), s.stroke([(x0, y0)], "bg", 1.5))
     assert not s.mask[y0, x0]
+
+
+# ------------------------------------------------ frames sharing their guides
+
+
+class _NpzStore:
+    """A ``GuideStore`` that keeps each guide as the bytes of an ``.npz``, as the app's files do."""
+
+    def __init__(self):
+        self.files: dict[str, bytes] = {}
+
+    def load(self, name):
+        if name not in self.files:
+            return None
+        with np.load(io.BytesIO(self.files[name]), allow_pickle=False) as arrays:
+            return dict(arrays)
+
+    def save(self, name, arrays):
+        buffer = io.BytesIO()
+        np.savez(buffer, **arrays)
+        self.files[name] = buffer.getvalue()
+
+
+@pytest.mark.parametrize("with_depth", [True, False])
+def test_a_frame_in_another_process_loads_the_guides_instead_of_building_them(monkeypatch, with_depth):
+    from egonet.grabcut import GrabCutFrame
+    from egonet.grabcut import frame as grabcut_frame
+
+    if with_depth:
+        image, depth, _ = _white_on_white()
+    else:
+        (image, _), depth = _two_colours(), None
+    store = _NpzStore()
+    first = GrabCutFrame(image, depth, store=store)
+    session = GrabCutSession(first)
+    session.box(40, 30, 130, 100)
+    state = session.state()
+    assert first.share() == (2 if with_depth else 1) and first.share() == 0  # saved once
+    names = sorted(store.files)
+    kinds = [name.split("-")[1] for name in names]
+    assert kinds == (["colour", "depth"] if with_depth else ["colour"])
+    # The colour cut's links go with the colour guide only where the colour cut made them.
+    colour = store.load(names[0])
+    assert ("links_p" in colour) == (not with_depth)
+
+    def no_build(*args, **kwargs):
+        raise AssertionError("built again")
+
+    for cls in (grabcut_frame._Guide, grabcut_frame._DepthGuide):
+        monkeypatch.setattr(cls, "build", no_build)
+    monkeypatch.setattr("egonet.grabcut.refine._links", no_build)  # a colour guide's links
+    other = GrabCutFrame(image, depth, store=store)  # another process: nothing in memory
+    restored = GrabCutSession.from_state(other, state)
+    assert np.array_equal(restored.stroke([(85, 65)], "bg", 4), session.stroke([(85, 65)], "bg", 4))
+    assert other.share() == 0  # it had them from the store
+
+
+def test_a_damaged_or_foreign_stored_guide_is_built_again_and_replaced():
+    from egonet.grabcut import GrabCutFrame
+
+    image, depth, _ = _white_on_white()
+    store = _NpzStore()
+    first = GrabCutFrame(image, depth, store=store)
+    expected = GrabCutSession(first).box(40, 30, 130, 100)
+    first.share()
+    for name in list(store.files):  # every guide the wrong size for its ROI
+        arrays = store.load(name)
+        store.save(name, {key: value[:-1] for key, value in arrays.items()})
+    damaged = dict(store.files)
+    other = GrabCutFrame(image, depth, store=store)
+    assert np.array_equal(GrabCutSession(other).box(40, 30, 130, 100), expected)
+    assert other.share() == 2 and all(store.files[name] != damaged[name] for name in damaged)
+
+
+def test_a_read_only_frame_is_shared_as_it_is_and_anything_else_copied():
+    from egonet.grabcut import GrabCutFrame
+
+    image, depth, _ = _white_on_white()
+    writeable = GrabCutFrame(image, depth)
+    assert not np.shares_memory(writeable.image, image) and writeable.depth.dtype == np.float32
+    image.flags.writeable = False
+    z = depth.astype(np.float32)
+    z.flags.writeable = False
+    frame = GrabCutFrame(image, z)  # e.g. memory-mapped copies, shared by processes
+    assert frame.image is image and frame.depth is z
+    with_zeros = z.copy()
+    with_zeros[0, 0] = 0  # missing: becomes NaN in GrabCut's own copy, the caller's array untouched
+    with_zeros.flags.writeable = False
+    other = GrabCutFrame(image, with_zeros)
+    assert other.depth is not with_zeros and np.isnan(other.depth[0, 0]) and with_zeros[0, 0] == 0
