@@ -41,7 +41,9 @@ Sessions of one frame can share a ``GrabCutFrame(image, depth)``: the
 frame's checked copy and, per region of interest, the low-resolution guides
 a cut needs (5-25 ms to build on a 1408x1408 frame), so a session resumed
 with ``from_state`` for every request of a server, or the frame's next
-object, does not build them again.
+object, does not build them again. With a ``GuideStore`` (named arrays in,
+named arrays out) the guides go between processes too: ``share()`` saves
+them, and a frame in another process loads them before building any.
 
 Modules: :mod:`~egonet.grabcut.session` (``GrabCutSession``: box, stroke,
 undo, and the loop that composes the rest), :mod:`~egonet.grabcut.frame`
