@@ -10,7 +10,6 @@ every pixel, which is most of its cost).
 
 from __future__ import annotations
 
-
 import cv2
 import numpy as np
 

@@ -138,7 +138,9 @@ def _grabcut_frame(frame: Frame, *, use_depth: bool) -> GrabCutFrame:
     kept = _frames.get(key)
     if kept is None:
         image = _decoded(frame.rgb_path, lambda: egonet_io.read_image(media.absolute_path(frame.rgb_path)))
-        depth = _decoded(frame.depth_path, lambda: frames_service.frame_depth(frame)) if key[1] else None
+        depth = None
+        if key[1]:
+            depth = _decoded(frame.depth_path, lambda: _missing_as_nan(frames_service.frame_depth(frame)))
         try:
             kept = GrabCutFrame(image, depth, store=_SharedGuides(key))
         except EgonetError as exc:
@@ -220,11 +222,14 @@ def _decoded(relative: str, decode: Callable[[], np.ndarray]) -> np.ndarray:
     except (OSError, ValueError):  # none yet (or a foreign file): decode and share
         pass
     array = decode()
-    if array.dtype == np.float32 and array.ndim == 2:  # depth: missing as GrabCut keeps it
-        array = np.where(array > 0, array, np.float32(np.nan))
     egonet_io.write_atomic(path, lambda fh: np.save(fh, array))
     _trim(folder, current_app.config["GRABCUT_DISK_CACHE_BYTES"])
     return array
+
+
+def _missing_as_nan(depth: np.ndarray) -> np.ndarray:
+    """The stored depth (0 where missing) as GrabCutFrame keeps it (NaN), so it takes the shared copy as it is."""
+    return np.where(depth > 0, depth, np.float32(np.nan))
 
 
 def _trim(folder: Path, budget: int) -> None:
