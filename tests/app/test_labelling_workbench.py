@@ -17,7 +17,7 @@ from app.services import labelling
 from tests.app.test_labelling import body, get_png, make_frames, square
 
 BOX = {"box": [40, 25, 125, 95]}
-README = Path(__file__).resolve().parents[2] / "README.md"
+LABELLING_DOC = Path(__file__).resolve().parents[2] / "docs" / "labelling.md"
 
 
 def signed_in(app, make_user, role: str, name: str):
@@ -182,9 +182,9 @@ def test_who_else_is_on_a_frame_and_next_unlabelled_skips_frames_others_have_ope
     assert bob.post(f"/api/label/frames/{f1}/presence", json={}).get_json()["fields"] == {"open": "is required"}
 
 
-def readme_shortcuts() -> list[tuple[str, str]]:
-    """The rows of the README's shortcut table (labelling section)."""
-    text = README.read_text()
+def documented_shortcuts() -> list[tuple[str, str]]:
+    """The rows of the shortcut table in docs/labelling.md."""
+    text = LABELLING_DOC.read_text()
     table = text[text.index("| key | does |"):]
     rows = []
     for line in table.splitlines()[2:]:
@@ -195,7 +195,7 @@ def readme_shortcuts() -> list[tuple[str, str]]:
     return rows
 
 
-def test_the_shortcuts_overlay_and_the_readme_list_the_same_keys(app, make_user):
+def test_the_shortcuts_overlay_and_the_labelling_doc_list_the_same_keys(app, make_user):
     frame_id, *_ = make_frames(app, n=1)
     page = signed_in(app, make_user, "annotator", "ann").get(f"/label/frames/{frame_id}").get_data(as_text=True)
     overlay = page[page.index('id="shortcuts"'):]
@@ -203,4 +203,4 @@ def test_the_shortcuts_overlay_and_the_readme_list_the_same_keys(app, make_user)
     shown = [(html.unescape(k).strip(), html.unescape(d).strip())
              for k, d in re.findall(r"<dt>(.*?)</dt>\s*<dd>(.*?)</dd>", overlay, re.S)]
     assert len(shown) > 20
-    assert readme_shortcuts() == shown
+    assert documented_shortcuts() == shown

@@ -1,7 +1,7 @@
 """The real production server on PostgreSQL, and clients that act like the pages.
 
 Used by the crash test and by bench/load.py. The server is gunicorn running
-``app:create_app()`` (the README's production entry point) in its own
+``app:create_app()`` (the production entry point of docs/deployment.md) in its own
 process group, so a test can kill -9 all of it at once.
 """
 

@@ -275,7 +275,7 @@ def test_egonet_lite_learns_the_demo_better_than_the_action_object_prior(tmp_pat
 
     Small frames and few epochs favour quick fitting over regularisation
     (dropout 0.1, no augmentation, a larger step); the default settings need
-    more data and epochs (see README).
+    more data and epochs (see docs/training.md).
     """
     samples = demo_samples(15, width=64, height=48)
     config = TrainConfig(
