@@ -12,6 +12,7 @@ model is trained. Screenshots of every step go to the test's tmp folder.
 """
 
 import io as bytes_io
+import itertools
 import json
 import re
 import zipfile
@@ -24,11 +25,11 @@ from app.extensions import db
 from app.models import Frame
 from app.services import exchange
 from app.services.importing import import_path
-from app.services.labelling.masks import decode_rle
 from egonet import io
 from tests.app.test_suggest import network_like, stored_run
 from tests.browser.conftest import sign_in
 from tests.browser.test_label import drag, open_frame, settle
+from tests.browser.test_label_depth import iou, mask_of
 from tests.browser.test_label_workbench import COLOURS, edge_point, pixel, server_annotation
 from tests.browser.test_propagate import wait_for_frame
 from tests.realdata import BACKREST, PRIMESENSE, chair_truth
@@ -43,11 +44,6 @@ FOOT = [(336, 350), (362, 360), (380, 372), (376, 384), (354, 372), (332, 358)] 
 RAW_STATUS = re.compile(r"\b[45]\d\d\b|Bad Request|Conflict|Forbidden")
 
 
-def mask_of(page, k: int) -> np.ndarray:
-    rle = page.evaluate(f"window.labelPage.maskRle({k})")
-    return decode_rle(rle, tuple(rle["size"]), field="mask")
-
-
 def wait_for_area(page, k: int, mask: np.ndarray) -> None:
     page.wait_for_function(f"() => window.labelPage.instances()[{k}]?.area === {int(mask.sum())}")
     settle(page)
@@ -60,24 +56,19 @@ def click_points(page, points) -> None:
         page.mouse.click(p["x"], p["y"])
 
 
-def iou(a: np.ndarray, b: np.ndarray) -> float:
-    return float((a & b).sum() / max(1, (a | b).sum()))
-
-
-def said_in_words(page, words: str) -> str:
+def said_in_words(page, words: str) -> None:
     """Wait for the page's message to say ``words``; it must not be a bare HTTP status."""
     page.wait_for_function("s => document.querySelector('#message').textContent.includes(s)", arg=words)
     text = page.locator("#message").inner_text()
     assert not RAW_STATUS.search(text), text
-    return text
 
 
 @pytest.mark.filterwarnings("ignore:__array__ implementation:DeprecationWarning")  # pycocotools predates numpy 2
 def test_an_annotators_day_then_review_and_export(live_app, live_server, browser, tmp_path):
     with live_app.app_context():
         import_path(PRIMESENSE, activity="room")
-        f0, f1, f2 = db.session.execute(db.select(Frame.id).order_by(Frame.index)).scalars()
-    shots = iter(range(1, 100))
+        f0, f1, _ = db.session.execute(db.select(Frame.id).order_by(Frame.index)).scalars()
+    shots = itertools.count(1)
 
     def shot(page, name: str) -> None:
         page.screenshot(path=tmp_path / f"{next(shots):02d}-{name}.png")
@@ -168,8 +159,7 @@ def test_an_annotators_day_then_review_and_export(live_app, live_server, browser
     page.click("#instances .accept-proposal")
     page.wait_for_selector("#instances .instance.proposed", state="detached")
     settle(page)
-    proposed = mask_of(page, 1)
-    assert iou(proposed, cabinet) > 0.7
+    assert iou(mask_of(page, 1), cabinet) > 0.7
     page.evaluate("() => new Promise(requestAnimationFrame)")
     for k in (0, 1):
         assert pixel(page, *edge_point(page, k)) == list(COLOURS[k]), f"object {k + 1} is not outlined in its colour"
@@ -188,7 +178,7 @@ def test_an_annotators_day_then_review_and_export(live_app, live_server, browser
     shot(page, "done-read-only")
     context.close()
 
-    # The reviewer: the Label link in the navigation bar, the queue's Fix, a painted fix, Accept.
+    # The reviewer: the Label link in the navigation bar, the queue's Fix, an erased stray, Accept.
     rev = browser.new_context(viewport={"width": 1280, "height": 800}).new_page()
     sign_in(rev, live_app, live_server, username="rev", role="reviewer")
     rev.locator("header.topbar nav a", has_text="Label").click()
@@ -197,8 +187,8 @@ def test_an_annotators_day_then_review_and_export(live_app, live_server, browser
     rev.wait_for_function("() => document.querySelector('#review-queue .mask-thumb').complete")
     shot(rev, "review-queue")
     rev.locator("#review-queue .fix-link").click()
-    rev.wait_for_selector("#fixing:not([hidden])")
     rev.wait_for_selector("#label-app[data-ready='1']")
+    rev.wait_for_selector("#fixing:not([hidden])")
     before = mask_of(rev, 0)
     rev.keyboard.press("1")
     rev.keyboard.press("e")
