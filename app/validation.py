@@ -6,7 +6,7 @@ whose ``fields`` name every bad field (``"clicks[2].x": "must be >= 0"``).
 Unknown fields are refused, so a misspelt option never does nothing.
 
 Integers fit a SQL INTEGER column unless a field says otherwise, so an id
-past ``app.MAX_ID`` is a 400, not a database error.
+past ``app.limits.MAX_ID`` is a 400, not a database error.
 
 Example::
 
@@ -21,7 +21,7 @@ from typing import Any
 
 from flask import request
 
-from app import MAX_ID
+from app.limits import MAX_ID
 from app.errors import Problem
 
 MISSING = object()

@@ -32,7 +32,8 @@ from app.services import training
 from app.services.scoring import cache, sources
 from app.services.scoring.rows import Scorer, ScoringProblem, Source, build_rows, compare
 from app.services.scoring.sources import AOP_SIZE, BASELINE_NAMES, CENTER_SIGMA, SALIENCY, Scored, Truth
-from app.services.scoring.table import BASELINE, FRAMES, HUMAN, MODEL, Report
+from app.services.scoring.cells import BASELINE, FRAMES, HUMAN, MODEL
+from app.services.scoring.table import Report
 from egonet.metrics import DEFAULT_RESAMPLES, DEFAULT_THRESHOLDS, METRICS, Resampler, threshold_values
 from egonet.metrics.bootstrap import MAX_RESAMPLES
 

@@ -18,7 +18,7 @@ from typing import Any
 
 from sqlalchemy import func, update
 
-from app import MAX_ID
+from app.limits import MAX_ID
 from app.extensions import db
 from app.models import Activity, Frame, User
 from app.models.studies import ActivityOrder, FrameKind, Participant, Study, StudyCondition, StudyFrame, StudyStatus

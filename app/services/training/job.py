@@ -25,7 +25,7 @@ from app.models import User, utcnow
 from app.models.training import FINAL_STATUSES, Checkpoint, Prediction, RunStatus, TrainingRun
 from app.services import ground_truth, media
 from app.services.training.control import RunRequest, TrainingProblem, cancel_run, checkpoint_root, create_run
-from app.services.training.frames import FoldScorer
+from app.services.training.predictions import FoldScorer
 from app.services.training.history import record_epochs
 from egonet import io
 
