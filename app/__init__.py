@@ -17,12 +17,8 @@ import threadpoolctl
 from flask import Flask
 from werkzeug.routing import IntegerConverter
 
-# Ids are at most this (SQL INTEGER, the id columns' type; PostgreSQL refuses
-# to compare them with anything larger): larger path ids match no route (404),
-# larger ids in bodies and queries are a 400 (app.validation).
-MAX_ID = 2**31 - 1
-SECRET_KEY_FILE = "secret_key"
-MIN_SECRET_KEY_LENGTH = 32
+from app.limits import MAX_ID, MIN_SECRET_KEY_LENGTH, SECRET_KEY_FILE
+
 
 
 def digits_up_to(limit: int) -> str:

@@ -24,6 +24,7 @@ from flask import Flask, Response, current_app, redirect, request, url_for
 from flask_login import current_user
 
 from app.errors import error_response, wants_json
+from app.limits import MIN_SECRET_KEY_LENGTH
 from app.models import Role
 
 STAFF = frozenset({Role.ADMIN, Role.ANNOTATOR, Role.REVIEWER})
@@ -126,8 +127,6 @@ def register(app: Flask) -> None:
 
 def require_production_safety(app: Flask) -> None:
     """In production: refuse a short secret key, send cookies over HTTPS only."""
-    from app import MIN_SECRET_KEY_LENGTH
-
     if app.config.get("PRODUCTION"):
         if len(app.config.get("SECRET_KEY") or "") < MIN_SECRET_KEY_LENGTH:
             raise RuntimeError(

@@ -6,7 +6,7 @@ whose ``fields`` name every bad field (``"clicks[2].x": "must be >= 0"``).
 Unknown fields are refused, so a misspelt option never does nothing.
 
 Integers fit a SQL INTEGER column unless a field says otherwise, so an id
-past ``app.MAX_ID`` is a 400, not a database error.
+past ``app.limits.MAX_ID`` is a 400, not a database error.
 
 Example::
 
@@ -21,15 +21,15 @@ from typing import Any
 
 from flask import request
 
-from app import MAX_ID
+from app.limits import MAX_ID
 from app.errors import Problem
 
 MISSING = object()
 
 
-class Invalid(Exception):
-    def __init__(self, reason: str):
-        self.reason = reason
+class Invalid(Problem):
+    """A value that does not fit its field, said in a few words (``must be >= 0``):
+    whoever checks the value names the field."""
 
 
 @dataclass(kw_only=True)
@@ -138,7 +138,7 @@ def _parse(spec: Field, value: Any, path: str, errors: dict[str, str]) -> Any:
     try:
         value = spec.check(value)
     except Invalid as exc:
-        errors[path] = exc.reason
+        errors[path] = exc.message
         return None
     if isinstance(spec, List):
         return [_parse(spec.item, v, f"{path}[{i}]", errors) for i, v in enumerate(value)]
@@ -189,7 +189,7 @@ def query_int(name: str, *, min: int | None = 1, max: int | None = MAX_ID) -> in
     except ValueError:
         raise Problem(f"{name}: must be an integer", fields={name: "must be an integer"}) from None
     except Invalid as exc:
-        raise Problem(f"{name}: {exc.reason}", fields={name: exc.reason}) from None
+        raise Problem(f"{name}: {exc.message}", fields={name: exc.message}) from None
 
 
 def json_body(schema: dict[str, Field]) -> dict:

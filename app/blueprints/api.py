@@ -1,9 +1,10 @@
 """Read-only JSON views of the dataset (the labelling and study APIs build on
 these), and a fresh CSRF token for pages whose token went stale."""
 
-from flask import Blueprint, jsonify, url_for
+from flask import Blueprint, jsonify
 from flask_wtf.csrf import generate_csrf
 
+from app.blueprints.frames import media_urls
 from app.extensions import db
 from app.models import Activity, Frame, Sequence
 from app.security import public
@@ -25,9 +26,7 @@ def frame_json(frame: Frame, status) -> dict:
         "content_hash": frame.content_hash,
         "intrinsics": frame.intrinsics,
         "status": status.value,
-        "rgb_url": url_for("frames.media_file", name=frame.rgb_path),
-        "depth_url": url_for("frames.depth", frame_id=frame.id) if frame.depth_path else None,
-        "dhg_url": url_for("frames.media_file", name=frame.dhg_path) if frame.dhg_path else None,
+        **media_urls(frame),
         "meta": frames_service.shown_meta(frame),  # without the demo renderer's truth
     }
 

@@ -12,6 +12,15 @@ from app.services import training as training_service
 bp = Blueprint("frames", __name__)
 
 
+def media_urls(frame: Frame) -> dict[str, str | None]:
+    """Where a page loads the frame's RGB, depth and DHG images (None: the frame has none)."""
+    return {
+        "rgb_url": url_for("frames.media_file", name=frame.rgb_path),
+        "depth_url": url_for("frames.depth", frame_id=frame.id) if frame.depth_path else None,
+        "dhg_url": url_for("frames.media_file", name=frame.dhg_path) if frame.dhg_path else None,
+    }
+
+
 @bp.get("/")
 def index():
     return render_template("frames/index.html", summaries=frames_service.activity_summaries())

@@ -20,6 +20,7 @@ from flask import Blueprint, Response, current_app, flash, redirect, render_temp
 from flask_login import current_user
 
 from app.blueprints import exports
+from app.blueprints.frames import media_urls
 from app.errors import Problem
 from app.extensions import db
 from app.models import Annotation, Frame, InstanceKind, Role, Status
@@ -112,14 +113,7 @@ def page_config(frame: Frame, *, mode: str, annotation: Annotation | None = None
     config = {
         "mode": mode,
         "history_max_bytes": labelling.MAX_HISTORY_BYTES,
-        "frame": {
-            "id": frame.id,
-            "width": frame.width,
-            "height": frame.height,
-            "rgb_url": url_for("frames.media_file", name=frame.rgb_path),
-            "depth_url": url_for("frames.depth", frame_id=frame.id) if frame.depth_path else None,
-            "dhg_url": url_for("frames.media_file", name=frame.dhg_path) if frame.dhg_path else None,
-        },
+        "frame": {"id": frame.id, "width": frame.width, "height": frame.height, **media_urls(frame)},
         "urls": {
             "grabcut": {
                 "box": url_for("label.grabcut_box"),

@@ -1,58 +1,9 @@
 """The ``flask egonet`` command group: thin wrappers over the services.
 
 Each area adds its commands in its own module (data.py, training.py, ...),
-all on the one group below. A ``Problem`` or ``EgonetError`` raised by a
-command exits non-zero with a one-line reason (click's "Error: ...").
+all on the one group of ``app.cli.group``. A ``Problem`` or ``EgonetError``
+raised by a command exits non-zero with a one-line reason (click's "Error: ...").
 """
 
-import contextlib
-
-import click
-from flask import Blueprint
-from flask.cli import AppGroup
-
-from app.errors import Problem
-from egonet.errors import EgonetError
-
-
-class EgonetGroup(AppGroup):
-    """The command group; its one handler prints a ``Problem`` or ``EgonetError`` as one line."""
-
-    def invoke(self, ctx: click.Context):
-        try:
-            return super().invoke(ctx)
-        except (Problem, EgonetError) as exc:
-            raise click.ClickException(str(exc)) from None
-
-
-bp = Blueprint("egonet_cli", __name__, cli_group="egonet")
-bp.cli = EgonetGroup()
-
-
-@contextlib.contextmanager
-def progress_bar(label: str, *, file=None):
-    """Yield (on_start, on_progress) callbacks that drive a click progress bar.
-
-    ``file`` defaults to stdout; commands whose stdout is data (CSV, JSON)
-    pass ``sys.stderr``.
-    """
-    state: dict = {}
-
-    def on_start(total: int) -> None:
-        state["bar"] = click.progressbar(length=total, label=label, show_eta=True, show_pos=True, file=file)
-        state["bar"].__enter__()
-
-    def on_progress(n: int) -> None:
-        if "bar" not in state:
-            on_start(0)
-        state["bar"].update(n)
-
-    try:
-        yield on_start, on_progress
-    finally:
-        if "bar" in state:
-            state["bar"].__exit__(None, None, None)
-
-
-# Register the commands of every area on the group.
-from app.cli import data, labelling, scoring, studies, training, users  # noqa: E402, F401
+from app.cli import data, labelling, scoring, studies, training, users  # noqa: F401  (they register their commands)
+from app.cli.group import bp  # noqa: F401

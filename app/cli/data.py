@@ -4,7 +4,7 @@ from pathlib import Path
 
 import click
 
-from app.cli import bp, progress_bar
+from app.cli.group import bp, progress_bar
 from app.models import Role, Status
 
 

@@ -4,7 +4,7 @@ import sys
 
 import click
 
-from app.cli import bp, progress_bar
+from app.cli.group import bp, progress_bar
 
 FORMATS = {"table": "to_table", "csv": "to_csv", "latex": "to_latex", "json": "to_json"}
 METRICS = ("pooled", "per-image", "ods-ois")

@@ -5,7 +5,7 @@ from pathlib import Path
 
 import click
 
-from app.cli import bp, progress_bar
+from app.cli.group import bp, progress_bar
 
 MAX_DEFINITION_BYTES = 1024 * 1024
 

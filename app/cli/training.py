@@ -5,7 +5,7 @@ from pathlib import Path
 
 import click
 
-from app.cli import bp, progress_bar
+from app.cli.group import bp, progress_bar
 from app.queue import current_huey, enqueue, run_worker
 
 

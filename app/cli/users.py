@@ -9,7 +9,7 @@ import sys
 
 import click
 
-from app.cli import bp
+from app.cli.group import bp
 from app.models import Role, User
 from app.services import users
 

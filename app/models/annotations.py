@@ -5,10 +5,10 @@ import enum
 import uuid
 from datetime import datetime
 
-from sqlalchemy import Enum, Float, ForeignKey, LargeBinary, String, Text, UniqueConstraint
+from sqlalchemy import Float, ForeignKey, LargeBinary, String, Text, UniqueConstraint
 from sqlalchemy.orm import Mapped, mapped_column, relationship
 
-from app.models.base import Base, UTCDateTime, utcnow
+from app.models.base import Base, UTCDateTime, enum_type, utcnow
 from app.models.frames import Frame
 from app.models.users import User
 
@@ -29,10 +29,6 @@ FINISHED = (Status.DONE, Status.REVIEWED)
 class InstanceKind(enum.StrEnum):
     TACTILE = "tactile"
     VISUAL = "visual"
-
-
-def _enum(cls):
-    return Enum(cls, native_enum=False, length=20, values_callable=lambda e: [m.value for m in e])
 
 
 class Annotation(Base):
@@ -56,7 +52,7 @@ class Annotation(Base):
     id: Mapped[int] = mapped_column(primary_key=True)
     frame_id: Mapped[int] = mapped_column(ForeignKey("frame.id", ondelete="CASCADE"), index=True)
     author_id: Mapped[int] = mapped_column(ForeignKey("user.id"), index=True)
-    status: Mapped[Status] = mapped_column(_enum(Status), default=Status.TODO, index=True)
+    status: Mapped[Status] = mapped_column(enum_type(Status), default=Status.TODO, index=True)
     mask_path: Mapped[str | None] = mapped_column(String(200), info={"media": True})
     no_action_object: Mapped[bool] = mapped_column(default=False)
     version: Mapped[int] = mapped_column(default=1)
@@ -101,7 +97,7 @@ class Instance(Base):
     id: Mapped[int] = mapped_column(primary_key=True)
     annotation_id: Mapped[int] = mapped_column(ForeignKey("annotation.id", ondelete="CASCADE"), index=True)
     position: Mapped[int]
-    kind: Mapped[InstanceKind | None] = mapped_column(_enum(InstanceKind))
+    kind: Mapped[InstanceKind | None] = mapped_column(enum_type(InstanceKind))
     label: Mapped[str | None] = mapped_column(String(120))
     mask_path: Mapped[str] = mapped_column(String(200), info={"media": True})
     # A stable name the labelling page gives the instance: positions shift

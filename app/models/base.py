@@ -4,9 +4,10 @@ The naming convention gives every constraint a stable name, so Alembic can
 alter tables on SQLite (batch mode) and PostgreSQL alike.
 """
 
+import enum
 from datetime import UTC, datetime
 
-from sqlalchemy import DateTime, MetaData
+from sqlalchemy import DateTime, Enum, MetaData
 from sqlalchemy.orm import DeclarativeBase
 from sqlalchemy.types import TypeDecorator
 
@@ -21,6 +22,11 @@ NAMING_CONVENTION = {
 
 def utcnow() -> datetime:
     return datetime.now(UTC)
+
+
+def enum_type(cls: type[enum.Enum]) -> Enum:
+    """An enum column's type: its members' values as strings of up to 20 characters (no database enum type)."""
+    return Enum(cls, native_enum=False, length=20, values_callable=lambda e: [m.value for m in e])
 
 
 class UTCDateTime(TypeDecorator):

@@ -4,10 +4,10 @@ import enum
 from datetime import datetime
 from typing import Any
 
-from sqlalchemy import JSON, BigInteger, Enum, ForeignKey, String, Text
+from sqlalchemy import JSON, BigInteger, ForeignKey, String, Text
 from sqlalchemy.orm import Mapped, mapped_column, relationship
 
-from app.models.base import Base, UTCDateTime, utcnow
+from app.models.base import Base, UTCDateTime, enum_type, utcnow
 from app.models.users import User
 
 
@@ -30,7 +30,7 @@ class ExportJob(Base):
     id: Mapped[int] = mapped_column(primary_key=True)
     requested_by_id: Mapped[int | None] = mapped_column(ForeignKey("user.id"), index=True)
     status: Mapped[ExportStatus] = mapped_column(
-        Enum(ExportStatus, native_enum=False, length=20, values_callable=lambda e: [m.value for m in e]),
+        enum_type(ExportStatus),
         default=ExportStatus.QUEUED,
         index=True,
     )

@@ -15,16 +15,12 @@ import enum
 from datetime import datetime
 from typing import Any
 
-from sqlalchemy import JSON, Enum, Float, ForeignKey, String, Text, UniqueConstraint
+from sqlalchemy import JSON, Float, ForeignKey, String, Text, UniqueConstraint
 from sqlalchemy.orm import Mapped, mapped_column, relationship
 
-from app.models.base import Base, UTCDateTime, utcnow
+from app.models.base import Base, UTCDateTime, enum_type, utcnow
 from app.models.frames import Frame
 from app.models.users import User
-
-
-def _enum(cls):
-    return Enum(cls, native_enum=False, length=20, values_callable=lambda e: [m.value for m in e])
 
 
 class EntryKind(enum.StrEnum):
@@ -113,10 +109,10 @@ class Study(Base):
     superpixels: Mapped[dict[str, Any]] = mapped_column(JSON, default=dict)
     instructions: Mapped[str] = mapped_column(Text, default="")
     consent: Mapped[str] = mapped_column(Text, default="")
-    status: Mapped[StudyStatus] = mapped_column(_enum(StudyStatus), default=StudyStatus.OPEN)
+    status: Mapped[StudyStatus] = mapped_column(enum_type(StudyStatus), default=StudyStatus.OPEN)
     version: Mapped[int] = mapped_column(default=1)
     sigma_scaled: Mapped[bool] = mapped_column(default=False)
-    activity_order: Mapped[ActivityOrder] = mapped_column(_enum(ActivityOrder), default=ActivityOrder.SHUFFLED)
+    activity_order: Mapped[ActivityOrder] = mapped_column(enum_type(ActivityOrder), default=ActivityOrder.SHUFFLED)
     open_link_token: Mapped[str | None] = mapped_column(String(64), unique=True)
     cap: Mapped[int | None]
     arrivals: Mapped[int] = mapped_column(default=0)
@@ -181,7 +177,7 @@ class StudyFrame(Base):
     # No cascade: a frame that a study used cannot disappear under its results.
     frame_id: Mapped[int] = mapped_column(ForeignKey("frame.id"), index=True)
     position: Mapped[int]
-    kind: Mapped[FrameKind] = mapped_column(_enum(FrameKind), default=FrameKind.MAIN)
+    kind: Mapped[FrameKind] = mapped_column(enum_type(FrameKind), default=FrameKind.MAIN)
     catch_position: Mapped[int | None]
     region: Mapped[dict[str, Any] | None] = mapped_column(JSON)
 
@@ -210,7 +206,7 @@ class Participant(Base):
     study_id: Mapped[int] = mapped_column(ForeignKey("study.id", ondelete="CASCADE"), index=True)
     user_id: Mapped[int] = mapped_column(ForeignKey("user.id"), unique=True)
     number: Mapped[int]
-    entry: Mapped[EntryKind] = mapped_column(_enum(EntryKind))
+    entry: Mapped[EntryKind] = mapped_column(enum_type(EntryKind))
     code: Mapped[str] = mapped_column(String(16), unique=True)
     link_token: Mapped[str | None] = mapped_column(String(64), unique=True)
     link_used_at: Mapped[datetime | None] = mapped_column(UTCDateTime())
@@ -219,7 +215,7 @@ class Participant(Base):
     started_at: Mapped[datetime | None] = mapped_column(UTCDateTime())
     deadline: Mapped[datetime | None] = mapped_column(UTCDateTime())
     finished_at: Mapped[datetime | None] = mapped_column(UTCDateTime())
-    end_reason: Mapped[EndReason | None] = mapped_column(_enum(EndReason))
+    end_reason: Mapped[EndReason | None] = mapped_column(enum_type(EndReason))
     created_at: Mapped[datetime] = mapped_column(UTCDateTime(), default=utcnow)
     condition_id: Mapped[int | None] = mapped_column(ForeignKey("study_condition.id", ondelete="SET NULL"), index=True)
     external_id: Mapped[str | None] = mapped_column(String(64))
@@ -263,7 +259,7 @@ class Trial(Base):
     position: Mapped[int]
     shown_at: Mapped[datetime | None] = mapped_column(UTCDateTime())
     submitted_at: Mapped[datetime | None] = mapped_column(UTCDateTime())
-    outcome: Mapped[Outcome | None] = mapped_column(_enum(Outcome))
+    outcome: Mapped[Outcome | None] = mapped_column(enum_type(Outcome))
     rt_ms: Mapped[float | None] = mapped_column(Float)
     window_width: Mapped[int | None]
     window_height: Mapped[int | None]
@@ -321,7 +317,7 @@ class TrialEvent(Base):
     id: Mapped[int] = mapped_column(primary_key=True)
     trial_id: Mapped[int] = mapped_column(ForeignKey("study_trial.id", ondelete="CASCADE"), index=True)
     position: Mapped[int]
-    kind: Mapped[EventKind] = mapped_column(_enum(EventKind))
+    kind: Mapped[EventKind] = mapped_column(enum_type(EventKind))
     client_ms: Mapped[float | None] = mapped_column(Float)
     server_at: Mapped[datetime] = mapped_column(UTCDateTime())
     detail: Mapped[dict[str, Any]] = mapped_column(JSON, default=dict)

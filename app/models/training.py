@@ -27,16 +27,12 @@ import enum
 from datetime import datetime
 from typing import Any
 
-from sqlalchemy import JSON, Enum, Float, ForeignKey, String, Text, UniqueConstraint
+from sqlalchemy import JSON, Float, ForeignKey, String, Text, UniqueConstraint
 from sqlalchemy.orm import Mapped, mapped_column, relationship
 
-from app.models.base import Base, UTCDateTime, utcnow
+from app.models.base import Base, UTCDateTime, enum_type, utcnow
 from app.models.frames import Frame
 from app.models.users import User
-
-
-def _enum(cls):
-    return Enum(cls, native_enum=False, length=20, values_callable=lambda e: [m.value for m in e])
 
 
 class RunStatus(enum.StrEnum):
@@ -64,12 +60,12 @@ class TrainingRun(Base):
     name: Mapped[str] = mapped_column(String(200))
     model_name: Mapped[str] = mapped_column(String(40))
     model_options: Mapped[dict[str, Any]] = mapped_column(JSON, default=dict)
-    folds: Mapped[FoldsMode] = mapped_column(_enum(FoldsMode))
+    folds: Mapped[FoldsMode] = mapped_column(enum_type(FoldsMode))
     epochs: Mapped[int]
     device: Mapped[str] = mapped_column(String(10))
     seed: Mapped[int]
     config: Mapped[dict[str, Any]] = mapped_column(JSON, default=dict)
-    status: Mapped[RunStatus] = mapped_column(_enum(RunStatus), default=RunStatus.QUEUED, index=True)
+    status: Mapped[RunStatus] = mapped_column(enum_type(RunStatus), default=RunStatus.QUEUED, index=True)
     progress: Mapped[float] = mapped_column(Float, default=0.0)
     loss: Mapped[float | None] = mapped_column(Float)
     eta_s: Mapped[float | None] = mapped_column(Float)

@@ -84,7 +84,7 @@ function wire() {
   $("#redo").addEventListener("click", redo);
   $("#add-instance").addEventListener("click", newObject);
   wireDisplay();
-  wireInstances();
+  wireInstances({ save: () => autosaver.changed() });
   wireSaving({ refresh });
   wireLock();
   wirePropagate();

@@ -1,13 +1,15 @@
 // The labelling page's list of action-objects: adding, selecting, showing
 // or hiding (on the canvas only; not saved) and deleting them, their kind
 // and name, the "no action-object" flag, and commit(), which records an
-// edit in the undo history and lets autosave send it.
+// edit in the undo history and lets autosave send it (the entry module
+// hands wireInstances autosave's changed()).
 
 import { updateControls } from "./label_panel.js";
-import { autosaver } from "./label_save.js";
 import { $, N, doc, editable, instance, makeInstance, record, ui } from "./label_state.js";
 import { renderOverlay } from "./label_view.js";
 import { countSet } from "./raster.js";
+
+let saveEdit = () => {}; // set by wireInstances
 
 // Redraw everything that shows the document.
 export function refresh() {
@@ -19,7 +21,7 @@ export function refresh() {
 // The document changed (restored from the history, say): show it and save it.
 export function edited() {
   refresh();
-  autosaver.changed();
+  saveEdit();
 }
 
 // Record the edit just made (undoable) and let autosave send it.
@@ -79,7 +81,8 @@ function setNoActionObject(event) {
   commit();
 }
 
-export function wireInstances() {
+export function wireInstances({ save }) {
+  saveEdit = save;
   $("#no-ao").addEventListener("change", setNoActionObject);
 }
 

@@ -15,28 +15,10 @@ import { applyMeta, autosaver, loadAnnotation } from "./label_save.js";
 import { postAcceptProposal, postSuggest } from "./label_server.js";
 import { $, H, W, doc, meta, recordReplaced, snapshot } from "./label_state.js";
 import { draw, painters } from "./label_view.js";
+import { boundingBox } from "./raster.js";
 
 const proposals = new Map(); // instance key -> the run that proposed it, as the server last said
 const boxes = new Map(); // instance key -> [x0, y0, x1, y1) of its mask, as last drawn in the list
-
-// A proposal's mask's box, or null when it is empty.
-function maskBox(mask) {
-  let x0 = W;
-  let y0 = H;
-  let x1 = -1;
-  let y1 = -1;
-  for (let y = 0; y < H; y++) {
-    const row = y * W;
-    for (let x = 0; x < W; x++) {
-      if (!mask[row + x]) continue;
-      if (x < x0) x0 = x;
-      if (x > x1) x1 = x;
-      if (y < y0) y0 = y;
-      y1 = y;
-    }
-  }
-  return x1 < 0 ? null : [x0, y0, x1 + 1, y1 + 1];
-}
 
 // Ask the run for proposals; the saved result replaces the page's document.
 export async function suggest(refresh) {
@@ -100,7 +82,7 @@ function decorate() {
     const run = proposals.get(key);
     if (run === undefined) continue;
     const inst = doc.instances.find((i) => i.key === key);
-    const box = inst && maskBox(inst.mask);
+    const box = inst && boundingBox(inst.mask, W, H);
     if (box) boxes.set(key, box);
     li.classList.add("proposed");
     const row = document.createElement("div");

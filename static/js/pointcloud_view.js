@@ -3,9 +3,8 @@
 // (camera coordinates, metres: x right, y down, z forward), N x 4 uint8 (r, g, b, flags).
 
 export const MAGIC = "EGP1";
-export const FLAG_TRUTH = 1;
-export const FLAG_PREDICTED = 2;
-// As egonet.pointcloud.MARK_COLORS / MARK_ALPHA: labelled green, predicted red, both yellow.
+// As egonet.pointcloud.MARK_COLORS / MARK_ALPHA, by the flags' bits (1 labelled, 2 predicted):
+// labelled green, predicted red, both yellow.
 export const MARKS = { 1: [40, 220, 60], 2: [230, 40, 40], 3: [250, 220, 30] };
 export const MARK_ALPHA = 0.65;
 export const MIN_DISTANCE = 0.05;

@@ -14,7 +14,7 @@ import time
 import numpy as np
 import pytest
 
-from app import MAX_ID
+from app.limits import MAX_ID
 from app.errors import Problem
 from app.extensions import db
 from app.models.annotations import GrabCutState

@@ -11,7 +11,8 @@ import stat
 
 from flask.sessions import SecureCookieSessionInterface
 
-from app import SECRET_KEY_FILE, create_app
+from app import create_app
+from app.limits import SECRET_KEY_FILE
 
 
 def forged_session_cookie(app, secret_key: str, session: dict) -> str:

@@ -362,7 +362,7 @@ def hand_made_run(*, status=RunStatus.DONE, name="hand made", tags=(), folds=("c
 def test_per_frame_scores_by_hand():
     from egonet.metrics import count_stats
 
-    from app.services.training.frames import scores_at
+    from app.services.training.predictions import scores_at
 
     prob = np.array([[0.9, 0.4], [0.2, 0.0]], np.float32)
     truth = np.array([[True, True], [False, False]])

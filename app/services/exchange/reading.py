@@ -299,7 +299,7 @@ def _decode_segmentation(segmentation: object, frame: Frame, where: str) -> np.n
     try:
         return decode_rle(Rle().check(segmentation), (h, w), field="segmentation")
     except Invalid as exc:
-        raise ExchangeProblem(f"{where}: segmentation: {exc.reason}") from None
+        raise ExchangeProblem(f"{where}: segmentation: {exc.message}") from None
     except Problem as exc:
         raise ExchangeProblem(f"{where}: {exc.message}") from None
 

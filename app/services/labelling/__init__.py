@@ -11,7 +11,8 @@ the server-side GrabCut sessions that help draw it; import it from here.
     * ``masks``: masks as COCO RLE and PNG, checked before they are decoded;
     * ``propagation``: carrying an annotation to the next / from the previous
       frame of its sequence, and the sequence's filmstrip;
-    * ``suggest``: a trained run's proposals ("Suggest"), accepting them, batches.
+    * ``suggest``: a trained run's proposals ("Suggest"), accepting them, batches;
+    * ``regions``: the regions of a probability map that Suggest proposes.
 """
 
 from app.services.labelling.annotations import (
@@ -57,7 +58,6 @@ from app.services.labelling.suggest import (
     Suggestion,
     SuggestProblem,
     accept_proposal,
-    proposal_regions,
     queue_suggestions,
     resolve_run,
     suggest_frame,
@@ -65,6 +65,7 @@ from app.services.labelling.suggest import (
     suggest_from_page,
     suggestion_runs,
 )
+from app.services.labelling.regions import proposal_regions
 from app.services.labelling.presence import HEARTBEAT_S, PRESENCE_TTL_S, leave, mark_present, others_on
 from app.services.labelling.review import (
     INSTANCE_COLOURS,

@@ -8,13 +8,11 @@ checkpoint's stored prediction of the frame, or predicts it with
 ``egonet.predictor.NetworkPredictor`` (through ``training.predict``, which
 stores it for the viewer too), thresholds the map at the fold's best-F
 threshold (``Checkpoint.metrics["threshold"]``, 0.5 when none is stored),
-and turns each connected region above it into an instance: regions smaller
-than ``MIN_AREA_FRACTION`` of the frame are specks and dropped, regions
-over ``MAX_AREA_FRACTION`` mean the map is not selective there and are
-dropped too. Each region is refined by GrabCut through the user's own
-GrabCut session for the new instance, started from the region's mask
-(``GrabCutSession.seed_mask``): its edge may move by ``REFINE_BAND`` of the
-region's size, so it snaps to the object's edge without straying onto a
+and turns each connected region above it into an instance (``regions``).
+Each region is refined by GrabCut through the user's own GrabCut session
+for the new instance, started from the region's mask
+(``GrabCutSession.seed_mask``): its edge may move by ``regions.REFINE_BAND``
+of the region's size, so it snaps to the object's edge without straying onto a
 background of the object's colour, and the annotator can go on correcting
 it with strokes; the session passes the frame's depth when the GrabCut
 service does.
@@ -41,7 +39,6 @@ import time
 from collections.abc import Callable, Iterable
 from dataclasses import dataclass, field
 
-import cv2
 import numpy as np
 from sqlalchemy.orm.exc import StaleDataError
 
@@ -61,23 +58,12 @@ from app.services.labelling.annotations import (
     user_annotation,
 )
 from app.services.labelling.grabcut import grabcut_seed
+from app.services.labelling.regions import Region, iou, proposal_regions
 from app.services.labelling.review import _unlabelled_for
 from egonet import io as egonet_io
 
-MIN_AREA_FRACTION = 0.002
-"""Regions smaller than this share of the frame are specks, not proposals (154 px at 320x240)."""
-MAX_AREA_FRACTION = 0.5
-"""A region over half the frame says the map is above the threshold nearly everywhere: no proposal."""
-MAX_PROPOSALS = 5
-"""At most this many regions per frame, the most probable first (sum of probability over the region)."""
 DEFAULT_THRESHOLD = 0.5
 """When a checkpoint stores no best-F threshold."""
-REFINE_BAND = 0.06
-"""GrabCut may move a region's edge at least by this share of its long side (and MIN_REFINE_BAND_PX),
-further where the map blurs it (``_band``), at most by MAX_REFINE_BAND of it: the map is
-blurry at its low resolution, so its edge is near the object's, not on it."""
-MIN_REFINE_BAND_PX = 3
-MAX_REFINE_BAND = 0.25
 SAME_OBJECT_IOU = 0.5
 """A proposal overlapping an instance the annotator drew this much is that object again: left out."""
 FAST_MODELS = ("egonet-lite",)
@@ -86,25 +72,6 @@ FAST_MODELS = ("egonet-lite",)
 
 class SuggestProblem(Problem):
     """A suggestion that cannot be made; ``field`` names the bad input."""
-
-
-@dataclass
-class Region:
-    """A connected region of the thresholded map: a proposal before GrabCut.
-
-    Attributes:
-        mask: bool ``(H, W)``.
-        box: The region's box ``(x0, y0, x1, y1)`` (x1, y1 exclusive).
-        band: How far GrabCut may move its edge, pixels (``REFINE_BAND``).
-        area: Pixels in the region.
-        mass: Sum of the probability over the region (how the regions are ranked).
-    """
-
-    mask: np.ndarray
-    box: tuple[int, int, int, int]
-    band: float
-    area: int
-    mass: float
 
 
 @dataclass
@@ -295,103 +262,6 @@ def frame_probability(checkpoint: Checkpoint, frame: Frame, *, device: str = "au
 
 
 # --------------------------------------------------------------------------
-# From a probability map to regions
-
-
-def proposal_regions(
-    probability: np.ndarray,
-    threshold: float,
-    *,
-    min_area_fraction: float = MIN_AREA_FRACTION,
-    max_area_fraction: float = MAX_AREA_FRACTION,
-    limit: int = MAX_PROPOSALS,
-) -> tuple[list[Region], list[str]]:
-    """The connected regions of ``probability >= threshold`` worth proposing.
-
-    Args:
-        probability: float ``(H, W)`` in [0, 1].
-        threshold: Pixels at or above it are the object's.
-        min_area_fraction: Smaller regions (a share of the frame) are dropped as specks.
-        max_area_fraction: Larger regions are dropped: the map is not selective there.
-        limit: At most this many, the largest probability mass first.
-
-    Returns:
-        ``(regions, notes)``: the regions, most probable first, and what was
-        dropped, in words.
-
-    Example:
-        >>> p = np.zeros((40, 60), np.float32); p[10:20, 10:30] = 0.9
-        >>> regions, notes = proposal_regions(p, 0.5)
-        >>> [(r.area, r.box, r.band) for r in regions], notes
-        ([(200, (10, 10, 30, 20), 3.0)], [])
-    """
-    h, w = probability.shape
-    binary = (probability >= threshold).astype(np.uint8)
-    count, labels, stats, _ = cv2.connectedComponentsWithStats(binary, connectivity=8)
-    min_area = max(1, int(np.ceil(min_area_fraction * h * w)))
-    regions, specks, too_large = [], 0, 0
-    for label in range(1, count):
-        area = int(stats[label, cv2.CC_STAT_AREA])
-        if area < min_area:
-            specks += 1
-            continue
-        if area > max_area_fraction * h * w:
-            too_large += 1
-            continue
-        mask = labels == label
-        regions.append(_region(mask, probability, stats[label], area))
-    regions.sort(key=lambda r: -r.mass)
-    notes = []
-    if specks:
-        notes.append(f"{specks} speck{'' if specks == 1 else 's'} under {min_area} px dropped")
-    if too_large:
-        notes.append(f"{too_large} region{'' if too_large == 1 else 's'} over {max_area_fraction:.0%} of the frame "
-                     "dropped (the map is above the threshold almost everywhere)")
-    if len(regions) > limit:
-        notes.append(f"{len(regions) - limit} less probable region{'' if len(regions) - limit == 1 else 's'} left out")
-        regions = regions[:limit]
-    return regions, notes
-
-
-def _region(mask: np.ndarray, probability: np.ndarray, stat: np.ndarray, area: int) -> Region:
-    x, y, bw, bh = (int(v) for v in stat[:4])
-    return Region(
-        mask=mask,
-        box=(x, y, x + bw, y + bh),
-        band=_band(mask, probability, max(bw, bh)),
-        area=area,
-        mass=float(probability[mask].sum()),
-    )
-
-
-def _band(mask: np.ndarray, probability: np.ndarray, size: int) -> float:
-    """How far GrabCut may move a region's edge: about as far as the map blurs it.
-
-    The map's rise across the edge (the region's mean probability less that
-    of a ring around it) over its slope on the edge is the width of the
-    blur: a map at 1/8 of the frame's size blurs an edge over several of
-    the frame's pixels, a sharp one over one or two. At least
-    ``REFINE_BAND`` of the region's long side (and ``MIN_REFINE_BAND_PX``),
-    at most ``MAX_REFINE_BAND`` of it.
-    """
-    u8 = mask.view(np.uint8)
-    edge = cv2.morphologyEx(u8, cv2.MORPH_GRADIENT, np.ones((3, 3), np.uint8)).view(bool)
-    reach = max(3, round(MAX_REFINE_BAND * size))
-    ring = cv2.dilate(u8, cv2.getStructuringElement(cv2.MORPH_ELLIPSE, (2 * reach + 1, 2 * reach + 1))).view(bool) & ~mask
-    p = probability.astype(np.float32)
-    # Sobel's 3x3 weights sum to 8 across a unit ramp: slope per pixel.
-    slope = np.hypot(cv2.Sobel(p, cv2.CV_32F, 1, 0), cv2.Sobel(p, cv2.CV_32F, 0, 1))[edge].mean() / 8
-    rise = float(p[mask].mean() - (p[ring].mean() if ring.any() else 0.0))
-    width = rise / slope if slope > 0 else 0.0
-    return float(min(max(width, REFINE_BAND * size, MIN_REFINE_BAND_PX), MAX_REFINE_BAND * size))
-
-
-def _iou(a: np.ndarray, b: np.ndarray) -> float:
-    union = np.logical_or(a, b).sum()
-    return float(np.logical_and(a, b).sum() / union) if union else 0.0
-
-
-# --------------------------------------------------------------------------
 # Suggesting
 
 
@@ -441,7 +311,7 @@ def suggest_frame(
     for region in regions:
         key = f"s{secrets.token_hex(6)}"
         mask = _refine(frame, user, key, region, result.notes)
-        if any(_iou(mask, s.mask) >= SAME_OBJECT_IOU for s in kept):
+        if any(iou(mask, s.mask) >= SAME_OBJECT_IOU for s in kept):
             repeated += 1
             _forget(frame, user, [key])
             continue

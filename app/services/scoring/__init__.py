@@ -44,8 +44,9 @@ The package, one module per concern:
 * ``sources``: ground truth and each source's per-frame counts;
 * ``cache``: the per-frame counts on disk;
 * ``rows``: frames per row (shared or each), seed groups, intervals, paired comparisons;
-* ``table``: :class:`Report`, its rows and cells, a :class:`Comparison`;
-* ``formats``: the report as text, CSV, LaTeX or JSON;
+* ``cells``: the table's labels, cells, curves, rows and paired differences;
+* ``table``: :class:`Report` and a :class:`Comparison`;
+* ``formats``: their renderers (text, CSV, LaTeX, JSON), mixins of the two;
 * ``plots``: :func:`pr_plot` (the page's SVG) and :func:`pr_figure` (SVG/PDF files);
 * ``perframe``: :func:`frame_table`, per-image scores of one activity.
 """
@@ -54,7 +55,7 @@ from app.services.scoring.perframe import FrameTable, frame_table
 from app.services.scoring.plots import PLOT_MARGIN, Plot, PlotLine, default_plot_rows, pr_figure, pr_plot
 from app.services.scoring.report import available_runs, available_studies, build_report, load_sources
 from app.services.scoring.rows import ScoringProblem
-from app.services.scoring.table import (
+from app.services.scoring.cells import (
     ALL,
     FRAMES,
     MEAN,
@@ -62,13 +63,12 @@ from app.services.scoring.table import (
     METRIC_TITLES,
     STATISTIC_LABELS,
     Cell,
-    Comparison,
     Curve,
     Difference,
-    Report,
     Row,
     definition,
 )
+from app.services.scoring.table import Comparison, Report
 
 __all__ = [
     "ALL",

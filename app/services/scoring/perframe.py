@@ -23,7 +23,7 @@ from app.models import Frame
 from app.models import Sequence as FrameSequence
 from app.services.scoring.report import load_sources
 from app.services.scoring.rows import ScoringProblem
-from app.services.scoring.table import HUMAN
+from app.services.scoring.cells import HUMAN
 from egonet.metrics import DEFAULT_THRESHOLDS, frame_scores, threshold_values
 
 

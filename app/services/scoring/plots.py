@@ -14,7 +14,8 @@ import io
 from collections.abc import Collection
 from dataclasses import dataclass
 
-from app.services.scoring.table import ALL, HUMAN, Report, Row
+from app.services.scoring.cells import ALL, HUMAN, Row
+from app.services.scoring.table import Report
 from egonet.metrics import iso_f_curve, threshold_values
 
 MAX_SHOWN_PEOPLE = 3

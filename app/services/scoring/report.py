@@ -32,7 +32,8 @@ from app.services import training
 from app.services.scoring import cache, sources
 from app.services.scoring.rows import Scorer, ScoringProblem, Source, build_rows, compare
 from app.services.scoring.sources import AOP_SIZE, BASELINE_NAMES, CENTER_SIGMA, SALIENCY, Scored, Truth
-from app.services.scoring.table import BASELINE, FRAMES, HUMAN, MODEL, Report
+from app.services.scoring.cells import BASELINE, FRAMES, HUMAN, MODEL
+from app.services.scoring.table import Report
 from egonet.metrics import DEFAULT_RESAMPLES, DEFAULT_THRESHOLDS, METRICS, Resampler, threshold_values
 from egonet.metrics.bootstrap import MAX_RESAMPLES
 
@@ -360,29 +361,21 @@ def build_report(
     """
     _check_view(metric, frames, resamples, seed)
     found, notes = load_sources(
-        run_ids=run_ids,
-        study_ids=study_ids,
-        baselines=baselines,
-        thresholds=thresholds,
-        answered_only=answered_only,
-        exclude_failed_checks=exclude_failed_checks,
-        by_condition=by_condition,
-        use_cache=use_cache,
-        on_start=on_start,
-        on_progress=on_progress,
+        run_ids=run_ids, study_ids=study_ids, baselines=baselines, thresholds=thresholds, answered_only=answered_only,
+        exclude_failed_checks=exclude_failed_checks, by_condition=by_condition, use_cache=use_cache,
+        on_start=on_start, on_progress=on_progress,
     )
+    return _scored(found, notes, thresholds=thresholds, metric=metric, frames=frames, answered_only=answered_only,
+                   resamples=resamples, seed=seed, compare_keys=compare_keys)
+
+
+def _scored(found: list[Source], notes: list[str], *, thresholds: int, metric: str, frames: str, answered_only: bool,
+            resamples: int, seed: int, compare_keys: tuple[str, str] | None) -> Report:
+    """The loaded sources as the report's rows, under the convention and frame choice, with the comparison asked for."""
     scorer = Scorer(metric, Resampler(resamples=resamples, seed=seed))
     rows, activities, frame_notes = build_rows(found, frames=frames, scorer=scorer)
     comparison = compare(found, *compare_keys, scorer=scorer) if compare_keys else None
     return Report(
-        activities=activities,
-        rows=rows,
-        thresholds=thresholds,
-        metric=metric,
-        frames=frames,
-        answered_only=answered_only,
-        resamples=resamples,
-        seed=seed,
-        notes=frame_notes + notes,
-        comparison=comparison,
+        activities=activities, rows=rows, thresholds=thresholds, metric=metric, frames=frames, answered_only=answered_only,
+        resamples=resamples, seed=seed, notes=frame_notes + notes, comparison=comparison,
     )

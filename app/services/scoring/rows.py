@@ -28,7 +28,8 @@ import numpy as np
 
 from app.errors import Problem
 from app.services.scoring.cache import FrameStats
-from app.services.scoring.table import ALL, HUMAN, STATISTIC_LABELS, Cell, Comparison, Curve, Difference, Row
+from app.services.scoring.cells import ALL, HUMAN, STATISTIC_LABELS, Cell, Curve, Difference, Row
+from app.services.scoring.table import Comparison
 from egonet.metrics import Estimate, FrameCounts, Resampler, curve_from_counts, f_scores, reduce_sums, weighted_sums
 
 Values = dict[str, Estimate]

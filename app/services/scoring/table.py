@@ -1,179 +1,23 @@
-"""The score table itself: cells, curves, rows, the report and a paired comparison.
+"""The score table itself: the report and a paired comparison.
 
 :class:`Report` holds the rows (models, baselines, people) by activity
 columns and their mean, under one metric convention and one frame choice;
-``formats`` writes it as plain text, CSV, LaTeX or JSON. Nothing here reads
-the database: ``report`` fills it.
+its renderers (``formats``) write it as plain text, CSV, LaTeX or JSON.
+Nothing here reads the database: ``report`` fills it.
 """
 
 from __future__ import annotations
 
-import json
 from collections import defaultdict
-from collections.abc import Mapping
 from dataclasses import dataclass, field
-from typing import Any
 
+from app.services.scoring.cells import BASELINE, FRAMES, HUMAN, KIND_TITLES, MEAN, METRIC_TITLES, MODEL, PALETTE, STATISTIC_LABELS, Cell, Difference, Row, definition
+from app.services.scoring.formats import ComparisonFormats, ReportFormats
 from egonet.metrics import DEFAULT_RESAMPLES, DEFAULT_THRESHOLDS
 
-ALL = "all"
-"""The key of a row's result pooled over all its frames."""
-MEAN = "mean"
-"""The column of the unweighted mean over activities."""
-
-MODEL, BASELINE, HUMAN = "model", "baseline", "human"
-KIND_TITLES = {MODEL: "Models", BASELINE: "Baselines", HUMAN: "People (MF only)"}
-
-FRAMES = {
-    "shared": "each activity's frames that every row scored there has (their intersection)",
-    "each": "all the frames each row has; best marked only among rows scored on the same frames",
-}
-"""The frame choices and what they mean."""
-
-STATISTIC_LABELS = {
-    "pooled": {"max_f": "MF", "ap": "AP"},
-    "per-image": {"max_f": "mean F", "ap": "mean AP"},
-    "ods-ois": {"max_f": "ODS", "ois": "OIS", "ap": "AP"},
-}
-"""Column labels of each convention's statistics, in the order they are shown."""
-
-METRIC_TITLES = {
-    "pooled": "Pooled: max F and AP of the pixel counts summed over all frames of an activity",
-    "per-image": "Per image: the mean over frames of each frame's best F, and of each frame's AP",
-    "ods-ois": "BSDS ODS / OIS: best F at one threshold for the activity (ODS), at each frame's own (OIS), and AP",
-}
-
-METRIC_SHORT = {"pooled": "pixels pooled per activity (default)", "per-image": "mean of each frame's best F", "ods-ois": "BSDS ODS / OIS"}
-"""What the metric selector says beside each convention's name."""
-
-METRIC_DEFINITIONS = {
-    "pooled": (
-        "MF is the maximum over thresholds of F = 2PR / (P + R) and AP the average precision, sum over k of "
-        "(R_k - R_{k+1}) P_k, with P = TP / (TP + FP) (1 when nothing is predicted) and R = TP / (TP + FN) "
-        "computed from the pixel counts summed over all the frames of the activity."
-    ),
-    "per-image": (
-        "Each frame gets its own precision-recall curve; mean F is the mean over frames of each frame's best F "
-        "(at its own best threshold) and mean AP the mean of the frames' APs. A frame without action-object "
-        "pixels scores 0 in every row."
-    ),
-    "ods-ois": (
-        "ODS (optimal dataset scale) is the best F at one threshold for all frames of the activity, from pooled "
-        "counts (the pooled MF); OIS (optimal image scale) is F of the counts summed over frames each taken at "
-        "its own best threshold (the highest on ties); AP is the pooled average precision."
-    ),
-}
-
-COMMON_DEFINITION = (
-    "Thresholds t_k = k / (T + 1), k = 1..T (T = 99: 0.01 .. 0.99), a pixel being positive when its probability "
-    "is >= t_k (maps are never normalised). Models are scored on held-out frames only; AOP is the mean "
-    "ground-truth mask of the other activities' labelled frames (leave-one-activity-out); people on the frames "
-    "of their trials, MF only. The mean column is the unweighted mean of the per-activity values. 95% intervals: "
-    "BCa bootstrap over frames, resampled within each activity."
-)
-
-# Line colours of the precision-recall plots, one per row in table order.
-PALETTE = ("#1f77b4", "#d62728", "#2ca02c", "#ff7f0e", "#9467bd", "#8c564b", "#e377c2", "#17becf", "#bcbd22", "#7f7f7f")
-
-
-def definition(metric: str) -> str:
-    """The full definition of a convention's numbers (for the page, the downloads and the JSON)."""
-    return f"{METRIC_DEFINITIONS[metric]} {COMMON_DEFINITION}"
-
-
-@dataclass(frozen=True)
-class Cell:
-    """One (row, column) result.
-
-    Attributes:
-        n_frames: Frames scored (0: the row has frames there, none shared).
-        values: The convention's statistics (``max_f``, ``ap``, ``ois``);
-            None for people's AP and where no frame was scored.
-        ci: The 95 % interval of each statistic, None where the value is.
-        sd: For a group of seeds, the standard deviation of each statistic
-            across the seeds; None otherwise.
-        frames_available: Frames the row has there (before the shared cut).
-        frames_key: A fingerprint of the frames scored; cells with the same
-            key were scored on the same frames.
-        activities: For the mean, how many activities it averages.
-    """
-
-    n_frames: int
-    values: Mapping[str, float | None] = field(default_factory=dict)
-    ci: Mapping[str, tuple[float, float] | None] = field(default_factory=dict)
-    sd: Mapping[str, float | None] | None = None
-    frames_available: int = 0
-    frames_key: str = ""
-    activities: int = 1
-
-    @property
-    def max_f(self) -> float | None:
-        return self.values.get("max_f")
-
-    @property
-    def ap(self) -> float | None:
-        return self.values.get("ap")
-
-    @property
-    def no_shared_frames(self) -> bool:
-        return self.n_frames == 0
-
-
-@dataclass(frozen=True)
-class Curve:
-    """A pooled precision-recall curve over increasing thresholds, and where F is largest."""
-
-    precision: tuple[float, ...]
-    recall: tuple[float, ...]
-    best: int
-
 
 @dataclass
-class Row:
-    """One line of the table: a run, a group of runs that differ only in their seed, a baseline or a participant.
-
-    Attributes:
-        key: Stable identifier (``run:3``, ``seeds:3,5,7``, ``baseline:aop``, ``participant:12``).
-        name: Shown in the table (``egonet-lite (run 3)``, ``AOP``, ``P01``).
-        kind: ``model``, ``baseline`` or ``human``.
-        detail: A longer description (run name and folds, study name).
-        cells: Results by activity name.
-        mean: The unweighted mean over the activities with a value (None without any).
-        overall: The result on all the row's frames together (None without any).
-        curves: Pooled curves by activity and :data:`ALL` (a group has none: its seeds do).
-        unanswered: For a participant, trials without an answer (scored as
-            empty maps unless the report keeps answered trials only).
-        members: For a group of seeds, its runs' rows (on the group's frames).
-        group: For a run of a group, the group's key.
-        seed: For a run, its seed.
-    """
-
-    key: str
-    name: str
-    kind: str
-    detail: str
-    cells: dict[str, Cell]
-    mean: Cell | None
-    overall: Cell | None
-    curves: dict[str, Curve]
-    unanswered: int | None = None
-    members: list[Row] = field(default_factory=list)
-    group: str | None = None
-    seed: int | None = None
-
-
-@dataclass(frozen=True)
-class Difference:
-    """A paired difference (row A minus row B) of one statistic on the frames both rows have."""
-
-    value: float
-    ci: tuple[float, float] | None
-    p_value: float | None
-    n_frames: int
-
-
-@dataclass
-class Comparison:
+class Comparison(ComparisonFormats):
     """Two rows compared on their shared frames, per activity and for the mean over activities."""
 
     a: tuple[str, str]  # (key, name)
@@ -189,22 +33,9 @@ class Comparison:
         """The difference of the mean MF-like statistic (``max_f``), the comparison's first line."""
         return self.mean.get("max_f")
 
-    def to_text(self) -> str:
-        from app.services.scoring import formats
-
-        return formats.comparison_text(self)
-
-    def to_json(self) -> str:
-        return json.dumps(self.as_dict(), indent=1) + "\n"
-
-    def as_dict(self) -> dict[str, Any]:
-        from app.services.scoring import formats
-
-        return formats.comparison_dict(self)
-
 
 @dataclass
-class Report:
+class Report(ReportFormats):
     """The score table: rows (models, baselines, people) by activity columns and their mean.
 
     Attributes:
@@ -231,8 +62,6 @@ class Report:
     seed: int = 0
     notes: list[str] = field(default_factory=list)
     comparison: Comparison | None = None
-
-    # -- values the renderers share --------------------------------------------
 
     def statistics(self) -> list[str]:
         """The convention's statistics, in the order they are shown (MF-like first)."""
@@ -325,29 +154,3 @@ class Report:
             f"Frames: {self.frames} - {FRAMES[self.frames]}; people: {people}.",
             f"{ci}.",
         ]
-
-    # -- renderers (``formats``, which reads this module's labels) ----------------
-
-    def to_table(self) -> str:
-        from app.services.scoring import formats
-
-        return formats.table_text(self)
-
-    def to_csv(self) -> str:
-        from app.services.scoring import formats
-
-        return formats.table_csv(self)
-
-    def to_latex(self) -> str:
-        from app.services.scoring import formats
-
-        return formats.table_latex(self)
-
-    def to_json(self) -> str:
-        return json.dumps(self.as_dict(), indent=1) + "\n"
-
-    def as_dict(self) -> dict[str, Any]:
-        from app.services.scoring import formats
-
-        return formats.report_dict(self)
-

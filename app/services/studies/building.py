@@ -18,7 +18,7 @@ from typing import Any
 
 from sqlalchemy import func, update
 
-from app import MAX_ID
+from app.limits import MAX_ID
 from app.extensions import db
 from app.models import Activity, Frame, User
 from app.models.studies import ActivityOrder, FrameKind, Participant, Study, StudyCondition, StudyFrame, StudyStatus
@@ -184,6 +184,31 @@ def create_study(
         StudyProblem: naming the bad field, e.g. an activity with too few
             eligible frames.
     """
+    columns, activity_ids, sigma_px = _checked_settings(
+        name=name, activity_ids=activity_ids, frames_per_activity=frames_per_activity, seed=seed, time_limit_s=time_limit_s,
+        trial_limit_s=trial_limit_s, multiple_clicks=multiple_clicks, sigma_px=sigma_px, activity_order=activity_order,
+    )
+    activities, eligible = _eligible_frames(activity_ids, frames_per_activity)
+    names = [a.name for a in activities]
+    condition_list = protocol.check_conditions(conditions, activity_names=names, frames_per_activity=frames_per_activity)
+    link = protocol.check_open_link(open_link, [c["name"] for c in condition_list])
+    columns |= _page_columns(superpixels, instructions, consent, comprehension, display, completion)
+    columns["cap"] = link["cap"] if link else None
+    study = _new_or_redone(study, columns, created_by=created_by, version=version, open_link=link is not None)
+    _draw_study_frames(study, activities, eligible, practice_trials=practice_trials, catch_trials=catch_trials, sigma_px=sigma_px)
+    _add_conditions(study, condition_list, quotas=link["quotas"] if link else {})
+    if study.participants:
+        recruiting.rebuild_participants(study)
+    db.session.commit()
+    return study
+
+
+def _checked_settings(
+    *, name: str, activity_ids: Iterable[int], frames_per_activity: int, seed: int | None, time_limit_s: int,
+    trial_limit_s: int | None, multiple_clicks: bool, sigma_px: float | None, activity_order: str,
+) -> tuple[dict[str, Any], list[int], float | None]:
+    """The study's own settings checked, in the order the form shows them: its columns so far, the
+    chosen activity ids and the click width (None: scaled to each frame)."""
     name = check_text(name or "", "name", max_len=200)
     activity_ids = sorted(set(activity_ids))
     if not activity_ids:
@@ -195,11 +220,6 @@ def create_study(
         check_int(trial_limit_s, "trial_limit_s", 1, 24 * 3600)
     if sigma_px is not None:
         sigma_px = check_number(sigma_px, "sigma_px", 0.5, 10_000)
-    order = _activity_order(activity_order)
-    activities, eligible = _eligible_frames(activity_ids, frames_per_activity)
-    names = [a.name for a in activities]
-    condition_list = protocol.check_conditions(conditions, activity_names=names, frames_per_activity=frames_per_activity)
-    link = protocol.check_open_link(open_link, [c["name"] for c in condition_list])
     columns = dict(
         name=name,
         seed=seed,
@@ -207,15 +227,29 @@ def create_study(
         time_limit_s=time_limit_s,
         trial_limit_s=trial_limit_s,
         multiple_clicks=bool(multiple_clicks),
+        activity_order=_activity_order(activity_order),
+    )
+    return columns, activity_ids, sigma_px
+
+
+def _page_columns(superpixels, instructions, consent, comprehension, display, completion) -> dict[str, Any]:
+    """What participants see: the click regions, the texts, the comprehension check, the display and the end, checked."""
+    columns = dict(
         superpixels=check_superpixels(dict(superpixels or DEFAULT_SUPERPIXELS)),
         instructions=check_text(instructions or "", "instructions", max_len=protocol.MAX_TEXT, min_len=0),
         consent=check_text(consent or "", "consent", max_len=protocol.MAX_TEXT, min_len=0),
         comprehension=protocol.check_comprehension(comprehension),
         display=protocol.check_display(display),
-        activity_order=order,
-        cap=link["cap"] if link else None,
-        **_completion_columns(protocol.check_completion(completion)),
     )
+    completion = protocol.check_completion(completion)
+    columns.update(completion_code=completion.get("code"), failed_code=completion.get("failed_code"),
+                   redirect_url=completion.get("redirect_url"))
+    return columns
+
+
+def _new_or_redone(study: Study | None, columns: dict[str, Any], *, created_by: User | None, version: int | None,
+                   open_link: bool) -> Study:
+    """A new study with these columns; or ``study`` locked at ``version``, cleared and given them."""
     if study is None:
         study = Study(created_by=created_by, **columns)
         db.session.add(study)
@@ -224,21 +258,22 @@ def create_study(
         _clear(study)
         for key, value in columns.items():
             setattr(study, key, value)
-    if link is None:
+    if not open_link:
         study.open_link_token = None
     elif study.open_link_token is None:
         study.open_link_token = secrets.token_urlsafe(18)
+    return study
+
+
+def _draw_study_frames(study: Study, activities: list[Activity], eligible: dict[int, list[Frame]], *,
+                       practice_trials: Any, catch_trials: Any, sigma_px: float | None) -> None:
+    """The timed part's frames, then the practice and catch frames; the click width, scaled to the widest frame drawn when not given."""
     main = _draw_frames(study, activities, eligible)
-    practice = _practice_frames(practice_trials, seed=seed, eligible=eligible, taken={f.id for f in main})
+    practice = _practice_frames(practice_trials, seed=study.seed, eligible=eligible, taken={f.id for f in main})
     catch = _catch_frames(catch_trials, main_count=len(main), taken={f.id for f in main} | {f.id for f in practice})
     _add_frames(study, practice, catch, start=len(main))
     study.sigma_scaled = sigma_px is None
     study.sigma_px = sigma_px if sigma_px is not None else scaled_sigma(max(f.width for f in main))
-    _add_conditions(study, condition_list, quotas=link["quotas"] if link else {})
-    if study.participants:
-        recruiting.rebuild_participants(study)
-    db.session.commit()
-    return study
 
 
 def _add_conditions(study: Study, conditions: list[dict[str, Any]], *, quotas: dict[str, int]) -> None:
@@ -254,14 +289,6 @@ def _activity_order(value: Any) -> ActivityOrder:
         return ActivityOrder(value)
     except ValueError:
         raise StudyProblem(f"activity_order must be one of {', '.join(ActivityOrder)}", field="activity_order") from None
-
-
-def _completion_columns(completion: dict[str, Any]) -> dict[str, Any]:
-    return {
-        "completion_code": completion.get("code"),
-        "failed_code": completion.get("failed_code"),
-        "redirect_url": completion.get("redirect_url"),
-    }
 
 
 def entered(study: Study) -> int:

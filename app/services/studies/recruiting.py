@@ -23,7 +23,6 @@ import random
 import secrets
 from collections.abc import Mapping
 from dataclasses import dataclass, field
-from typing import Any
 
 from sqlalchemy import func, or_, update
 from sqlalchemy.exc import IntegrityError
@@ -356,8 +355,3 @@ def set_active(participant: Participant, active: bool) -> Participant:
     participant.user.end_sessions()
     db.session.commit()
     return participant
-
-
-def external_fields(participant: Participant) -> dict[str, Any]:
-    """The platform's parameters of a participant, for exports."""
-    return {"platform": participant.platform, "external_id": participant.external_id, **participant.external}

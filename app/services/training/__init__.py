@@ -9,12 +9,13 @@ A run is a ``TrainingRun`` row first, then a job that trains it with
   files go (``CHECKPOINT_ROOT``, one ``run-<id>/`` folder per run).
 * ``job``: ``execute_run``, the job the worker (``train_run`` of
   ``app.tasks``) or ``flask egonet train`` runs, and its bookkeeping.
-* ``predictions``: run a checkpoint on frames (``predict``) and read stored
-  maps; for the scorer, ``completed_runs()`` and ``held_out_predictions(run)``.
+* ``predictions``: run a checkpoint on frames (``predict``), score each map on
+  its frame (``scores_at``) and read stored maps; for the scorer,
+  ``completed_runs()`` and ``held_out_predictions(run)``.
 * ``released``: the authors' released ``.caffemodel`` as a run with one
   checkpoint (``register_release``, ``convert_release``, the page's chunked upload).
 * ``history``: the per-epoch rows the job writes and the charts poll.
-* ``frames``: per-frame scores of held-out predictions; the per-frame browser.
+* ``frames``: the per-frame browser of held-out predictions; scoring old runs' maps.
 * ``manage``: rename and tag runs, their downloads, deleting a run and all it made.
 
 Callers import from here: ``from app.services import training``.
@@ -41,7 +42,6 @@ from app.services.training.released import (
     convert_release,
     finish_upload,
     import_in_foreground,
-    is_released,
     register_release,
     start_upload,
     write_chunk,
@@ -81,7 +81,6 @@ __all__ = [
     "convert_release",
     "finish_upload",
     "import_in_foreground",
-    "is_released",
     "register_release",
     "start_upload",
     "write_chunk",

@@ -288,6 +288,19 @@ def resume_run(run: TrainingRun) -> TrainingRun:
     return run
 
 
+def claim_run(run: TrainingRun, message: str) -> bool:
+    """Queued -> running (the worker's first step), unless it is no longer queued (cancelled meanwhile, or
+    another worker has it); ``message`` says what the run does first."""
+    claimed = db.session.execute(
+        update(TrainingRun)
+        .where(TrainingRun.id == run.id, TrainingRun.status == RunStatus.QUEUED)
+        .values(status=RunStatus.RUNNING, started_at=utcnow(), message=message)
+    ).rowcount
+    db.session.commit()
+    db.session.refresh(run)
+    return bool(claimed)
+
+
 def cancel_run(run: TrainingRun) -> TrainingRun:
     """Stop a queued or running run (a running one stops at its next progress report).
 

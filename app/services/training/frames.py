@@ -1,77 +1,24 @@
-"""Per-frame scores of a run's held-out predictions, and the per-frame browser's pages.
+"""The per-frame browser's pages of a run's held-out predictions, worst F first.
 
 Every held-out prediction keeps its frame's precision, recall and F at its
-fold's best threshold (``Checkpoint.metrics["threshold"]``, the threshold
-of the fold's pooled MF), so the frames that pull a fold's score down can
-be listed worst first. Counts come from ``egonet.metrics.count_stats`` (the
-same thresholds and comparisons as the pooled score). A frame without an
-action-object scores F = 1 when nothing reaches the threshold and 0
-otherwise (the pooled metric's convention, recall 0 without positives,
-would call a perfect empty map the worst).
-
-The job scores maps as a fold ends (``FoldScorer``); runs recorded before
-per-frame scores existed are scored by ``score_run_frames`` (the worker's
+fold's best threshold (``predictions.scores_at``), so the frames that pull a
+fold's score down can be listed worst first. The job scores maps as a fold
+ends (``predictions.FoldScorer``); runs recorded before per-frame scores
+existed are scored by ``score_run_frames`` (the worker's
 ``score_run_frames`` job, queued from the run's frames page).
 """
 
 from dataclasses import dataclass
 
-import numpy as np
 from sqlalchemy import func
 
 from app.extensions import db
 from app.models import Frame
-from app.models.training import Checkpoint, Prediction, TrainingRun
+from app.models.training import Prediction, TrainingRun
 from app.services import ground_truth, media
-from app.services.training.predictions import read_probability
-from egonet import io
-from egonet.metrics import Counts, count_stats, curve_from_counts, threshold_values
+from app.services.training.predictions import frame_counts, read_probability, scores_at, threshold_of
 
-DEFAULT_THRESHOLD = 0.5
-"""A fold whose metrics hold no threshold (recorded before thresholds were kept)."""
 PAGE_SIZE = 24
-
-
-def threshold_of(checkpoint: Checkpoint) -> float:
-    value = checkpoint.metrics.get("threshold")
-    return float(value) if isinstance(value, int | float) else DEFAULT_THRESHOLD
-
-
-def scores_at(counts: Counts, threshold: float) -> tuple[float, float, float | None]:
-    """``(f, precision, recall)`` of one map's counts at the threshold nearest ``threshold``.
-
-    Recall is ``None`` for a frame without an action-object.
-    """
-    k = int(np.argmin(np.abs(threshold_values(len(counts.tp)) - threshold)))
-    tp, fp, fn = (int(c[k]) for c in counts)
-    if tp + fn == 0:  # no action-object: right only when nothing is predicted
-        return (1.0, 1.0, None) if fp == 0 else (0.0, 0.0, None)
-    precision, recall = curve_from_counts(Counts(*(np.array([c]) for c in (tp, fp, fn))))
-    p, r = float(precision[0]), float(recall[0])
-    return (2 * p * r / (p + r) if p + r > 0 else 0.0), p, r
-
-
-def frame_counts(probability: np.ndarray, mask_path) -> Counts:
-    """A map's counts against a truth mask file (``None``: no action-object)."""
-    mask = io.read_mask(mask_path) if mask_path is not None else np.zeros(probability.shape, bool)
-    return count_stats(probability, mask)
-
-
-class FoldScorer:
-    """Collects the counts of a fold's held-out maps as they come; scores them once the threshold is known."""
-
-    def __init__(self) -> None:
-        self.counts: dict[int, Counts] = {}
-
-    def add(self, frame_id: int, probability: np.ndarray, mask_path) -> None:
-        self.counts[frame_id] = frame_counts(probability, mask_path)
-
-    def apply(self, predictions: list[Prediction], threshold: float) -> None:
-        for prediction in predictions:
-            counts = self.counts.get(prediction.frame_id)
-            if counts is not None:
-                prediction.f_score, prediction.precision, prediction.recall = scores_at(counts, threshold)
-        self.counts = {}
 
 
 def unscored_count(run: TrainingRun) -> int:

@@ -24,8 +24,8 @@ from app.extensions import db
 from app.models import User, utcnow
 from app.models.training import FINAL_STATUSES, Checkpoint, Prediction, RunStatus, TrainingRun
 from app.services import ground_truth, media
-from app.services.training.control import RunRequest, TrainingProblem, cancel_run, checkpoint_root, create_run
-from app.services.training.frames import FoldScorer
+from app.services.training.control import RunRequest, TrainingProblem, cancel_run, checkpoint_root, claim_run, create_run
+from app.services.training.predictions import FoldScorer
 from app.services.training.history import record_epochs
 from egonet import io
 
@@ -169,7 +169,7 @@ def execute_run(run_id: int, *, on_progress: Callable | None = None) -> Training
         return _fail(run, exc)
     if rank != 0:
         return _train_as_follower(run, config)
-    if not _claim(run):
+    if not claim_run(run, "loading frames"):
         return run
     out_dir = checkpoint_root() / f"run-{run.id}"
     recorder = _Recorder(run.id, out_dir, on_progress)
@@ -193,18 +193,6 @@ def execute_run(run_id: int, *, on_progress: Callable | None = None) -> Training
         raise
     _finish(run)
     return run
-
-
-def _claim(run: TrainingRun) -> bool:
-    """Queued -> running, unless it is no longer queued (cancelled meanwhile, or another worker has it)."""
-    claimed = db.session.execute(
-        update(TrainingRun)
-        .where(TrainingRun.id == run.id, TrainingRun.status == RunStatus.QUEUED)
-        .values(status=RunStatus.RUNNING, started_at=utcnow(), message="loading frames")
-    ).rowcount
-    db.session.commit()
-    db.session.refresh(run)
-    return bool(claimed)
 
 
 def _finish(run: TrainingRun) -> None:

@@ -1,9 +1,17 @@
-"""Predictions: run a checkpoint on frames, read stored maps (the scorer, the viewer).
+"""Predictions: run a checkpoint on frames, score and read stored maps (the scorer, the viewer).
 
 Every model run outside training goes through ``egonet.predictor.NetworkPredictor``
 (the frame at the checkpoint's training size, probabilities back at the
 frame's own), so ``predict`` stores what the training job stored for the
 same frame. Maps are 16-bit PNGs in the media store (probability x 65535).
+
+A held-out map is scored on its frame at its fold's best threshold
+(``Checkpoint.metrics["threshold"]``, the threshold of the fold's pooled
+MF; ``scores_at``). Counts come from ``egonet.metrics.count_stats`` (the
+same thresholds and comparisons as the pooled score). A frame without an
+action-object scores F = 1 when nothing reaches the threshold and 0
+otherwise (the pooled metric's convention, recall 0 without positives,
+would call a perfect empty map the worst).
 
 For the scorer: ``held_out_predictions(run)``.
 """
@@ -20,11 +28,14 @@ from app.models.training import Checkpoint, FoldsMode, Prediction, TrainingRun
 from app.services import media
 from app.services.training.control import TrainingProblem, checkpoint_root
 from egonet import io
+from egonet.metrics import Counts, count_stats, curve_from_counts, threshold_values
 from egonet.overlay import heatmap
 from egonet.overlay import overlay as egonet_overlay
 
 PICTURE_WIDTH = 320
 """Width of the per-frame browser's pictures."""
+DEFAULT_THRESHOLD = 0.5
+"""A fold whose metrics hold no threshold (recorded before thresholds were kept)."""
 
 
 def held_out_predictions(run: TrainingRun) -> Iterator[tuple[Frame, np.ndarray]]:
@@ -55,6 +66,48 @@ def read_probability(path: str, *, shape: tuple[int, int] | None = None) -> np.n
         raise io.MediaError(path, f"prediction is {probability.shape[1]}x{probability.shape[0]}, "
                                   f"the frame {shape[1]}x{shape[0]}")
     return probability
+
+
+def threshold_of(checkpoint: Checkpoint) -> float:
+    value = checkpoint.metrics.get("threshold")
+    return float(value) if isinstance(value, int | float) else DEFAULT_THRESHOLD
+
+
+def scores_at(counts: Counts, threshold: float) -> tuple[float, float, float | None]:
+    """``(f, precision, recall)`` of one map's counts at the threshold nearest ``threshold``.
+
+    Recall is ``None`` for a frame without an action-object.
+    """
+    k = int(np.argmin(np.abs(threshold_values(len(counts.tp)) - threshold)))
+    tp, fp, fn = (int(c[k]) for c in counts)
+    if tp + fn == 0:  # no action-object: right only when nothing is predicted
+        return (1.0, 1.0, None) if fp == 0 else (0.0, 0.0, None)
+    precision, recall = curve_from_counts(Counts(*(np.array([c]) for c in (tp, fp, fn))))
+    p, r = float(precision[0]), float(recall[0])
+    return (2 * p * r / (p + r) if p + r > 0 else 0.0), p, r
+
+
+def frame_counts(probability: np.ndarray, mask_path) -> Counts:
+    """A map's counts against a truth mask file (``None``: no action-object)."""
+    mask = io.read_mask(mask_path) if mask_path is not None else np.zeros(probability.shape, bool)
+    return count_stats(probability, mask)
+
+
+class FoldScorer:
+    """Collects the counts of a fold's held-out maps as they come; scores them once the threshold is known."""
+
+    def __init__(self) -> None:
+        self.counts: dict[int, Counts] = {}
+
+    def add(self, frame_id: int, probability: np.ndarray, mask_path) -> None:
+        self.counts[frame_id] = frame_counts(probability, mask_path)
+
+    def apply(self, predictions: list[Prediction], threshold: float) -> None:
+        for prediction in predictions:
+            counts = self.counts.get(prediction.frame_id)
+            if counts is not None:
+                prediction.f_score, prediction.precision, prediction.recall = scores_at(counts, threshold)
+        self.counts = {}
 
 
 def latest_prediction(frame_id: int) -> Prediction | None:
@@ -157,7 +210,7 @@ def predict(
 
     A frame in the checkpoint's test set gets ``held_out=True`` (every frame,
     for the authors' released model: it was not trained on ours) and its
-    per-frame scores at the fold's threshold (``frames.scores_at``);
+    per-frame scores at the fold's threshold (``scores_at``);
     predicting a frame again replaces that checkpoint's earlier prediction of it.
 
     Args:
@@ -170,7 +223,6 @@ def predict(
         TrainingProblem: No frames, frames without DHG, or an unreadable checkpoint.
     """
     from app.services import ground_truth
-    from app.services.training.frames import frame_counts, scores_at, threshold_of
     from egonet.predictor import NetworkPredictor
     from egonet.train import load_checkpoint, resolve_device
 

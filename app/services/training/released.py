@@ -33,7 +33,7 @@ from app.extensions import db
 from app.models import User, utcnow
 from app.models.training import Checkpoint, FoldsMode, RunStatus, TrainingRun
 from app.queue import enqueue
-from app.services.training.control import TrainingProblem, checkpoint_root
+from app.services.training.control import TrainingProblem, checkpoint_root, claim_run
 from egonet.errors import EgonetError
 
 CHUNK_BYTES = 8 * 1024 * 1024
@@ -107,11 +107,6 @@ def register_release(
     return run
 
 
-def is_released(run: TrainingRun) -> bool:
-    """Whether the run is one of the authors' released models (not trained here)."""
-    return run.folds is FoldsMode.RELEASED
-
-
 def convert_release(run_id: int, path: Path, *, delete: bool = False, releases=None,
                     on_progress: Callable[[int, int], None] | None = None) -> TrainingRun:
     """The job: the release's weights into a checkpoint, its ``Checkpoint`` row, the run done.
@@ -134,7 +129,7 @@ def convert_release(run_id: int, path: Path, *, delete: bool = False, releases=N
     if run is None:
         raise TrainingProblem(f"no training run with id {run_id}")
     try:
-        if not _claim(run):
+        if not claim_run(run, "reading the weights"):
             return run
         info = run.config["released"]
         reporter = _Reporter(run.id, on_progress)
@@ -176,16 +171,6 @@ def import_in_foreground(path: Path, *, name: str | None = None, size: tuple[int
     """``flask egonet import-weights``: register and convert here; the file stays where it is."""
     run = register_release(path, name=name, size=size)
     return convert_release(run.id, path, on_progress=on_progress)
-
-
-def _claim(run: TrainingRun) -> bool:
-    claimed = db.session.execute(
-        update(TrainingRun).where(TrainingRun.id == run.id, TrainingRun.status == RunStatus.QUEUED)
-        .values(status=RunStatus.RUNNING, started_at=utcnow(), message="reading the weights")
-    ).rowcount
-    db.session.commit()
-    db.session.refresh(run)
-    return bool(claimed)
 
 
 class _Reporter:
