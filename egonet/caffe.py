@@ -51,6 +51,7 @@ import numpy as np
 import torch
 from torch import nn
 
+from egonet.checkpoint import TrainConfig, checkpoint_state
 from egonet.errors import EgonetError
 from egonet.network import EgoNetModel, TwoStreamEgoNet, VGGDeepLabStream, build_model
 
@@ -502,9 +503,9 @@ def checkpoint_from_caffemodel(
     releases: Sequence[Release] = RELEASES,
     progress: Progress | None = None,
 ) -> dict:
-    """A checkpoint (``egonet.train`` format) of a released model, for everything that reads checkpoints.
+    """A checkpoint (``egonet.checkpoint`` format) of a released model, for everything that reads checkpoints.
 
-    :func:`egonet.train.model_from_checkpoint` and
+    :func:`egonet.checkpoint.model_from_checkpoint` and
     ``egonet.predictor.NetworkPredictor.from_checkpoint`` read it like a
     trained one: frames are resized to ``size`` for the forward pass and the
     maps back to each frame's size. It records where it came from under
@@ -520,28 +521,14 @@ def checkpoint_from_caffemodel(
     Returns:
         The checkpoint dict (plain types and tensors; ``torch.save`` it).
     """
-    from egonet.train import CHECKPOINT_FORMAT, TrainConfig
-
     path = Path(path)
     model, release, digest = _load(path, releases=releases, progress=progress)
     config = TrainConfig(model=release.model, model_options=dict(model.config.options), height=size[0], width=size[1],
                          epochs=1, augment=None, device="cpu")
-    return {
-        "format": CHECKPOINT_FORMAT,
-        "model": {"name": model.config.name, "options": dict(model.config.options)},
-        "state_dict": model.state_dict(),
-        "config": config.to_dict(),
-        "fold": "released",
-        "train_keys": [],
-        "test_keys": [],
-        "epoch": 0,
-        "iteration": 0,
-        "complete": True,
-        "metrics": {},
-        "history": [],
-        "released": {"release": release.key, "title": release.title, "file": path.name,
-                     "bytes": path.stat().st_size, "sha256": digest},
-    }
+    released = {"release": release.key, "title": release.title, "file": path.name, "bytes": path.stat().st_size,
+                "sha256": digest}
+    return checkpoint_state(model, config, fold="released", train_keys=[], test_keys=[], epoch=0, iteration=0,
+                            complete=True, metrics={}, history=[], extra={"released": released})
 
 
 def _load(path: str | Path, *, releases: Sequence[Release], progress: Progress | None) -> tuple[EgoNetModel, Release, str]:

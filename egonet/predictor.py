@@ -31,10 +31,10 @@ import numpy as np
 import torch
 from torch import Tensor
 
+from egonet.checkpoint import model_from_checkpoint
 from egonet.data import MIN_SIDE, check_size, resize_frame, resize_probability
 from egonet.errors import EgonetError
 from egonet.network import EgoNetModel
-from egonet.train import model_from_checkpoint
 
 __all__ = ["NetworkPredictor"]
 
@@ -75,7 +75,7 @@ class NetworkPredictor:
         """The checkpoint's model (eval mode, on ``device``) at the checkpoint's training size.
 
         Args:
-            state: A checkpoint from :func:`egonet.train.load_checkpoint`.
+            state: A checkpoint from :func:`egonet.checkpoint.load_checkpoint`.
             device: Where the model runs.
         """
         size = (state["config"]["height"], state["config"]["width"])

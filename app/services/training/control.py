@@ -143,7 +143,7 @@ def _check_init(config) -> dict[str, str]:
 
 def _train_config(request: RunRequest):
     """The engine's configuration of a request; its checks name the request's field."""
-    from egonet.train import TrainConfig
+    from egonet.checkpoint import TrainConfig
 
     try:
         return TrainConfig(

@@ -151,13 +151,8 @@ def execute_run(run_id: int, *, on_progress: Callable | None = None) -> Training
     Raises:
         Exception: Whatever made the run fail, after the row says so.
     """
-    from egonet.train import (
-        Cancelled,
-        TrainConfig,
-        cross_validate,
-        resolve_device,
-        setup_distributed,
-    )
+    from egonet.checkpoint import TrainConfig
+    from egonet.train import Cancelled, cross_validate, resolve_device, setup_distributed
 
     run = db.session.get(TrainingRun, run_id)
     if run is None:
@@ -280,7 +275,8 @@ def _samples(activity_ids: list[int] | None) -> list:
 
 def _resumed_plan(run: TrainingRun, samples: list, resume_id: int):
     """A run that continues a checkpoint: that checkpoint's fold, on the same frames."""
-    from egonet.train import Fold, fold_slug, load_checkpoint
+    from egonet.checkpoint import load_checkpoint
+    from egonet.train import Fold, fold_slug
 
     checkpoint = db.session.get(Checkpoint, resume_id)
     if checkpoint is None:

@@ -128,7 +128,7 @@ def convert_release(run_id: int, path: Path, *, delete: bool = False, releases=N
         on_progress: Also called with ``(bytes done, file size)`` (the CLI's bar).
     """
     from egonet.caffe import RELEASES, checkpoint_from_caffemodel
-    from egonet.train import save_checkpoint
+    from egonet.checkpoint import save_checkpoint
 
     run = db.session.get(TrainingRun, run_id)
     if run is None:
