@@ -91,8 +91,11 @@ V1_TYPES = {
 }
 
 
-class _Truncated(Exception):
+class _Truncated(EgonetError):
     """The wire data ends inside a field."""
+
+    def __init__(self):
+        super().__init__("the wire data ends inside a field")
 
 
 # --------------------------------------------------------------------------- reading
@@ -169,7 +172,7 @@ def _read(path: Path, *, progress: Progress | None = None) -> tuple[dict[str, Ca
     return layers, buffer
 
 
-class _WireError(Exception):
+class _WireError(EgonetError):
     """Bytes that are not protobuf wire data."""
 
 

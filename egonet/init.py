@@ -44,6 +44,7 @@ import numpy as np
 import torch
 from torch import Tensor, nn
 
+from egonet.caffe import read_caffemodel
 from egonet.errors import EgonetError
 from egonet.network import RELEASED_BGR_MEAN, EarlyFusionEgoNet, EgoNetModel, TwoStreamEgoNet, VGGDeepLabStream
 
@@ -274,8 +275,6 @@ def _read_caffemodel(path: Path) -> dict[str, list[np.ndarray]]:
     An inner product's weight comes back 2-D (legacy files store it as
     ``(1, 1, O, I)``), so a plain VGG16's dense fc6/fc7 convert as torchvision's do.
     """
-    from egonet.caffe import read_caffemodel
-
     blobs = {}
     for name, layer in read_caffemodel(path).items():
         if not layer.blobs:

@@ -69,11 +69,11 @@ from egonet.baselines import ActionObjectPrior
 from egonet.checkpoint import DEVICES, FOLD_MODES, TrainConfig, checkpoint_state, load_checkpoint, save_checkpoint
 from egonet.data import FrameDataset, Sample, resize_probability
 from egonet.errors import EgonetError
+from egonet.init import initialise
 from egonet.metrics import ScoreAccumulator
 from egonet.network import EgoNetModel, build_model, saved_options
 
 __all__ = [
-    "Cancelled",
     "Fold",
     "FoldResult",
     "Progress",
@@ -84,10 +84,6 @@ __all__ = [
     "resolve_device",
     "train_one_epoch",
 ]
-
-
-class Cancelled(Exception):
-    """Raised by a progress callback to stop training (the last epoch's checkpoint stays)."""
 
 
 # --------------------------------------------------------------------------- folds
@@ -529,8 +525,6 @@ def _initial_model(config: TrainConfig, *, device: torch.device, world_size: int
         options = dict(config.model_options) | ({"pretrained": True} if config.pretrained else {})
     model = build_model(config.model, **options)
     if config.init is not None and start is None:
-        from egonet.init import initialise  # ImageNet VGG16 / DeepLab into every VGG stream
-
         initialise(model, config.init, sha256=config.init_sha256)
     model = model.to(device)
     if world_size > 1:
@@ -629,7 +623,7 @@ def cross_validate(
         folds: Explicit folds (positions in ``samples``); by default
             :func:`make_folds` with ``config.folds``.
         start: A loaded checkpoint to continue; needs exactly one fold.
-        on_progress: Progress reports (rank 0); may raise :class:`Cancelled`.
+        on_progress: Progress reports (rank 0); may raise :class:`egonet.errors.Cancelled`.
         on_fold_end: Called with each fold's result (rank 0).
         on_map: Called with ``(fold, sample, float32 (H, W) probabilities at
             the frame's own size)`` for every held-out frame (rank 0).

@@ -17,8 +17,9 @@ from egonet import synth
 from egonet.checkpoint import CHECKPOINT_FORMAT, DEFAULT_LR, TrainConfig, load_checkpoint, model_from_checkpoint
 from egonet.data import Sample
 from egonet.dhg import encode_dhg
+from egonet.errors import Cancelled
 from egonet.predictor import NetworkPredictor
-from egonet.train import Cancelled, Fold, cross_validate, make_folds, resolve_device
+from egonet.train import Fold, cross_validate, make_folds, resolve_device
 
 ROOT = Path(__file__).resolve().parents[2]
 

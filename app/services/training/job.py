@@ -28,6 +28,7 @@ from app.services.training.control import RunRequest, TrainingProblem, cancel_ru
 from app.services.training.frames import FoldScorer
 from app.services.training.history import record_epochs
 from egonet import io
+from egonet.errors import Cancelled
 
 log = logging.getLogger(__name__)
 
@@ -72,8 +73,6 @@ class _Recorder:
         self.scorer = FoldScorer()
 
     def progress(self, progress) -> None:
-        from egonet.train import Cancelled
-
         if self.on_progress is not None:
             self.on_progress(progress)
         now = time.monotonic()
@@ -152,7 +151,7 @@ def execute_run(run_id: int, *, on_progress: Callable | None = None) -> Training
         Exception: Whatever made the run fail, after the row says so.
     """
     from egonet.checkpoint import TrainConfig
-    from egonet.train import Cancelled, cross_validate, resolve_device, setup_distributed
+    from egonet.train import cross_validate, resolve_device, setup_distributed
 
     run = db.session.get(TrainingRun, run_id)
     if run is None:

@@ -34,7 +34,7 @@ from app.models import User, utcnow
 from app.models.training import Checkpoint, FoldsMode, RunStatus, TrainingRun
 from app.queue import enqueue
 from app.services.training.control import TrainingProblem, checkpoint_root
-from egonet.errors import EgonetError
+from egonet.errors import Cancelled, EgonetError
 
 CHUNK_BYTES = 8 * 1024 * 1024
 """The most one upload request may carry (well under ``MAX_CONTENT_LENGTH``)."""
@@ -44,10 +44,6 @@ MAX_PENDING_UPLOADS = 4
 STALE_UPLOAD_S = 24 * 3600
 PROGRESS_INTERVAL_S = 1.0
 _TOKEN = re.compile(r"[0-9a-f]{32}")
-
-
-class Cancelled(Exception):
-    """The run was cancelled while its weights were being converted."""
 
 
 def uploads_root() -> Path:
