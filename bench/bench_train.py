@@ -27,7 +27,7 @@ import torch
 import torch.nn.functional as F
 
 from egonet.checkpoint import DEFAULT_LR
-from egonet.network import build_model
+from egonet.network.builders import build_model
 
 
 def iteration_times(name: str, *, runs: int, batch: int, height: int, width: int) -> list[float]:

@@ -26,7 +26,7 @@ shapes (:data:`RELEASES`): RGB+DHG (``conv1_1`` ... ``fc7``, ``dhg_conv1_1``
 only (``fc9`` 512 wide on 4098 channels, plus ``fc8_obj``, 41 outputs on
 fc7, which nothing downstream uses: it is checked and left out). The
 shapes a release must have come from the model builder itself
-(:func:`egonet.network.build_model` with the release's options), so the
+(:func:`egonet.network.builders.build_model` with the release's options), so the
 loader and the network cannot disagree. Anything else (a missing layer, a
 wrong shape, a truncated file) is refused with one line naming the layer
 and both shapes.
@@ -53,7 +53,9 @@ from torch import nn
 
 from egonet.checkpoint import TrainConfig, checkpoint_state
 from egonet.errors import EgonetError
-from egonet.network import EgoNetModel, TwoStreamEgoNet, VGGDeepLabStream, build_model
+from egonet.network.builders import build_model
+from egonet.network.model import EgoNetModel, TwoStreamEgoNet
+from egonet.network.streams import VGGDeepLabStream
 
 __all__ = [
     "DEPLOY_SIZE",
@@ -334,7 +336,7 @@ class Release:
     Attributes:
         key: ``"rgb+dhg"`` or ``"rgb"``.
         title: How messages name it (``"the authors' RGB+DHG release"``).
-        model: The :data:`egonet.network.MODELS` name.
+        model: The :data:`egonet.network.builders.MODELS` name.
         options: The builder options that give the released shapes and conventions.
         unused: Layers in the file that the output does not use, by name, with
             their number of outputs (a 1x1 convolution on fc7): read, checked
@@ -466,7 +468,7 @@ def load_caffemodel(
 ) -> EgoNetModel:
     """The authors' released model from its ``.caffemodel``, in eval mode; no Caffe needed.
 
-    The model is :func:`egonet.network.build_model` of the release's builder
+    The model is :func:`egonet.network.builders.build_model` of the release's builder
     (``egonet`` for RGB+DHG, ``egonet-rgb`` with a 512-wide fc9 for RGB) with
     the release's conventions. Its ``predict(rgb, dhg)`` takes ``rgb``
     ``(N, 3, H, W)`` RGB in ``[0, 1]`` and ``dhg`` ``(N, 3, H, W)`` as the

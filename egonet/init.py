@@ -24,7 +24,7 @@ downloaded):
 :func:`initialise` reads a file and copies its layers into every VGG stream
 of a model (``rgb_stream``, ``dhg_stream``, or the early-fusion ``stream``)::
 
-    >>> from egonet.network import build_model
+    >>> from egonet.network.builders import build_model
     >>> model = build_model("egonet")                        # doctest: +SKIP
     >>> weights = initialise(model, "vgg16-397923af.pth")    # doctest: +SKIP
     >>> weights.name, weights.sha256[:8], weights.kind       # doctest: +SKIP
@@ -46,7 +46,8 @@ from torch import Tensor, nn
 
 from egonet.caffe import read_caffemodel
 from egonet.errors import EgonetError
-from egonet.network import RELEASED_BGR_MEAN, EarlyFusionEgoNet, EgoNetModel, TwoStreamEgoNet, VGGDeepLabStream
+from egonet.network.model import EarlyFusionEgoNet, EgoNetModel, TwoStreamEgoNet
+from egonet.network.streams import RELEASED_BGR_MEAN, VGGDeepLabStream
 
 __all__ = [
     "DEEPLAB_LAYERS",

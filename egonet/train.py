@@ -71,7 +71,8 @@ from egonet.data import FrameDataset, Sample, resize_probability
 from egonet.errors import EgonetError
 from egonet.init import initialise
 from egonet.metrics import ScoreAccumulator
-from egonet.network import EgoNetModel, build_model, saved_options
+from egonet.network.builders import build_model, saved_options
+from egonet.network.model import EgoNetModel
 
 __all__ = [
     "Fold",

@@ -26,7 +26,8 @@ from egonet.init import (
     load_init,
     vgg16_to_deeplab,
 )
-from egonet.network import RELEASED_BGR_MEAN, build_model
+from egonet.network.builders import build_model
+from egonet.network.streams import RELEASED_BGR_MEAN
 
 # (in, out) of the 13 convolutions at full VGG16 size.
 VGG16_WIDTHS = [(3, 64), (64, 64), (64, 128), (128, 128), (128, 256), (256, 256), (256, 256),
