@@ -55,7 +55,7 @@ import os
 import re
 import time
 from collections.abc import Callable, Iterator, Mapping, Sequence
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 from pathlib import Path
 
 import numpy as np
@@ -374,20 +374,6 @@ def evaluate(
     return out
 
 
-
-def _rng_state() -> dict:
-    state = {"torch": torch.get_rng_state()}
-    if torch.cuda.is_available():
-        state["cuda"] = torch.cuda.get_rng_state_all()
-    return state
-
-
-def _set_rng_state(state: Mapping) -> None:
-    torch.set_rng_state(state["torch"])
-    if "cuda" in state and torch.cuda.is_available():
-        torch.cuda.set_rng_state_all(state["cuda"])
-
-
 # --------------------------------------------------------------------------- one fold
 
 
@@ -455,61 +441,127 @@ def fit(
     """
     device = resolve_device(config.device)
     rank, world_size = setup_distributed(device)
-    tracker = tracker or _Tracker(steps=0, folds=1, epochs=config.epochs, callback=None)
     model = _initial_model(config, device=device, world_size=world_size, start=start)
     optimizer = torch.optim.SGD(
         model.parameters(), lr=config.learning_rate, momentum=config.momentum, weight_decay=config.weight_decay
     )
-    sampler, loader = _training_loader(train_set, config, device=device, rank=rank, world_size=world_size)
-    per_process = loader.batch_size
+    keys = {"train_keys": [s.key for s in _samples(train_set)], "test_keys": [s.key for s in _samples(test_set)]}
+    tracker = tracker or _Tracker(steps=0, folds=1, epochs=config.epochs, callback=None)
+    run = _FoldRun(config, fold, model, optimizer, device, rank, tracker, checkpoint_path, keys)
+    loader = _training_loader(train_set, config, device=device, rank=rank, world_size=world_size)
     lr_at = _poly_schedule(config, iterations=len(loader) * config.epochs)
-    epoch, iteration, history, metrics = 0, 0, [], {}
     if start is not None:
-        epoch, iteration, history, metrics = _restore(start, model, optimizer, epochs=config.epochs)
-        tracker.skip(epoch * len(loader))
+        run.restore(start)
+        tracker.skip(run.epoch * len(loader))
     trainer = model if world_size == 1 else DistributedDataParallel(model, device_ids=[device] if device.type == "cuda" else None)
     prior = ActionObjectPrior.fit(train_set.base(i)[2] for i in range(len(train_set)))
-    keys = {"train_keys": [s.key for s in _samples(train_set)], "test_keys": [s.key for s in _samples(test_set)]}
 
-    def save(metrics: dict, *, complete: bool) -> None:
-        if checkpoint_path is not None and rank == 0:
-            progress = {"epoch": epoch, "iteration": iteration, "complete": complete, "metrics": metrics, "history": history}
-            extra = {"optimizer": optimizer.state_dict(), "rng": _rng_state()}
-            save_checkpoint(checkpoint_path, checkpoint_state(model, config, fold=fold, **keys, **progress, extra=extra))
-
-    while epoch < config.epochs:
-        epoch += 1
-        # Shuffling and augmentation draw from (seed, epoch): a resumed epoch repeats exactly.
-        sampler.set_epoch(epoch)
-        train_set.set_epoch(epoch)
-        tracker.update(fold=fold, epoch=epoch, loss=None, phase="train")
-        train_loss, iteration = train_one_epoch(
-            trainer, loader, optimizer, device=device, lr_at=lr_at, iteration=iteration, amp=config.amp,
-            on_step=lambda loss: tracker.update(steps=1, loss=loss),
-        )
-        record = {"epoch": epoch, "train_loss": train_loss, "lr": lr_at(iteration - 1)}
-        # The last epoch is scored below, with the prior and the maps; scoring it here too would be twice.
-        last = epoch == config.epochs
-        if not last and config.eval_every and epoch % config.eval_every == 0 and rank == 0:
-            tracker.update(phase="evaluate")
-            record |= evaluate(model, test_set, device=device, batch_size=per_process)
-        history.append(record)
-        metrics = {"train_loss": train_loss, "epochs": epoch}
-        save(metrics, complete=False)
-        if not last and on_epoch is not None and rank == 0:
+    while run.epoch < config.epochs:
+        record = run.train_epoch(trainer, loader, lr_at, test_set)
+        if run.epoch < config.epochs and on_epoch is not None and rank == 0:
             on_epoch(dict(record))
         _barrier()
 
     if rank == 0:  # the final scores, and the held-out maps for the caller
-        tracker.update(fold=fold, epoch=epoch, phase="evaluate")
-        final = evaluate(model, test_set, device=device, batch_size=per_process, prior=prior, on_map=on_map)
-        metrics = _final_metrics(final, history, epoch=epoch, train_frames=len(train_set), test_frames=len(test_set))
-        save(metrics, complete=True)
-        if on_epoch is not None and history:
-            on_epoch(dict(history[-1]))
+        run.finish(train_set, test_set, prior=prior, batch_size=loader.batch_size, on_map=on_map)
+        if on_epoch is not None and run.history:
+            on_epoch(dict(run.history[-1]))
     _barrier()
     model.eval()
-    return model, FoldResult(fold, checkpoint_path if rank == 0 else None, metrics, history, **keys)
+    return model, FoldResult(fold, checkpoint_path if rank == 0 else None, run.metrics, run.history, **keys)
+
+
+@dataclass
+class _FoldRun:
+    """A fold under training: what its steps share, and its progress (what its checkpoint records)."""
+
+    config: TrainConfig
+    fold: str
+    model: EgoNetModel
+    optimizer: torch.optim.Optimizer
+    device: torch.device
+    rank: int
+    tracker: _Tracker
+    checkpoint_path: Path | None
+    keys: dict[str, list]
+    epoch: int = 0
+    iteration: int = 0
+    history: list[dict] = field(default_factory=list)
+    metrics: dict = field(default_factory=dict)
+
+    def restore(self, start: Mapping) -> None:
+        """Continue a checkpoint: its weights, optimiser, RNG and progress."""
+        self.model.load_state_dict(start["state_dict"])
+        self.optimizer.load_state_dict(start["optimizer"])
+        self.epoch, self.iteration, self.history = int(start["epoch"]), int(start["iteration"]), list(start["history"])
+        if self.epoch > self.config.epochs:
+            raise EgonetError(
+                f"the checkpoint has trained {self.epoch} epochs already: ask for more than {self.epoch}", field="epochs"
+            )
+        # The torch RNG where the checkpoint left it: the next epoch's loader draws as it would have.
+        _set_rng_state(start["rng"])
+        self.metrics = dict(start["metrics"])
+
+    def train_epoch(self, trainer: torch.nn.Module, loader: DataLoader, lr_at: Callable[[int], float],
+                    test_set: FrameDataset) -> dict:
+        """One more epoch: train, score the held-out frames when due (rank 0), save; returns the epoch's record."""
+        self.epoch += 1
+        # Shuffling and augmentation draw from (seed, epoch): a resumed epoch repeats exactly.
+        loader.sampler.set_epoch(self.epoch)
+        loader.dataset.set_epoch(self.epoch)
+        self.tracker.update(fold=self.fold, epoch=self.epoch, loss=None, phase="train")
+        train_loss, self.iteration = train_one_epoch(
+            trainer, loader, self.optimizer, device=self.device, lr_at=lr_at, iteration=self.iteration,
+            amp=self.config.amp, on_step=lambda loss: self.tracker.update(steps=1, loss=loss),
+        )
+        record = {"epoch": self.epoch, "train_loss": train_loss, "lr": lr_at(self.iteration - 1)}
+        # The last epoch is scored by finish, with the prior and the maps; scoring it here too would be twice.
+        every = self.config.eval_every
+        if self.epoch < self.config.epochs and every and self.epoch % every == 0 and self.rank == 0:
+            self.tracker.update(phase="evaluate")
+            record |= evaluate(self.model, test_set, device=self.device, batch_size=loader.batch_size)
+        self.history.append(record)
+        self.metrics = {"train_loss": train_loss, "epochs": self.epoch}
+        self.save(complete=False)
+        return record
+
+    def finish(self, train_set: FrameDataset, test_set: FrameDataset, *, prior: ActionObjectPrior, batch_size: int,
+               on_map: Callable[[int, np.ndarray], None] | None) -> None:
+        """The fold's result from its final evaluation (rank 0); the last epoch's record gets the held-out scores."""
+        self.tracker.update(fold=self.fold, epoch=self.epoch, phase="evaluate")
+        final = evaluate(self.model, test_set, device=self.device, batch_size=batch_size, prior=prior, on_map=on_map)
+        if self.history:
+            self.history[-1] |= {k: final[k] for k in ("loss", "max_f", "ap")}
+        self.metrics = {
+            **final,
+            "train_loss": self.history[-1]["train_loss"] if self.history else None,
+            "epochs": self.epoch,
+            "train_frames": len(train_set),
+            "test_frames": len(test_set),
+        }
+        self.save(complete=True)
+
+    def save(self, *, complete: bool) -> None:
+        """Rank 0 writes the checkpoint: the format's keys, the optimiser and the RNG state."""
+        if self.checkpoint_path is not None and self.rank == 0:
+            progress = {"epoch": self.epoch, "iteration": self.iteration, "complete": complete,
+                        "metrics": self.metrics, "history": self.history}
+            extra = {"optimizer": self.optimizer.state_dict(), "rng": _rng_state()}
+            state = checkpoint_state(self.model, self.config, fold=self.fold, **self.keys, **progress, extra=extra)
+            save_checkpoint(self.checkpoint_path, state)
+
+
+def _rng_state() -> dict:
+    state = {"torch": torch.get_rng_state()}
+    if torch.cuda.is_available():
+        state["cuda"] = torch.cuda.get_rng_state_all()
+    return state
+
+
+def _set_rng_state(state: Mapping) -> None:
+    torch.set_rng_state(state["torch"])
+    if "cuda" in state and torch.cuda.is_available():
+        torch.cuda.set_rng_state_all(state["cuda"])
 
 
 def _initial_model(config: TrainConfig, *, device: torch.device, world_size: int, start: Mapping | None) -> EgoNetModel:
@@ -517,7 +569,7 @@ def _initial_model(config: TrainConfig, *, device: torch.device, world_size: int
 
     A fold that continues a checkpoint is built as that checkpoint's model
     (its options, with the conventions it was trained in), whose weights
-    :func:`_restore` then loads.
+    :meth:`_FoldRun.restore` then loads.
     """
     torch.manual_seed(config.seed)
     if start is not None:  # a checkpoint brings its own weights and conventions
@@ -537,14 +589,14 @@ def _initial_model(config: TrainConfig, *, device: torch.device, world_size: int
 
 def _training_loader(
     train_set: FrameDataset, config: TrainConfig, *, device: torch.device, rank: int, world_size: int
-) -> tuple[DistributedSampler, DataLoader]:
+) -> DataLoader:
     """Shuffled batches of this process's share of the frames (all of them in one process)."""
     sampler = DistributedSampler(train_set, num_replicas=world_size, rank=rank, shuffle=True, seed=config.seed)
     loader = DataLoader(
         train_set, batch_size=max(1, config.batch_size // world_size), sampler=sampler,
         num_workers=config.num_workers, pin_memory=device.type == "cuda", persistent_workers=False,
     )
-    return sampler, loader
+    return loader
 
 
 def _poly_schedule(config: TrainConfig, *, iterations: int) -> Callable[[int], float]:
@@ -555,35 +607,6 @@ def _poly_schedule(config: TrainConfig, *, iterations: int) -> Callable[[int], f
         return config.learning_rate * (1.0 - min(i, iterations - 1) / iterations) ** config.lr_power
 
     return lr_at
-
-
-def _restore(
-    start: Mapping, model: EgoNetModel, optimizer: torch.optim.Optimizer, *, epochs: int
-) -> tuple[int, int, list[dict], dict]:
-    """Load a checkpoint's weights, optimiser and RNG; return its ``(epoch, iteration, history, metrics)``."""
-    model.load_state_dict(start["state_dict"])
-    optimizer.load_state_dict(start["optimizer"])
-    epoch, iteration, history = int(start["epoch"]), int(start["iteration"]), list(start["history"])
-    if epoch > epochs:
-        raise EgonetError(
-            f"the checkpoint has trained {epoch} epochs already: ask for more than {epoch}", field="epochs"
-        )
-    # The torch RNG where the checkpoint left it: the next epoch's loader draws as it would have.
-    _set_rng_state(start["rng"])
-    return epoch, iteration, history, dict(start["metrics"])
-
-
-def _final_metrics(final: dict, history: list[dict], *, epoch: int, train_frames: int, test_frames: int) -> dict:
-    """The fold's result from its final evaluation; the last epoch's record gets the held-out scores."""
-    if history:
-        history[-1] |= {k: final[k] for k in ("loss", "max_f", "ap")}
-    return {
-        **final,
-        "train_loss": history[-1]["train_loss"] if history else None,
-        "epochs": epoch,
-        "train_frames": train_frames,
-        "test_frames": test_frames,
-    }
 
 
 def _samples(dataset: FrameDataset) -> Iterator[Sample]:
