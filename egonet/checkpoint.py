@@ -32,16 +32,8 @@ from egonet.io import write_atomic
 from egonet.network.builders import MODELS, build_model, saved_options
 from egonet.network.model import EgoNetModel
 
-__all__ = [
-    "CHECKPOINT_FORMAT",
-    "DEFAULT_LR",
-    "TrainConfig",
-    "checkpoint_state",
-    "load_checkpoint",
-    "model_from_checkpoint",
-    "paper_lr",
-    "save_checkpoint",
-]
+__all__ = ["CHECKPOINT_FORMAT", "DEFAULT_LR", "TrainConfig", "checkpoint_state", "load_checkpoint",
+           "model_from_checkpoint", "paper_lr", "save_checkpoint"]
 
 CHECKPOINT_FORMAT = "egonet-checkpoint/1"
 
@@ -212,18 +204,8 @@ def _check_number(
 
 
 def checkpoint_state(
-    model: EgoNetModel,
-    config: TrainConfig,
-    *,
-    fold: str,
-    train_keys: Sequence,
-    test_keys: Sequence,
-    epoch: int,
-    iteration: int,
-    complete: bool,
-    metrics: dict,
-    history: list[dict],
-    extra: Mapping[str, object],
+    model: EgoNetModel, config: TrainConfig, *, fold: str, train_keys: Sequence, test_keys: Sequence, epoch: int,
+    iteration: int, complete: bool, metrics: dict, history: list[dict], extra: Mapping[str, object],
 ) -> dict:
     """A checkpoint's contents: enough to rebuild and score the model; ``extra`` adds the producer's own keys."""
     return {

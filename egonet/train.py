@@ -532,13 +532,9 @@ class _FoldRun:
         final = evaluate(self.model, test_set, device=self.device, batch_size=batch_size, prior=prior, on_map=on_map)
         if self.history:
             self.history[-1] |= {k: final[k] for k in ("loss", "max_f", "ap")}
-        self.metrics = {
-            **final,
-            "train_loss": self.history[-1]["train_loss"] if self.history else None,
-            "epochs": self.epoch,
-            "train_frames": len(train_set),
-            "test_frames": len(test_set),
-        }
+        train_loss = self.history[-1]["train_loss"] if self.history else None
+        self.metrics = {**final, "train_loss": train_loss, "epochs": self.epoch, "train_frames": len(train_set),
+                        "test_frames": len(test_set)}
         self.save(complete=True)
 
     def save(self, *, complete: bool) -> None:

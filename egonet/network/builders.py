@@ -20,43 +20,15 @@ from collections.abc import Callable, Mapping
 
 from egonet.errors import EgonetError
 from egonet.network.lite import LITE_MEAN, LITE_STD, LiteStream, efficientnet_lite0_state_dict
-from egonet.network.model import (
-    COORD_ORDERS,
-    DHG_ORDERS,
-    CoordConvention,
-    CoordinateMaps,
-    CoordOrder,
-    DHGOrder,
-    EarlyFusionEgoNet,
-    EgoNetModel,
-    JointHead,
-    ModelConfig,
-    TwoStreamEgoNet,
-    _check_choice,
-    _check_coords,
-)
-from egonet.network.streams import (
-    RELEASED_BGR_MEAN,
-    RELEASED_DHG_FLIPPED_MEAN,
-    InputNormalization,
-    VGGDeepLabStream,
-    _check_width_divisor,
-)
+from egonet.network.model import (COORD_ORDERS, DHG_ORDERS, CoordConvention, CoordinateMaps, CoordOrder, DHGOrder,
+                                  EarlyFusionEgoNet, EgoNetModel, JointHead, ModelConfig, TwoStreamEgoNet,
+                                  _check_choice, _check_coords)
+from egonet.network.streams import (RELEASED_BGR_MEAN, RELEASED_DHG_FLIPPED_MEAN, InputNormalization, VGGDeepLabStream,
+                                    _check_width_divisor)
 
-__all__ = [
-    "MODELS",
-    "build_deeplab_dhg",
-    "build_deeplab_rgb",
-    "build_egonet",
-    "build_egonet_dhg",
-    "build_egonet_lite",
-    "build_egonet_rgb",
-    "build_model",
-    "build_no_coords",
-    "build_no_embedding",
-    "build_single_stream",
-    "saved_options",
-]
+__all__ = ["MODELS", "build_deeplab_dhg", "build_deeplab_rgb", "build_egonet", "build_egonet_dhg",
+           "build_egonet_lite", "build_egonet_rgb", "build_model", "build_no_coords", "build_no_embedding",
+           "build_single_stream", "saved_options"]
 
 #: What a checkpoint saved before these options existed was trained with.
 LEGACY_ORDERS = {"coord_order": "cols-first", "dhg_order": "depth-height-gray"}

@@ -13,15 +13,8 @@ from torch import Tensor, nn
 from egonet.errors import EgonetError
 from egonet.network.streams import InputNormalization
 
-__all__ = [
-    "MIN_SIDE",
-    "CoordinateMaps",
-    "EarlyFusionEgoNet",
-    "EgoNetModel",
-    "JointHead",
-    "ModelConfig",
-    "TwoStreamEgoNet",
-]
+__all__ = ["MIN_SIDE", "CoordinateMaps", "EarlyFusionEgoNet", "EgoNetModel", "JointHead", "ModelConfig",
+           "TwoStreamEgoNet"]
 
 #: Smallest accepted input height and width.
 MIN_SIDE = 8
