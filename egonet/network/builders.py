@@ -118,30 +118,40 @@ def _two_stream_vgg(
     )
 
 
-def build_egonet(
-    *,
-    coords: CoordConvention = "normalized",
-    coord_order: CoordOrder = "rows-first",
-    dhg_order: DHGOrder = "gray-height-depth",
-    dropout: float = 0.5,
-    width_divisor: int = 1,
-) -> TwoStreamEgoNet:
-    """The faithful EgoNet (RGB + DHG + coordinates + fc9 embedding); 138,502,786 parameters.
+def _vgg_builder(name: str, *, rgb: bool, dhg: bool, embed: int | None, doc: str) -> Callable[..., TwoStreamEgoNet]:
+    """The builder of a two-stream VGG variant that takes every shared option (see the module docstring)."""
 
-    Returns:
-        The model, randomly initialised (Kaiming for convolutions; there are
-        no ImageNet DeepLab weights offline).
+    def build(
+        *,
+        coords: CoordConvention = "normalized",
+        coord_order: CoordOrder = "rows-first",
+        dhg_order: DHGOrder = "gray-height-depth",
+        dropout: float = 0.5,
+        width_divisor: int = 1,
+    ) -> TwoStreamEgoNet:
+        _check_coords(coords)
+        return _two_stream_vgg(name, rgb=rgb, dhg=dhg, coords=coords, embed=embed, dropout=dropout,
+                               width_divisor=width_divisor, coord_order=coord_order, dhg_order=dhg_order)
 
-    Example:
-        >>> model = build_egonet()  # doctest: +SKIP
-        >>> model(torch.rand(1, 3, 33, 41), torch.rand(1, 3, 33, 41)).shape  # doctest: +SKIP
-        torch.Size([1, 2, 33, 41])
-    """
-    _check_coords(coords)
-    return _two_stream_vgg(
-        "egonet", rgb=True, dhg=True, coords=coords, embed=1024, dropout=dropout,
-        width_divisor=width_divisor, coord_order=coord_order, dhg_order=dhg_order,
-    )
+    build.__name__ = build.__qualname__ = "build_" + name.replace("-", "_")
+    build.__doc__ = doc
+    return build
+
+
+build_egonet = _vgg_builder(
+    "egonet", rgb=True, dhg=True, embed=1024,
+    doc="The faithful EgoNet (RGB + DHG + coordinates + fc9 embedding); 138,502,786 parameters, randomly "
+        "initialised (Kaiming for convolutions; there are no ImageNet DeepLab weights offline).",
+)
+build_egonet_dhg = _vgg_builder(
+    "egonet-dhg", rgb=False, dhg=True, embed=1024,
+    doc="Ablation: DHG stream + coordinates + fc9 + fc10 (no RGB); 69,253,954 parameters. ``rgb`` is still "
+        "required (it fixes the frame size) but its values are unused.",
+)
+build_no_embedding = _vgg_builder(
+    "no-embedding", rgb=True, dhg=True, embed=None,
+    doc="Ablation: fc9 removed, fc10 reads the 8194-channel concatenation; 130,125,446 parameters.",
+)
 
 
 def build_egonet_rgb(
@@ -177,50 +187,13 @@ def build_egonet_rgb(
     )
 
 
-def build_egonet_dhg(
-    *,
-    coords: CoordConvention = "normalized",
-    coord_order: CoordOrder = "rows-first",
-    dhg_order: DHGOrder = "gray-height-depth",
-    dropout: float = 0.5,
-    width_divisor: int = 1,
-) -> TwoStreamEgoNet:
-    """Ablation: DHG stream + coordinates + fc9 + fc10 (no RGB); 69,253,954 parameters.
-
-    ``rgb`` is still required (it fixes the frame size) but its values are unused.
-    """
-    _check_coords(coords)
-    return _two_stream_vgg(
-        "egonet-dhg", rgb=False, dhg=True, coords=coords, embed=1024, dropout=dropout,
-        width_divisor=width_divisor, coord_order=coord_order, dhg_order=dhg_order,
-    )
-
-
 def build_no_coords(
     *, dhg_order: DHGOrder = "gray-height-depth", dropout: float = 0.5, width_divisor: int = 1
 ) -> TwoStreamEgoNet:
-    """Ablation: both streams and fc9, no coordinate maps (8192 channels); 138,500,738 parameters.
-    """
+    """Ablation: both streams and fc9, no coordinate maps (8192 channels); 138,500,738 parameters."""
     return _two_stream_vgg(
         "no-coords", rgb=True, dhg=True, coords=None, embed=1024, dropout=dropout,
         width_divisor=width_divisor, dhg_order=dhg_order,
-    )
-
-
-def build_no_embedding(
-    *,
-    coords: CoordConvention = "normalized",
-    coord_order: CoordOrder = "rows-first",
-    dhg_order: DHGOrder = "gray-height-depth",
-    dropout: float = 0.5,
-    width_divisor: int = 1,
-) -> TwoStreamEgoNet:
-    """Ablation: fc9 removed, fc10 reads the 8194-channel concatenation; 130,125,446 parameters.
-    """
-    _check_coords(coords)
-    return _two_stream_vgg(
-        "no-embedding", rgb=True, dhg=True, coords=coords, embed=None, dropout=dropout,
-        width_divisor=width_divisor, coord_order=coord_order, dhg_order=dhg_order,
     )
 
 
