@@ -29,7 +29,7 @@ from collections.abc import Sequence
 
 import torch
 
-from egonet.network import build_model
+from egonet.network.builders import build_model
 
 
 def interleaved_times(
@@ -41,7 +41,7 @@ def interleaved_times(
     machine's background load during the bench affects them alike.
 
     Args:
-        names: Keys of ``egonet.network.MODELS``.
+        names: Keys of ``egonet.network.builders.MODELS``.
         runs: Timed runs of each model, after one warm-up run each.
         height: Frame height.
         width: Frame width.

@@ -26,8 +26,8 @@ import time
 import torch
 import torch.nn.functional as F
 
-from egonet.network import build_model
-from egonet.train import DEFAULT_LR
+from egonet.checkpoint import DEFAULT_LR
+from egonet.network.builders import build_model
 
 
 def iteration_times(name: str, *, runs: int, batch: int, height: int, width: int) -> list[float]:

@@ -26,7 +26,7 @@ shapes (:data:`RELEASES`): RGB+DHG (``conv1_1`` ... ``fc7``, ``dhg_conv1_1``
 only (``fc9`` 512 wide on 4098 channels, plus ``fc8_obj``, 41 outputs on
 fc7, which nothing downstream uses: it is checked and left out). The
 shapes a release must have come from the model builder itself
-(:func:`egonet.network.build_model` with the release's options), so the
+(:func:`egonet.network.builders.build_model` with the release's options), so the
 loader and the network cannot disagree. Anything else (a missing layer, a
 wrong shape, a truncated file) is refused with one line naming the layer
 and both shapes.
@@ -51,8 +51,11 @@ import numpy as np
 import torch
 from torch import nn
 
+from egonet.checkpoint import TrainConfig, checkpoint_state
 from egonet.errors import EgonetError
-from egonet.network import EgoNetModel, TwoStreamEgoNet, VGGDeepLabStream, build_model
+from egonet.network.builders import build_model
+from egonet.network.model import EgoNetModel, TwoStreamEgoNet
+from egonet.network.streams import VGGDeepLabStream
 
 __all__ = [
     "DEPLOY_SIZE",
@@ -90,8 +93,11 @@ V1_TYPES = {
 }
 
 
-class _Truncated(Exception):
+class _Truncated(EgonetError):
     """The wire data ends inside a field."""
+
+    def __init__(self):
+        super().__init__("the wire data ends inside a field")
 
 
 # --------------------------------------------------------------------------- reading
@@ -168,7 +174,7 @@ def _read(path: Path, *, progress: Progress | None = None) -> tuple[dict[str, Ca
     return layers, buffer
 
 
-class _WireError(Exception):
+class _WireError(EgonetError):
     """Bytes that are not protobuf wire data."""
 
 
@@ -330,7 +336,7 @@ class Release:
     Attributes:
         key: ``"rgb+dhg"`` or ``"rgb"``.
         title: How messages name it (``"the authors' RGB+DHG release"``).
-        model: The :data:`egonet.network.MODELS` name.
+        model: The :data:`egonet.network.builders.MODELS` name.
         options: The builder options that give the released shapes and conventions.
         unused: Layers in the file that the output does not use, by name, with
             their number of outputs (a 1x1 convolution on fc7): read, checked
@@ -462,7 +468,7 @@ def load_caffemodel(
 ) -> EgoNetModel:
     """The authors' released model from its ``.caffemodel``, in eval mode; no Caffe needed.
 
-    The model is :func:`egonet.network.build_model` of the release's builder
+    The model is :func:`egonet.network.builders.build_model` of the release's builder
     (``egonet`` for RGB+DHG, ``egonet-rgb`` with a 512-wide fc9 for RGB) with
     the release's conventions. Its ``predict(rgb, dhg)`` takes ``rgb``
     ``(N, 3, H, W)`` RGB in ``[0, 1]`` and ``dhg`` ``(N, 3, H, W)`` as the
@@ -502,9 +508,9 @@ def checkpoint_from_caffemodel(
     releases: Sequence[Release] = RELEASES,
     progress: Progress | None = None,
 ) -> dict:
-    """A checkpoint (``egonet.train`` format) of a released model, for everything that reads checkpoints.
+    """A checkpoint (``egonet.checkpoint`` format) of a released model, for everything that reads checkpoints.
 
-    :func:`egonet.train.model_from_checkpoint` and
+    :func:`egonet.checkpoint.model_from_checkpoint` and
     ``egonet.predictor.NetworkPredictor.from_checkpoint`` read it like a
     trained one: frames are resized to ``size`` for the forward pass and the
     maps back to each frame's size. It records where it came from under
@@ -520,28 +526,14 @@ def checkpoint_from_caffemodel(
     Returns:
         The checkpoint dict (plain types and tensors; ``torch.save`` it).
     """
-    from egonet.train import CHECKPOINT_FORMAT, TrainConfig
-
     path = Path(path)
     model, release, digest = _load(path, releases=releases, progress=progress)
     config = TrainConfig(model=release.model, model_options=dict(model.config.options), height=size[0], width=size[1],
                          epochs=1, augment=None, device="cpu")
-    return {
-        "format": CHECKPOINT_FORMAT,
-        "model": {"name": model.config.name, "options": dict(model.config.options)},
-        "state_dict": model.state_dict(),
-        "config": config.to_dict(),
-        "fold": "released",
-        "train_keys": [],
-        "test_keys": [],
-        "epoch": 0,
-        "iteration": 0,
-        "complete": True,
-        "metrics": {},
-        "history": [],
-        "released": {"release": release.key, "title": release.title, "file": path.name,
-                     "bytes": path.stat().st_size, "sha256": digest},
-    }
+    released = {"release": release.key, "title": release.title, "file": path.name, "bytes": path.stat().st_size,
+                "sha256": digest}
+    return checkpoint_state(model, config, fold="released", train_keys=[], test_keys=[], epoch=0, iteration=0,
+                            complete=True, metrics={}, history=[], extra={"released": released})
 
 
 def _load(path: str | Path, *, releases: Sequence[Release], progress: Progress | None) -> tuple[EgoNetModel, Release, str]:

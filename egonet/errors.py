@@ -1,4 +1,4 @@
-"""The one error egonet raises for input it cannot use.
+"""The one error egonet raises for input it cannot use, and the base of its others.
 
 ``EgonetError`` is a ``ValueError`` whose ``field`` names the argument or
 file at fault and whose message says what to do instead. The app maps it
@@ -33,3 +33,10 @@ class EgonetError(ValueError):
             prefix = f"{field}: "
             reason = message[len(prefix):] if field and message.startswith(prefix) else message
         self.reason = reason
+
+
+class Cancelled(EgonetError):
+    """Raised by a progress callback to stop long work (training, converting weights); what was saved stays."""
+
+    def __init__(self, message: str = "cancelled"):
+        super().__init__(message)

@@ -24,7 +24,7 @@ downloaded):
 :func:`initialise` reads a file and copies its layers into every VGG stream
 of a model (``rgb_stream``, ``dhg_stream``, or the early-fusion ``stream``)::
 
-    >>> from egonet.network import build_model
+    >>> from egonet.network.builders import build_model
     >>> model = build_model("egonet")                        # doctest: +SKIP
     >>> weights = initialise(model, "vgg16-397923af.pth")    # doctest: +SKIP
     >>> weights.name, weights.sha256[:8], weights.kind       # doctest: +SKIP
@@ -44,8 +44,10 @@ import numpy as np
 import torch
 from torch import Tensor, nn
 
+from egonet.caffe import read_caffemodel
 from egonet.errors import EgonetError
-from egonet.network import RELEASED_BGR_MEAN, EarlyFusionEgoNet, EgoNetModel, TwoStreamEgoNet, VGGDeepLabStream
+from egonet.network.model import EarlyFusionEgoNet, EgoNetModel, TwoStreamEgoNet
+from egonet.network.streams import RELEASED_BGR_MEAN, VGGDeepLabStream
 
 __all__ = [
     "DEEPLAB_LAYERS",
@@ -274,8 +276,6 @@ def _read_caffemodel(path: Path) -> dict[str, list[np.ndarray]]:
     An inner product's weight comes back 2-D (legacy files store it as
     ``(1, 1, O, I)``), so a plain VGG16's dense fc6/fc7 convert as torchvision's do.
     """
-    from egonet.caffe import read_caffemodel
-
     blobs = {}
     for name, layer in read_caffemodel(path).items():
         if not layer.blobs:

@@ -11,7 +11,7 @@ interface as the baselines in :mod:`egonet.baselines`: ``predict(rgb, dhg)``
 returns an action-object probability map ``(H, W)``::
 
     >>> import numpy as np
-    >>> from egonet.network import build_model
+    >>> from egonet.network.builders import build_model
     >>> from egonet.predictor import NetworkPredictor
     >>> predictor = NetworkPredictor(build_model("egonet-lite"), size=(24, 32))
     >>> rgb = np.zeros((57, 75, 3), np.uint8)
@@ -31,10 +31,10 @@ import numpy as np
 import torch
 from torch import Tensor
 
+from egonet.checkpoint import model_from_checkpoint
 from egonet.data import MIN_SIDE, check_size, resize_frame, resize_probability
 from egonet.errors import EgonetError
-from egonet.network import EgoNetModel
-from egonet.train import model_from_checkpoint
+from egonet.network.model import EgoNetModel
 
 __all__ = ["NetworkPredictor"]
 
@@ -43,7 +43,7 @@ class NetworkPredictor:
     """Numpy in, numpy out at the original resolution, on the model's device.
 
     Args:
-        model: A model from :func:`egonet.network.build_model` (weights loaded).
+        model: A model from :func:`egonet.network.builders.build_model` (weights loaded).
         size: The training size ``(H, W)`` (``TrainConfig.size``): every frame
             is resized to it for the forward pass, as training resized it.
         device: Move the model there first (``"cpu"``, ``"cuda"``...). ``None``
@@ -51,7 +51,7 @@ class NetworkPredictor:
             call time, so moving the model later is fine.
 
     Raises:
-        EgonetError: If ``model`` is not an :class:`~egonet.network.EgoNetModel`
+        EgonetError: If ``model`` is not an :class:`~egonet.network.model.EgoNetModel`
             or ``size`` is not ``(H, W)`` with integers >= 8.
     """
 
@@ -64,7 +64,7 @@ class NetworkPredictor:
     ) -> None:
         if not isinstance(model, EgoNetModel):
             raise EgonetError(
-                f"model must be an EgoNetModel from egonet.network.build_model, got {type(model).__name__}",
+                f"model must be an EgoNetModel from egonet.network.builders.build_model, got {type(model).__name__}",
                 field="model",
             )
         self.size = check_size(size)
@@ -75,7 +75,7 @@ class NetworkPredictor:
         """The checkpoint's model (eval mode, on ``device``) at the checkpoint's training size.
 
         Args:
-            state: A checkpoint from :func:`egonet.train.load_checkpoint`.
+            state: A checkpoint from :func:`egonet.checkpoint.load_checkpoint`.
             device: Where the model runs.
         """
         size = (state["config"]["height"], state["config"]["width"])

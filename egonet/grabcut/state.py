@@ -14,6 +14,7 @@ from collections.abc import Mapping, Sequence
 
 import numpy as np
 
+from egonet import rle
 from egonet.errors import EgonetError
 from egonet.grabcut.colour import _COMPONENTS, _MODEL_SIZE
 from egonet.grabcut.depth import _DEPTH_MODEL_SIZE
@@ -63,7 +64,7 @@ def _encode_state(levels: Sequence[_Snapshot], *, height: int, width: int, work_
             models[i] = snap.models
             low_shape[i] = snap.low.shape
             low_bits.append(np.packbits(snap.low, axis=None))
-            runs.append(_rle_encode(_unpack(snap)))
+            runs.append(rle.runs(_unpack(snap)))
         else:
             low_bits.append(np.zeros(0, np.uint8))
             runs.append(np.zeros(0, np.uint32))
@@ -132,8 +133,8 @@ def _decode_levels(state: Mapping[str, object], height: int, width: int, *,
         lh, lw = (int(v) for v in a["low_shape"][i])
         bits = a["low_bits"][a["low_offsets"][i] : a["low_offsets"][i + 1]].astype(np.uint8)
         low = np.unpackbits(bits, count=lh * lw).astype(bool).reshape(lh, lw)
-        inside = _rle_decode(a["mask_rle"][a["mask_offsets"][i] : a["mask_offsets"][i + 1]],
-                             (box[3] - box[1], box[2] - box[0]))
+        inside = rle.from_runs(a["mask_rle"][a["mask_offsets"][i] : a["mask_offsets"][i + 1]],
+                               (box[3] - box[1], box[2] - box[0]), field="state")
         levels.append(_Snapshot(box=box, strokes=snap_strokes, models=a["models"][i].astype(np.float64),
                                 low=low, mask_bits=np.packbits(inside, axis=None)))
     return levels
@@ -142,22 +143,3 @@ def _decode_levels(state: Mapping[str, object], height: int, width: int, *,
 def _offsets(parts: Sequence[np.ndarray]) -> np.ndarray:
     return np.cumsum([0] + [len(p) for p in parts]).astype(np.int64)
 
-
-def _rle_encode(mask: np.ndarray) -> np.ndarray:
-    """Run lengths of a bool array in row-major order, starting with a False run."""
-    flat = mask.ravel()
-    if flat.size == 0:
-        return np.zeros(0, np.uint32)
-    change = np.flatnonzero(flat[1:] != flat[:-1]) + 1
-    runs = np.diff(np.concatenate([[0], change, [flat.size]]))
-    if flat[0]:
-        runs = np.concatenate([[0], runs])
-    return runs.astype(np.uint32)
-
-
-def _rle_decode(runs: np.ndarray, shape: tuple[int, int]) -> np.ndarray:
-    values = np.arange(len(runs)) % 2 == 1
-    flat = np.repeat(values, runs.astype(np.int64))
-    if flat.size != shape[0] * shape[1]:
-        raise EgonetError(f"state: mask run lengths sum to {flat.size}, expected {shape[0] * shape[1]}", field="state")
-    return flat.reshape(shape)

@@ -20,7 +20,7 @@ from app.services.demo import create_demo
 from app.services.labelling import suggest
 from app.services.scoring import build_report
 from app.services.training import released
-from egonet.train import load_checkpoint
+from egonet.checkpoint import load_checkpoint
 from tests.caffe_files import TINY, TINY_RELEASES, release_layers, write_caffemodel
 
 

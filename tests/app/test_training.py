@@ -14,7 +14,7 @@ from app.models import Activity, Frame
 from app.models.training import Checkpoint, FoldsMode, Prediction, RunStatus, TrainingEpoch, TrainingRun
 from app.services import media, training
 from app.services.demo import create_demo
-from egonet.train import load_checkpoint
+from egonet.checkpoint import load_checkpoint
 
 TINY = {"model": "egonet-lite", "epochs": 1, "width": 32, "height": 24, "batch_size": 2, "device": "cpu"}
 

@@ -7,8 +7,8 @@ import pytest
 
 from app.extensions import db
 from app.models import Frame
-from app.services.labelling import coco_decode
 from app.services.importing import FrameItem, add_frames
+from egonet.rle import decode as coco_decode
 from tests.browser.conftest import screenshot, sign_in
 from tests.browser.test_label import area, drag, open_frame, settle
 

@@ -19,9 +19,9 @@ import torch
 
 from egonet import io
 from egonet.caffe import RELEASES, checkpoint_from_caffemodel, identify_release, load_caffemodel, read_caffemodel
-from egonet.network import saved_options
+from egonet.checkpoint import load_checkpoint, model_from_checkpoint, save_checkpoint
+from egonet.network.builders import saved_options
 from egonet.predictor import NetworkPredictor
-from egonet.train import load_checkpoint, model_from_checkpoint, save_checkpoint
 from tests.caffe_files import FULL, TINY, TINY_RELEASES, release_layers, selector_layers, write_caffemodel
 from tests.realdata import EGONET_SAMPLES
 

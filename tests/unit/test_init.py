@@ -26,7 +26,8 @@ from egonet.init import (
     load_init,
     vgg16_to_deeplab,
 )
-from egonet.network import RELEASED_BGR_MEAN, build_model
+from egonet.network.builders import build_model
+from egonet.network.streams import RELEASED_BGR_MEAN
 
 # (in, out) of the 13 convolutions at full VGG16 size.
 VGG16_WIDTHS = [(3, 64), (64, 64), (64, 128), (128, 128), (128, 256), (256, 256), (256, 256),
@@ -249,7 +250,7 @@ def test_initialise_copies_into_both_streams_of_egonet(tmp_path):
 
 
 def test_initialised_run_takes_the_papers_lr_converted_to_the_mean_loss():
-    from egonet.train import DEFAULT_LR, TrainConfig, paper_lr
+    from egonet.checkpoint import DEFAULT_LR, TrainConfig, paper_lr
 
     assert paper_lr(height=481, width=641) == pytest.approx(0.308, abs=1e-3)  # 1e-6 x 481 x 641
     config = TrainConfig(model="egonet", init="vgg16.pth", height=240, width=320)

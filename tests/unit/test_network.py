@@ -14,20 +14,11 @@ import numpy as np
 import pytest
 import torch
 
-from egonet.network import (
-    MODELS,
-    CoordinateMaps,
-    EgoNetModel,
-    InputNormalization,
-    JointHead,
-    LiteStream,
-    ModelConfig,
-    TwoStreamEgoNet,
-    VGGDeepLabStream,
-    build_model,
-    saved_options,
-)
 from egonet.data import resize_frame, resize_probability
+from egonet.network.builders import MODELS, build_model, saved_options
+from egonet.network.lite import LiteStream
+from egonet.network.model import CoordinateMaps, EgoNetModel, JointHead, ModelConfig, TwoStreamEgoNet
+from egonet.network.streams import InputNormalization, VGGDeepLabStream
 from egonet.predictor import NetworkPredictor
 
 VGG_NAMES = ["egonet", "egonet-rgb", "egonet-dhg", "single-stream", "no-coords", "no-embedding"]

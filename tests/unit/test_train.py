@@ -14,21 +14,12 @@ import pytest
 import torch
 
 from egonet import synth
+from egonet.checkpoint import CHECKPOINT_FORMAT, DEFAULT_LR, TrainConfig, load_checkpoint, model_from_checkpoint
 from egonet.data import Sample
 from egonet.dhg import encode_dhg
+from egonet.errors import Cancelled
 from egonet.predictor import NetworkPredictor
-from egonet.train import (
-    CHECKPOINT_FORMAT,
-    DEFAULT_LR,
-    Cancelled,
-    Fold,
-    TrainConfig,
-    cross_validate,
-    load_checkpoint,
-    make_folds,
-    model_from_checkpoint,
-    resolve_device,
-)
+from egonet.train import Fold, cross_validate, make_folds, resolve_device
 
 ROOT = Path(__file__).resolve().parents[2]
 
@@ -300,7 +291,8 @@ def test_torchrun_trains_on_two_processes_and_only_rank_zero_writes(tmp_path):
         sys.path.insert(0, {str(ROOT)!r})
         sys.path.insert(0, {str(Path(__file__).parent)!r})
         from test_train import TINY, tiny_samples
-        from egonet.train import Fold, TrainConfig, cross_validate
+        from egonet.checkpoint import TrainConfig
+        from egonet.train import Fold, cross_validate
         rank = int(os.environ["RANK"])
         out = {str(tmp_path / "out")!r}
         results = cross_validate(tiny_samples(6), TrainConfig(**(TINY | {{"batch_size": 4}}), epochs=2), out_dir=out,

@@ -6,7 +6,6 @@ from dataclasses import dataclass, field
 from pathlib import Path
 
 import numpy as np
-import pycocotools.mask as coco_mask
 
 from app.errors import Problem
 from app.extensions import db
@@ -14,9 +13,9 @@ from app.models import Activity, Annotation, Frame, Instance, InstanceKind, Role
 from app.services import media
 from app.services.exchange.selection import ANNOTATORS_DIR, COCO_FILE, MASKS_DIR, ExchangeProblem, frame_names
 from app.services.importing import unpacked
-from app.services.labelling.masks import Rle, coco_decode, decode_rle
+from app.services.labelling.masks import Rle, decode_rle
 from app.validation import Invalid
-from egonet import io
+from egonet import io, rle
 
 
 @dataclass
@@ -290,8 +289,7 @@ def _decode_segmentation(segmentation: object, frame: Frame, where: str) -> np.n
     h, w = frame.height, frame.width
     if isinstance(segmentation, list):  # polygons
         try:
-            rles = coco_mask.frPyObjects([list(map(float, p)) for p in segmentation], h, w)
-            return coco_decode(coco_mask.merge(rles))
+            return rle.from_polygons(segmentation, h, w)
         except (TypeError, ValueError, IndexError) as exc:
             raise ExchangeProblem(f"{where}: unreadable polygon ({exc})") from None
     if not isinstance(segmentation, dict) or set(segmentation) != {"size", "counts"}:

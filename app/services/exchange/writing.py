@@ -11,7 +11,6 @@ from pathlib import Path
 from typing import IO
 
 import numpy as np
-import pycocotools.mask as coco_mask
 
 from app.models import Annotation, Frame, Instance
 from app.services import media
@@ -27,7 +26,7 @@ from app.services.exchange.selection import (
     frame_names,
     select_export,
 )
-from egonet import io
+from egonet import io, rle
 
 Write = Callable[[str, bytes], None]
 
@@ -143,15 +142,15 @@ def _coco_image(image_id: int, group: FrameExport, name: str, records: list[dict
 
 
 def _coco_object(object_id: int, image_id: int, annotation: Annotation, instance: Instance, mask: np.ndarray) -> dict:
-    rle = coco_mask.encode(np.asfortranarray(mask.astype(np.uint8)))
+    segmentation = rle.encode(mask)
     return {
         "id": object_id,
         "image_id": image_id,
         "category_id": CATEGORY["id"],
         "iscrowd": 0,
-        "segmentation": {"size": [int(v) for v in rle["size"]], "counts": rle["counts"].decode("ascii")},
-        "area": int(coco_mask.area(rle)),
-        "bbox": [float(v) for v in coco_mask.toBbox(rle)],
+        "segmentation": segmentation,
+        "area": rle.area(segmentation),
+        "bbox": rle.bbox(segmentation),
         "attributes": {
             "annotator": annotation.author.username,
             "status": annotation.status.value,

@@ -43,7 +43,7 @@ from app.services.labelling.grabcut import (
     stroke_pixels,
 )
 from app.services.labelling.history import MAX_HISTORY_BYTES, get_history, put_history
-from app.services.labelling.masks import Rle, coco_decode, decode_rle, max_rle_chars
+from app.services.labelling.masks import Rle, decode_rle
 from app.services.labelling.propagation import (
     FILMSTRIP_MAX,
     Filmstrip,
@@ -78,6 +78,7 @@ from app.services.labelling.review import (
     review_annotation,
     review_queue,
 )
+from egonet.rle import max_chars as max_rle_chars
 
 __all__ = [
     "AUTHOR_STATUSES",
@@ -103,7 +104,6 @@ __all__ = [
     "check_open",
     "check_open_frame",
     "check_stroke",
-    "coco_decode",
     "copy_from_previous",
     "decode_rle",
     "empty_mask",

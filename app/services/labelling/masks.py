@@ -1,20 +1,16 @@
 """Masks as the labelling page and exports send them: COCO run-length
-encodings (RLE) and binary PNGs, checked against the frame before decoding.
-
-A hostile RLE string costs no more than a frame's worth of work: its length,
-alphabet, number widths, signs and total are checked before pycocotools
-decodes it (pycocotools leaves the rest of a mask uninitialised when the
-runs fall short). A PNG's size is read from its header first.
+encodings (RLE, checked and decoded by ``egonet.rle``) and binary PNGs,
+checked against the frame before decoding. A PNG's size is read from its
+header first.
 """
 
-import warnings
-
 import numpy as np
-import pycocotools.mask as coco_mask
 
 from app.errors import Problem
 from app.validation import Field, Invalid
 from egonet import io as egonet_io
+from egonet import rle as egonet_rle
+from egonet.errors import EgonetError
 
 
 class Rle(Field):
@@ -37,138 +33,17 @@ class Rle(Field):
         return value
 
 
-def max_rle_chars(pixels: int) -> int:
-    """The longest compressed counts string of a mask of ``pixels`` pixels.
-
-    pycocotools and the page write each count in as few characters as it
-    takes, and no empty run but the first, so a mask has at most pixels + 1
-    counts of at least one character each. A count written as a difference
-    ``d`` in k >= 2 characters has ``|d| >= 2**(5k - 6)``, and the
-    differences add up to at most 2 * pixels (each is at most the sum of
-    the two runs it compares), so at most 2 * pixels / 2**(5k - 6) counts
-    take a k-th character: 2 * pixels * (1/16 + 1/512 + ...) = 4 * pixels / 31
-    characters beyond one per count.
-    """
-    return pixels + 1 + 4 * pixels // 31
-
-
-def _count_chars(pixels: int) -> int:
-    """The most characters one count of such a mask takes (a difference in [-pixels, pixels])."""
-    k = 1
-    while 2 ** (5 * k - 1) <= pixels:
-        k += 1
-    return k
-
-
-def _bad_counts(where: str, reason: str) -> Problem:
-    return Problem(f"{where}: {reason}", fields={where: reason})
-
-
-def _string_runs(text: str, pixels: int, *, where: str) -> np.ndarray:
-    """Run lengths from COCO's compressed string, checked: pycocotools leaves
-    the rest of the mask uninitialised when the runs fall short, and older
-    versions read past a string that ends inside a number.
-
-    Each count is written in 5-bit groups, least significant first (6 bits
-    per character offset by 48: 0x20 says another group follows, 0x10 of the
-    last group is the sign), from the fourth count on as the difference to
-    the count two places before.
-
-    Raises:
-        Problem: 400 naming ``where`` (the counts' field).
-    """
-    if len(text) > max_rle_chars(pixels):
-        raise _bad_counts(where, f"{len(text)} characters, more than a mask of {pixels} pixels takes "
-                                 f"({max_rle_chars(pixels)} at most)")
-    codes = np.frombuffer(text.encode("ascii", "replace"), np.uint8) - np.uint8(48)  # the alphabet is 0..63
-    if not text.isascii() or (codes >= 64).any():
-        wide = np.frombuffer(text.encode("utf-32-le", "surrogatepass"), np.uint32)
-        first = text[np.argmax((wide < 48) | (wide >= 112))]
-        raise _bad_counts(where, f"character {first!r} is not part of COCO's RLE alphabet")
-    if not codes.size:
-        return codes.astype(np.int64)
-    last = (codes & 0x20) == 0  # the last character of a number
-    if not last[-1]:
-        raise _bad_counts(where, "the string ends inside a number")
-    ends = np.flatnonzero(last)
-    widths = np.empty_like(ends)
-    widths[0] = ends[0] + 1
-    np.subtract(ends[1:], ends[:-1], out=widths[1:])
-    if widths.max() > _count_chars(pixels):
-        raise _bad_counts(where, f"a number of {widths.max()} characters; no count of this mask takes more than "
-                                 f"{_count_chars(pixels)}")
-    if len(ends) > pixels + 1:
-        raise _bad_counts(where, f"{len(ends)} runs, more than a mask of {pixels} pixels has ({pixels + 1} at most)")
-    return _unpack_counts(codes, ends, widths)
-
-
-def _unpack_counts(codes: np.ndarray, ends: np.ndarray, widths: np.ndarray) -> np.ndarray:
-    """The run lengths of checked codes, given where each number ends and how wide it is."""
-    # Horner's rule from each number's last (most significant) group back, on
-    # the numbers that still have groups left.
-    values = (codes[ends] & 0x1F).astype(np.int64)
-    longer = np.flatnonzero(widths > 1)
-    for j in range(1, int(widths.max())):
-        longer = longer[widths[longer] > j]
-        values[longer] = (values[longer] << 5) | (codes[ends[longer] - j] & 0x1F)
-    negative = np.flatnonzero(codes[ends] & 0x10)
-    values[negative] -= np.left_shift(1, 5 * widths[negative])
-    runs = values.copy()
-    runs[1::2] = np.cumsum(values[1::2])  # counts[i] = values[i] + counts[i - 2] from i = 3 on
-    runs[2::2] = np.cumsum(values[2::2])
-    return runs
-
-
-def _list_runs(counts: list, pixels: int, *, where: str) -> np.ndarray:
-    if len(counts) > pixels + 1:  # before looking at each
-        raise _bad_counts(where, f"{len(counts)} runs, more than a mask of {pixels} pixels has ({pixels + 1} at most)")
-    if not set(map(type, counts)) <= {int}:
-        raise _bad_counts(where, "must be non-negative integers")
-    try:
-        return np.array(counts, np.int64)
-    except OverflowError:
-        raise _bad_counts(where, f"a run is longer than the mask's {pixels} pixels") from None
-
-
-def coco_decode(rle: dict) -> np.ndarray:
-    """A bool ``(H, W)`` mask from a compressed COCO RLE, with pycocotools."""
-    with warnings.catch_warnings():
-        # pycocotools' decoder predates numpy 2's __array__(copy=...) and says so.
-        warnings.simplefilter("ignore", DeprecationWarning)
-        return np.ascontiguousarray(coco_mask.decode(rle), dtype=bool)
-
-
 def decode_rle(rle: dict, shape: tuple[int, int], *, field: str) -> np.ndarray:
-    """A bool ``(H, W)`` mask from a checked ``Rle`` value.
-
-    The counts are checked (length, alphabet, signs, total) before
-    pycocotools decodes them, so a hostile string costs no more than a
-    frame's worth of work.
+    """A bool ``(H, W)`` mask from a checked ``Rle`` value (``egonet.rle.decode``).
 
     Raises:
         Problem: 400 naming ``field`` when the size is not the frame's or
             the runs do not cover the mask exactly.
     """
-    h, w = shape
-    if list(rle["size"]) != [h, w]:
-        raise Problem(
-            f"{field}: the mask is {rle['size'][1]}x{rle['size'][0]}, the frame {w}x{h}",
-            fields={f"{field}.size": f"must be [{h}, {w}] (the frame's height and width)"},
-        )
-    counts, where = rle["counts"], f"{field}.counts"
-    if isinstance(counts, str):
-        runs = _string_runs(counts, h * w, where=where)
-    else:
-        runs = _list_runs(counts, h * w, where=where)
-    if (runs < 0).any():
-        raise _bad_counts(where, "a run length is negative")
-    total = int(runs.sum())
-    if total != h * w:
-        raise Problem(f"{where}: the runs cover {total} pixels, the mask has {h * w}",
-                      fields={where: f"must add up to {h * w} pixels"})
-    if isinstance(counts, str):
-        return coco_decode({"size": [h, w], "counts": counts.encode()})
-    return coco_decode(coco_mask.frPyObjects({"size": [h, w], "counts": counts}, h, w))
+    try:
+        return egonet_rle.decode(rle, shape, field=field)
+    except EgonetError as exc:
+        raise Problem.from_egonet(exc) from None
 
 
 def decode_mask_png(data: bytes, shape: tuple[int, int], *, field: str = "mask") -> np.ndarray:

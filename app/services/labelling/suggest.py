@@ -191,7 +191,7 @@ def _usable_checkpoints(run: TrainingRun, frame: Frame | None) -> list[Checkpoin
 def _uses_dhg(run: TrainingRun) -> bool:
     import torch
 
-    from egonet.network import build_model
+    from egonet.network.builders import build_model
 
     with torch.device("meta"):  # shapes only: instant
         return build_model(run.model_name, **run.model_options).uses_dhg

@@ -130,7 +130,7 @@ def _check_init(config) -> dict[str, str]:
     import torch
 
     from egonet.init import check_init, load_init
-    from egonet.network import build_model
+    from egonet.network.builders import build_model
 
     try:
         weights = load_init(config.init)
@@ -143,7 +143,7 @@ def _check_init(config) -> dict[str, str]:
 
 def _train_config(request: RunRequest):
     """The engine's configuration of a request; its checks name the request's field."""
-    from egonet.train import TrainConfig
+    from egonet.checkpoint import TrainConfig
 
     try:
         return TrainConfig(
@@ -202,7 +202,7 @@ def _check_pretrained(model: str) -> None:
     """ImageNet weights exist for egonet-lite only, from an optional package."""
     import importlib.util
 
-    from egonet.network import EFFICIENTNET_LITE0_PACKAGE
+    from egonet.network.lite import EFFICIENTNET_LITE0_PACKAGE
 
     if model != "egonet-lite":
         raise TrainingProblem(f"ImageNet weights can be had offline for egonet-lite only, not {model}", field="pretrained")
@@ -235,7 +235,7 @@ def _check_data(frames: list[Frame], config) -> None:
     """Refuse what would fail in the worker: too few activities or frames, DHG missing."""
     import torch
 
-    from egonet.network import build_model
+    from egonet.network.builders import build_model
     from egonet.train import make_folds
 
     if not frames:

@@ -28,6 +28,7 @@ from app.services.training.control import RunRequest, TrainingProblem, cancel_ru
 from app.services.training.predictions import FoldScorer
 from app.services.training.history import record_epochs
 from egonet import io
+from egonet.errors import Cancelled
 
 log = logging.getLogger(__name__)
 
@@ -72,8 +73,6 @@ class _Recorder:
         self.scorer = FoldScorer()
 
     def progress(self, progress) -> None:
-        from egonet.train import Cancelled
-
         if self.on_progress is not None:
             self.on_progress(progress)
         now = time.monotonic()
@@ -151,13 +150,8 @@ def execute_run(run_id: int, *, on_progress: Callable | None = None) -> Training
     Raises:
         Exception: Whatever made the run fail, after the row says so.
     """
-    from egonet.train import (
-        Cancelled,
-        TrainConfig,
-        cross_validate,
-        resolve_device,
-        setup_distributed,
-    )
+    from egonet.checkpoint import TrainConfig
+    from egonet.train import cross_validate, resolve_device, setup_distributed
 
     run = db.session.get(TrainingRun, run_id)
     if run is None:
@@ -268,7 +262,8 @@ def _samples(activity_ids: list[int] | None) -> list:
 
 def _resumed_plan(run: TrainingRun, samples: list, resume_id: int):
     """A run that continues a checkpoint: that checkpoint's fold, on the same frames."""
-    from egonet.train import Fold, fold_slug, load_checkpoint
+    from egonet.checkpoint import load_checkpoint
+    from egonet.train import Fold, fold_slug
 
     checkpoint = db.session.get(Checkpoint, resume_id)
     if checkpoint is None:

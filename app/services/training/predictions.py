@@ -224,7 +224,8 @@ def predict(
     """
     from app.services import ground_truth
     from egonet.predictor import NetworkPredictor
-    from egonet.train import load_checkpoint, resolve_device
+    from egonet.checkpoint import load_checkpoint
+    from egonet.train import resolve_device
 
     if not frames:
         raise TrainingProblem("no frames to predict", field="frames")

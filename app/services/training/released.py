@@ -34,7 +34,7 @@ from app.models import User, utcnow
 from app.models.training import Checkpoint, FoldsMode, RunStatus, TrainingRun
 from app.queue import enqueue
 from app.services.training.control import TrainingProblem, checkpoint_root, claim_run
-from egonet.errors import EgonetError
+from egonet.errors import Cancelled, EgonetError
 
 CHUNK_BYTES = 8 * 1024 * 1024
 """The most one upload request may carry (well under ``MAX_CONTENT_LENGTH``)."""
@@ -44,10 +44,6 @@ MAX_PENDING_UPLOADS = 4
 STALE_UPLOAD_S = 24 * 3600
 PROGRESS_INTERVAL_S = 1.0
 _TOKEN = re.compile(r"[0-9a-f]{32}")
-
-
-class Cancelled(Exception):
-    """The run was cancelled while its weights were being converted."""
 
 
 def uploads_root() -> Path:
@@ -123,7 +119,7 @@ def convert_release(run_id: int, path: Path, *, delete: bool = False, releases=N
         on_progress: Also called with ``(bytes done, file size)`` (the CLI's bar).
     """
     from egonet.caffe import RELEASES, checkpoint_from_caffemodel
-    from egonet.train import save_checkpoint
+    from egonet.checkpoint import save_checkpoint
 
     run = db.session.get(TrainingRun, run_id)
     if run is None:

@@ -1,8 +1,7 @@
 """The light EgoNet stream: EfficientNet-Lite0 at output stride 8, and its ImageNet weights.
 
-``egonet.network.build_egonet_lite`` composes two of these streams with
-EgoNet's coordinate embedding; they live here so the network module keeps to
-the faithful model and its variants.
+``egonet.network.builders.build_egonet_lite`` composes two of these streams with
+EgoNet's coordinate embedding.
 """
 
 from __future__ import annotations
