@@ -151,3 +151,28 @@ def test_the_reader_sees_circles_inside_functions_and_packages(tmp_path, monkeyp
 def test_js_reader_sees_both_import_forms():
     sample = "import { a } from './one.js';\nexport { b } from './two.js';\nconst c = await import('./three.js');\n"
     assert {a or b for a, b in JS_IMPORT.findall(sample)} == {"./one.js", "./two.js", "./three.js"}
+
+
+def room(module: str) -> str:
+    """A folder of the house: a room prefix, services and egonet by sub-package."""
+    best = max((p for _, prefixes in LAYERS for p in prefixes if module == p or module.startswith(p + ".")), key=len)
+    rest = module[len(best) + 1 :].split(".")[0] if module != best else ""
+    if best in ("app.services", "egonet") and rest and (ROOT / best.replace(".", "/") / rest).is_dir():
+        return f"{best}.{rest}"
+    return best
+
+
+def house_picture() -> str:
+    """docs/architecture.md's picture: rooms by floor, imports between rooms as arrows."""
+    arrows = sorted({(room(a), room(b)) for a, targets in graph().items() for b in targets if room(a) != room(b)})
+    lines = ["```mermaid", "flowchart TD"]
+    for i, (floor, _) in enumerate(LAYERS):
+        rooms = sorted({room(m) for m in graph() if room_of(m) == i})
+        lines += [f'  subgraph floor{i}["{floor}"]', *(f'    {r.replace(".", "_")}["{r}"]' for r in rooms), "  end"]
+    lines += [f"  {a.replace('.', '_')} --> {b.replace('.', '_')}" for a, b in arrows]
+    return "\n".join([*lines, "```"]) + "\n"
+
+
+def test_the_house_picture_is_current():
+    doc = (ROOT / "docs" / "architecture.md").read_text()
+    assert house_picture() in doc, "redraw it: python -c 'from tests.test_layers import house_picture as h; print(h())'"
