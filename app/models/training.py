@@ -2,7 +2,7 @@
 
 A ``TrainingRun`` is one request to train: a model, its options, the folds
 mode and the resolved training configuration (``config``, the dict of
-``egonet.train.TrainConfig.to_dict()`` plus the activities used). The worker
+``egonet.checkpoint.TrainConfig.to_dict()`` plus the activities used). The worker
 (or ``flask egonet train``) moves it from queued to running to done, failed
 or cancelled, and reports ``progress``, ``loss`` and ``eta_s`` as it goes;
 ``updated_at`` is the time of the last report.
