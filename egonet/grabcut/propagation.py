@@ -37,7 +37,8 @@ How, all inside one region of interest (ROI) at a reduced work size:
 5. Back to full resolution: where the cut agrees with the warp, the warp's
    soft values (sub-pixel); elsewhere the cut, smoothed; upsampled
    bilinearly, then parts smaller than 2 % of the largest are dropped (one
-   stray speck would ruin the mask's box).
+   stray speck would ruin the mask's box), unless the flow carried the
+   object there (a tail's tip, a foot past a thin ankle).
 
 A cut that disagrees grossly with the warped mask (overlap below 0.5, or less
 than half or more than twice its area) is a cut that failed (colours of the
@@ -370,13 +371,19 @@ def _cut(next_low: np.ndarray, gc: np.ndarray, models: tuple[np.ndarray, np.ndar
     return (gc & 1).astype(bool)
 
 
-def _drop_specks(mask: np.ndarray) -> np.ndarray:
-    """``mask`` without connected parts smaller than ``_SPECK`` of its largest part."""
+def _drop_specks(mask: np.ndarray, warped: np.ndarray) -> np.ndarray:
+    """``mask`` without the cut's stray specks: parts smaller than ``_SPECK`` of its largest part.
+
+    A small part mostly inside the ``warped`` mask is kept: the flow carried
+    the object there (a tail's tip, a foot beyond a thin ankle, a piece seen
+    past an occluder), so it is the object, not the cut's stray.
+    """
     n, labels, stats, _ = cv2.connectedComponentsWithStats(mask.view(np.uint8), connectivity=8)
     if n <= 2:
         return mask
     areas = stats[1:, cv2.CC_STAT_AREA]
-    keep = np.concatenate([[False], areas >= _SPECK * areas.max()])
+    carried = np.bincount(labels[warped], minlength=n)[1:]
+    keep = np.concatenate([[False], (areas >= _SPECK * areas.max()) | (carried >= 0.5 * areas)])
     return keep[labels]
 
 
@@ -448,4 +455,4 @@ def propagate(prev_rgb: np.ndarray, prev_mask: np.ndarray, next_rgb: np.ndarray,
     # to a fraction of a work-size pixel; elsewhere the cut, smoothed so the
     # bilinear upsample gives a clean edge instead of work-size stairs.
     soft = np.where(label == warped, warp.warped_low, cv2.GaussianBlur(label.astype(np.float32), (0, 0), 0.7))
-    return _drop_specks(roi.paste(soft, shape))
+    return _drop_specks(roi.paste(soft, shape), fallback)
