@@ -315,9 +315,8 @@ def _trimap(warp: _Warp) -> tuple[np.ndarray, np.ndarray]:
     band between, the flow's answer stands except where it is in doubt
     (:func:`_doubt`), since a good flow is better than a colour model where
     object and background look alike; pixels in doubt, and a thin strip
-    along the warped edge, are
-    probable foreground inside the warped mask and probable background
-    outside: the cut decides those.
+    along the warped edge, are probable foreground inside the warped mask
+    and probable background outside: the cut decides those.
     """
     warped = warp.warped_low >= 0.5
     ys, xs = np.nonzero(warped)
