@@ -19,10 +19,15 @@ How, all inside one region of interest (ROI) at a reduced work size:
    sure foreground, pixels beyond its dilated border are sure background. In
    the band between, the flow's answer stands where the flow is sure of
    itself (forward and backward flow agree), because where object and
-   background look alike a good flow beats a colour model; where the flow is
-   in doubt (occlusion, no texture, non-rigid motion), and on a one-pixel
-   strip along the warped edge, the band is probable foreground inside the
-   warped mask and probable background outside it, and the cut decides. The
+   background look alike a good flow beats a colour model. It stands too
+   where the flow is in doubt but agrees with the object's overall motion
+   (an affine map fitted to the sure flow inside the object, applied to the
+   previous mask): a leg or tail that keeps still while its flow is
+   unsure, which the cut would clip off (thin parts cost it little to
+   cut). Where the flow is in doubt and parts from the overall motion
+   (occlusion, no texture, a smear), and on a one-pixel strip along the
+   warped edge, the band is probable foreground inside the warped mask and
+   probable background outside it, and the cut decides. The
    colour models are fitted on the previous frame with its exact mask (not
    the warp's guess), held for the first cut and re-fitted once, so colours
    the object shows only in the new frame can come in.
@@ -37,7 +42,8 @@ How, all inside one region of interest (ROI) at a reduced work size:
 5. Back to full resolution: where the cut agrees with the warp, the warp's
    soft values (sub-pixel); elsewhere the cut, smoothed; upsampled
    bilinearly, then parts smaller than 2 % of the largest are dropped (one
-   stray speck would ruin the mask's box).
+   stray speck would ruin the mask's box), unless the flow carried the
+   object there (a tail's tip, a foot past a thin ankle).
 
 A cut that disagrees grossly with the warped mask (overlap below 0.5, or less
 than half or more than twice its area) is a cut that failed (colours of the
@@ -75,6 +81,8 @@ _SEED_RADIUS = 0.08  # how far the cut may move the edge: this fraction of the o
 _MIN_SEED_RADIUS = 2  # ... and at least this many work-size pixels
 _EDGE = 1  # the warped edge's strip the cut always decides, work-size pixels each side
 _DOUBT = 1.0  # forward-backward flow miss (work-size pixels) above which the flow is in doubt
+_AFFINE_POINTS = 2000  # most flow vectors the object's affine motion is fitted on
+_AFFINE_MISS = 1.0  # RANSAC inlier distance for that fit, work-size pixels
 _ITERATIONS = 2  # graph cuts: one with the previous frame's models, one re-fitted
 _SPECK = 0.02  # parts smaller than this fraction of the largest are dropped
 _MIN_SAMPLES = 40  # fewest pixels per side to fit a colour model on (5 components)
@@ -261,17 +269,54 @@ def _disk(radius: int) -> np.ndarray:
     return cv2.getStructuringElement(cv2.MORPH_ELLIPSE, (2 * radius + 1, 2 * radius + 1))
 
 
+def _affine_moved(warp: _Warp, sure: np.ndarray) -> np.ndarray | None:
+    """The previous mask moved by the object's overall motion, or None without enough sure flow.
+
+    An affine map from the next ROI to the previous one, fitted (RANSAC) on
+    the flow at ``sure`` pixels, so a limb that moves on its own or a bad
+    patch of flow does not bend it.
+
+    Returns:
+        float32 ``(h, w)`` in [0, 1], like ``warp.warped_low``.
+    """
+    ys, xs = np.nonzero(sure)
+    if xs.size < _MIN_SAMPLES:
+        return None
+    step = -(-xs.size // _AFFINE_POINTS)
+    xs, ys = xs[::step], ys[::step]
+    at = np.stack([xs, ys], axis=1).astype(np.float32)
+    affine, _ = cv2.estimateAffine2D(at, at + warp.back[ys, xs], method=cv2.RANSAC,
+                                     ransacReprojThreshold=_AFFINE_MISS)
+    if affine is None:
+        return None
+    h, w = sure.shape
+    return cv2.warpAffine(warp.prev_mask_low, affine, (w, h), flags=cv2.INTER_LINEAR | cv2.WARP_INVERSE_MAP)
+
+
+def _doubt(warp: _Warp) -> np.ndarray:
+    """Bool ``(h, w)``: where the flow's answer is in doubt, so the cut should decide.
+
+    The forward-backward miss is above ``_DOUBT`` (or next to such a pixel)
+    and the warped mask differs there from the previous mask moved by the
+    object's overall motion: two motions that agree are trusted even where
+    the flow alone is unsure.
+    """
+    doubt = cv2.dilate((warp.mismatch > _DOUBT).view(np.uint8), _disk(1)).astype(bool)
+    warped = warp.warped_low >= 0.5
+    moved = _affine_moved(warp, warped & ~doubt)
+    return doubt if moved is None else doubt & (warped != (moved >= 0.5))
+
+
 def _trimap(warp: _Warp) -> tuple[np.ndarray, np.ndarray]:
     """GC_* seeds from the warped mask: uint8 ``(h, w)`` labels and the bool core.
 
     The eroded core is sure foreground and pixels beyond the dilated border
     sure background (both by ``_SEED_RADIUS`` of the object's size). In the
-    band between, the flow's answer stands where the flow is sure of itself
-    (the forward-backward miss is at most ``_DOUBT``), since a good flow is
-    better than a colour model where object and background look alike;
-    pixels the flow doubts, and a thin strip along the warped edge, are
-    probable foreground inside the warped mask and probable background
-    outside: the cut decides those.
+    band between, the flow's answer stands except where it is in doubt
+    (:func:`_doubt`), since a good flow is better than a colour model where
+    object and background look alike; pixels in doubt, and a thin strip
+    along the warped edge, are probable foreground inside the warped mask
+    and probable background outside: the cut decides those.
     """
     warped = warp.warped_low >= 0.5
     ys, xs = np.nonzero(warped)
@@ -281,7 +326,7 @@ def _trimap(warp: _Warp) -> tuple[np.ndarray, np.ndarray]:
     reach = cv2.dilate(as_u8, _disk(radius)).astype(bool)
     core = cv2.erode(as_u8, _disk(radius)).astype(bool)
     edge = cv2.morphologyEx(as_u8, cv2.MORPH_GRADIENT, _disk(_EDGE)).astype(bool)
-    doubt = cv2.dilate((warp.mismatch > _DOUBT).view(np.uint8), _disk(1)).astype(bool)
+    doubt = _doubt(warp)
     gc = np.full(warped.shape, cv2.GC_BGD, np.uint8)
     gc[warped] = cv2.GC_FGD
     unsure = reach & ~core & (edge | doubt)
@@ -370,13 +415,19 @@ def _cut(next_low: np.ndarray, gc: np.ndarray, models: tuple[np.ndarray, np.ndar
     return (gc & 1).astype(bool)
 
 
-def _drop_specks(mask: np.ndarray) -> np.ndarray:
-    """``mask`` without connected parts smaller than ``_SPECK`` of its largest part."""
+def _drop_specks(mask: np.ndarray, warped: np.ndarray) -> np.ndarray:
+    """``mask`` without the cut's stray specks: parts smaller than ``_SPECK`` of its largest part.
+
+    A small part mostly inside the ``warped`` mask is kept: the flow carried
+    the object there (a tail's tip, a foot beyond a thin ankle, a piece seen
+    past an occluder), so it is the object, not the cut's stray.
+    """
     n, labels, stats, _ = cv2.connectedComponentsWithStats(mask.view(np.uint8), connectivity=8)
     if n <= 2:
         return mask
     areas = stats[1:, cv2.CC_STAT_AREA]
-    keep = np.concatenate([[False], areas >= _SPECK * areas.max()])
+    carried = np.bincount(labels[warped], minlength=n)[1:]
+    keep = np.concatenate([[False], (areas >= _SPECK * areas.max()) | (carried >= 0.5 * areas)])
     return keep[labels]
 
 
@@ -448,4 +499,4 @@ def propagate(prev_rgb: np.ndarray, prev_mask: np.ndarray, next_rgb: np.ndarray,
     # to a fraction of a work-size pixel; elsewhere the cut, smoothed so the
     # bilinear upsample gives a clean edge instead of work-size stairs.
     soft = np.where(label == warped, warp.warped_low, cv2.GaussianBlur(label.astype(np.float32), (0, 0), 0.7))
-    return _drop_specks(roi.paste(soft, shape))
+    return _drop_specks(roi.paste(soft, shape), fallback)
