@@ -249,6 +249,7 @@ def _box_iou(a: np.ndarray, b: np.ndarray) -> float:
     return inter / ((ax1 - ax0) * (ay1 - ay0) + (bx1 - bx0) * (by1 - by0) - inter)
 
 
+@pytest.mark.slow
 @pytest.mark.skipif(not REAL_VIDEO.is_dir(), reason="real video fixtures not present")
 def test_real_video_every_frame_is_carried():
     # Real video (DAVIS windows around the hardest consecutive pairs: a moving
