@@ -22,6 +22,7 @@ from app.models import Activity, Role
 from app.models.studies import ANSWERED, EntryKind, FrameKind, Participant, Study, StudyFrame, Trial
 from app.security import roles
 from app.services import ground_truth, studies
+from egonet.io import decode_json
 
 bp = Blueprint("studies", __name__, url_prefix="/studies")
 
@@ -129,7 +130,7 @@ def create_from_file():
     if len(data) > MAX_DEFINITION_BYTES:
         raise Problem("a definition file has at most 1 MiB", status=413, fields={"definition": "too large"})
     try:
-        doc = json.loads(data)
+        doc = decode_json(data)
     except ValueError as exc:
         raise Problem(f"the definition file is not valid JSON: {exc}", fields={"definition": "not valid JSON"}) from None
     study = studies.study_from_definition(doc, created_by=current_user._get_current_object())
