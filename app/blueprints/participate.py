@@ -132,7 +132,8 @@ def _notice(title: str, message: str, status: int) -> tuple[str, int]:
 
 def _refused(exc: studies.StudyProblem):
     """A polite page for a study that takes nobody now (full, paused, closed)."""
-    titles = {"full": "This study is full", "paused": "This study is paused", "closed": "This study is closed"}
+    titles = {"full": "This study is full", "paused": "This study is paused", "closed": "This study is closed",
+              "elsewhere": "Please continue in your first browser"}  # fmt: skip
     return _notice(titles.get(exc.extra.get("reason"), "Not now"), exc.message, exc.status)
 
 
@@ -206,7 +207,8 @@ def link(token: str):
 @arrivals
 def open_link(open_token: str):
     """The study's open link: GET says what the study is (or that it is full, paused or closed); its Start
-    (a POST carrying the platform's parameters) admits, or resumes the participant with the same external id."""
+    (a POST carrying the platform's parameters) admits, or resumes the participant with the same external id
+    from their first browser or with their platform's same visit id (``studies.may_resume``)."""
     study = studies.open_link_study(open_token)
     source = request.args if request.method == "GET" else request.form
     arrival = studies.parse_arrival(source)
@@ -214,8 +216,12 @@ def open_link(open_token: str):
     if refused is not None:
         return refused
     known = studies.by_external_id(study, arrival.external_id)
+    same_browser = known is not None and current_user.is_authenticated and current_user.id == known.user_id
     if request.method == "GET":
-        reason = None if known is not None else studies.availability(study)
+        if known is None:
+            reason = studies.availability(study)
+        else:
+            reason = None if arrival.preview or studies.may_resume(known, arrival, same_browser=same_browser) else "elsewhere"
         if reason is not None:
             return _refused(studies.refusal(reason))
         return render_template(
@@ -223,7 +229,7 @@ def open_link(open_token: str):
             trials=_timed_trials(study), minutes=study.time_limit_s / 60,
         )  # fmt: skip
     try:
-        participant = studies.admit(study, arrival, user_agent=request.user_agent.string)
+        participant = studies.admit(study, arrival, user_agent=request.user_agent.string, same_browser=same_browser)
     except studies.StudyProblem as exc:
         if exc.status == 400:
             raise

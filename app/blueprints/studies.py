@@ -262,6 +262,17 @@ def set_active(study_id: int, participant_id: int):
     return redirect(url_for("studies.detail", study_id=study.id) + "#participants")
 
 
+@bp.post("/<int:study_id>/participants/<int:participant_id>/release")
+@roles(Role.ADMIN)
+def release(study_id: int, participant_id: int):
+    """Let an open-link participant who lost their first browser continue in a new one (``studies.release``)."""
+    study = _study(study_id)
+    person = _person(study, participant_id)
+    studies.release(person)
+    flash(f"{person.label} can continue in a new browser: they open the study's link again.")
+    return redirect(url_for("studies.detail", study_id=study.id) + "#participants")
+
+
 @bp.get("/<int:study_id>/participants/<int:participant_id>")
 @roles(Role.ADMIN)
 def participant(study_id: int, participant_id: int):

@@ -130,6 +130,40 @@ def test_prolific_and_mturk_parameters_are_stored_and_the_same_id_resumes(app, t
     assert len(participants_of(app, study_id)) == 3
 
 
+def test_a_platform_id_alone_does_not_resume_a_session(app, admin_client, tmp_path):
+    """A worker id is no credential: the first browser, the platform's same visit id, or staff's release resumes."""
+    study_id, token = open_study(app, tmp_path)
+    worker = {"workerId": "A1WORKER", "hitId": "3HIT"}
+    first, _, start = arrive(app, token, **worker, assignmentId="ASG1")
+    assert start.status_code == 302 and first.post("/s/consent", data={"decision": "agree"}).status_code == 302
+    thief, page, taken = arrive(app, token, **worker)  # the id alone, or with another assignment, in a fresh browser
+    assert page.status_code == 409 and b"continue in your first browser" in page.data
+    assert thief.post(f"/s/o/{token}", data={**worker, "assignmentId": "ASG9"}).status_code == 409
+    assert thief.get("/s/api/current", headers={"Accept": "application/json"}).status_code == 401
+    _, _, same_visit = arrive(app, token, **worker, assignmentId="ASG1")  # the same assignment, a new browser
+    assert same_visit.headers["Location"].endswith("/s/instructions")
+    assert arrive(app, token, **worker, assignmentId="ASG2")[1].status_code == 409
+    again = first.post(f"/s/o/{token}", data={**worker, "assignmentId": "ASG2"})  # returned the HIT, took another
+    assert again.headers["Location"].endswith("/s/instructions")
+    with app.app_context():
+        (person,) = db.session.get(Study, study_id).participants
+        assert person.external == {"assignmentId": "ASG2", "hitId": "3HIT"}
+
+    # Someone took a worker's id before the worker came: staff release it to the worker's browser.
+    early, _, _ = arrive(app, token, workerId="W2", assignmentId="X")
+    real, refused, _ = arrive(app, token, workerId="W2", assignmentId="Y")
+    assert refused.status_code == 409
+    with app.app_context():
+        taken_id = studies.by_external_id(db.session.get(Study, study_id), "W2").id
+    assert b"Release to a new browser" in admin_client.get(f"/studies/{study_id}").data
+    assert admin_client.post(f"/studies/{study_id}/participants/{taken_id}/release").status_code == 302
+    assert real.post(f"/s/o/{token}", data={"workerId": "W2", "assignmentId": "Y"}).headers["Location"].endswith("/s/consent")
+    assert early.get("/s/api/current", headers={"Accept": "application/json"}).status_code == 401  # signed out
+    assert early.post(f"/s/o/{token}", data={"workerId": "W2", "assignmentId": "X"}).status_code == 409
+    with app.app_context():
+        assert db.session.get(Participant, taken_id).external == {"assignmentId": "Y"}
+
+
 def test_quotas_per_condition_and_balanced_assignment(app, tmp_path):
     conditions = [{"name": "fast", "trial_limit_seconds": 5}, {"name": "slow", "trial_limit_seconds": 20}]
     study_id, token = open_study(app, tmp_path, conditions=conditions, open_link={"quotas": {"fast": 1, "slow": 2}})
@@ -211,7 +245,7 @@ def test_the_same_id_arriving_twice_at_once_is_one_participant(app, tmp_path):
     def arrive_now() -> None:
         with app.app_context():
             barrier.wait()
-            got.append(studies.admit(db.session.get(Study, study_id), studies.Arrival(platform="prolific", external_id="SAME1")).id)
+            got.append(studies.admit(db.session.get(Study, study_id), studies.Arrival(platform="prolific", external_id="SAME1", external={"SESSION_ID": "s1"})).id)
             db.session.remove()
 
     threads = [threading.Thread(target=arrive_now) for _ in range(4)]

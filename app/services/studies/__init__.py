@@ -62,11 +62,13 @@ from app.services.studies.recruiting import (
     admit,
     availability,
     by_external_id,
+    may_resume,
     open_link_study,
     order_seed,
     parse_arrival,
     places_taken,
     refusal,
+    release,
     set_active,
 )
 from app.services.studies.session import (

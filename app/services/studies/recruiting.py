@@ -42,7 +42,7 @@ from app.models.studies import (
     Trial,
 )
 from app.services.studies import protocol
-from app.services.studies.common import TOKEN_PATTERN, StudyProblem, check_int
+from app.services.studies.common import TOKEN_PATTERN, StudyProblem, check_int, now
 
 # Access codes: 8 characters without look-alikes (no 0/O, 1/I/L): 31^8, about 10^12.
 CODE_ALPHABET = "ABCDEFGHJKMNPQRSTUVWXYZ23456789"
@@ -56,10 +56,17 @@ PLATFORMS = (
 )
 MTURK_PREVIEW = "ASSIGNMENT_ID_NOT_AVAILABLE"
 """MTurk's ``assignmentId`` while a worker previews a HIT (before accepting it)."""
+# The platform's id of the participant's visit, given only to them with their id: a platform id alone is
+# no credential, so a session resumes from the browser that first arrived, with this same visit id, or
+# once staff released it (``RELEASED`` in ``external``: the next arrival binds a new browser).
+VISIT_PARAMS = {"prolific": "SESSION_ID", "mturk": "assignmentId"}
+RELEASED = "released_at"
 
 FULL = "This study is full: thank you for your interest."
 PAUSED = "This study is paused and takes no new participants at the moment. Please try again later."
 CLOSED = "This study is closed and takes no new participants."
+ELSEWHERE = ("You started this study in another browser: please continue there. If you cannot, write to the "
+             "researchers; they can let you continue here.")
 
 
 @dataclass
@@ -148,8 +155,8 @@ def availability(study: Study) -> str | None:
 
 
 def refusal(reason: str) -> StudyProblem:
-    """The polite refusal of the open link: 409 full or paused, 410 closed (``reason`` says which)."""
-    text = {"full": FULL, "paused": PAUSED, "closed": CLOSED}[reason]
+    """The polite refusal of the open link: 409 full, paused or elsewhere (another browser's session), 410 closed."""
+    text = {"full": FULL, "paused": PAUSED, "closed": CLOSED, "elsewhere": ELSEWHERE}[reason]
     return StudyProblem(text, status=410 if reason == "closed" else 409, reason=reason)
 
 
@@ -164,22 +171,51 @@ def _lock(study: Study) -> None:
     db.session.refresh(study)
 
 
-def admit(study: Study, arrival: Arrival, *, user_agent: str | None = None) -> Participant:
-    """The participant arriving through the open link: the one with this external id, or a new one.
+def may_resume(participant: Participant, arrival: Arrival, *, same_browser: bool) -> bool:
+    """Whether ``arrival`` may continue ``participant``'s session (see ``VISIT_PARAMS``)."""
+    param = VISIT_PARAMS.get(participant.platform)
+    visit = arrival.external.get(param) if param else None
+    return same_browser or (visit is not None and visit == participant.external.get(param)) or RELEASED in participant.external
+
+
+def resume(participant: Participant, arrival: Arrival, *, same_browser: bool) -> Participant:
+    """The participant again, their platform's parameters now this visit's (a new MTurk assignment, say).
+
+    Raises:
+        StudyProblem: 409 (``reason`` elsewhere) when the arrival may not resume them (``may_resume``).
+    """
+    if not may_resume(participant, arrival, same_browser=same_browser):
+        raise refusal("elsewhere")
+    participant.external = {k: v for k, v in participant.external.items() if k != RELEASED} | arrival.external
+    db.session.commit()
+    return participant
+
+
+def release(participant: Participant) -> None:
+    """Let the next arrival with the participant's id continue in a new browser; browsers signed in now are signed out."""
+    participant.external = {**participant.external, RELEASED: now().isoformat()}
+    participant.user.end_sessions()
+    db.session.commit()
+
+
+def admit(study: Study, arrival: Arrival, *, user_agent: str | None = None, same_browser: bool = False) -> Participant:
+    """The participant arriving through the open link: the one with this external id (``resume``), or a new one.
 
     A newcomer needs the study open and a free place within the cap and a
     condition's quota; they get a condition (balanced), a code and their
-    trials, in one transaction.
+    trials, in one transaction. ``same_browser``: this browser is signed in
+    as the participant with this external id.
 
     Raises:
         StudyProblem: 409 (``reason`` full or paused) or 410 (closed) for a
-            newcomer who cannot be admitted; 409 for an MTurk preview.
+            newcomer who cannot be admitted; 409 for an MTurk preview, and
+            (``reason`` elsewhere) for a known id from another browser.
     """
     if arrival.preview:
         raise StudyProblem("accept the HIT first, then open the study", status=409, reason="preview")
     known = by_external_id(study, arrival.external_id)
     if known is not None:
-        return known
+        return resume(known, arrival, same_browser=same_browser)
     _lock(study)
     try:
         reason = availability(study)
@@ -200,7 +236,7 @@ def admit(study: Study, arrival: Arrival, *, user_agent: str | None = None) -> P
         known = by_external_id(study, arrival.external_id)
         if known is None:
             raise
-        return known
+        return resume(known, arrival, same_browser=False)
     return participant
 
 

@@ -36,6 +36,7 @@ RULES = {
     "studies.delete": (ADMIN, 409),
     "studies.set_status": (ADMIN, 400),
     "studies.set_active": (ADMIN, 400),
+    "studies.release": (ADMIN, 302),
     "study.entry": (None, {"GET": 200, "POST": 400}),
     "study.link": (None, 410),
     "study.open_link": (None, 410),
