@@ -8,7 +8,7 @@ from collections import Counter
 import pytest
 
 from app.extensions import db
-from app.models.studies import ActivityOrder, EntryKind, FrameKind, Participant, Study
+from app.models.studies import ActivityOrder, EndReason, EntryKind, FrameKind, Participant, Study
 from app.services import studies
 from tests.app.access.studies import build_study
 
@@ -162,6 +162,34 @@ def test_a_platform_id_alone_does_not_resume_a_session(app, admin_client, tmp_pa
     assert early.post(f"/s/o/{token}", data={"workerId": "W2", "assignmentId": "X"}).status_code == 409
     with app.app_context():
         assert db.session.get(Participant, taken_id).external == {"assignmentId": "Y"}
+
+
+def test_an_mturk_hit_previews_without_admitting_and_submits_to_mturk_only(app, tmp_path):
+    study_id, token = open_study(app, tmp_path, completion={"code": "MT0001"})
+    preview = {"assignmentId": "ASSIGNMENT_ID_NOT_AVAILABLE", "hitId": "3HIT", "turkSubmitTo": "https://workersandbox.mturk.com"}
+    browser = app.test_client()
+    page = browser.get(f"/s/o/{token}", query_string=preview, headers={"Sec-Fetch-Dest": "iframe"})
+    assert page.status_code == 200 and b'id="preview-instructions"' in page.data and b"start-open" not in page.data
+    policy = page.headers["Content-Security-Policy"]
+    assert "frame-ancestors https://workersandbox.mturk.com https://www.mturk.com" in policy and "frame-ancestors 'none'" not in policy
+    with browser.get(f"/s/o/{token}/example") as example:
+        assert example.status_code == 200 and example.mimetype.startswith("image/")
+    assert participants_of(app, study_id) == []  # nobody admitted, no clock started
+    for host in ("https://evil.example", "https://www.mturk.com.evil.example", "javascript:alert(1)"):
+        bad = browser.get(f"/s/o/{token}", query_string={**preview, "turkSubmitTo": host}, headers={"Accept": "application/json"})
+        assert bad.status_code == 400 and "turkSubmitTo" in bad.get_json()["fields"]
+    accepted = {"workerId": "A2W", "assignmentId": "3ASG", "hitId": "3HIT", "turkSubmitTo": "https://www.mturk.com"}
+    framed = browser.get(f"/s/o/{token}", query_string=accepted, headers={"Sec-Fetch-Dest": "iframe"})
+    assert b'id="open-tab"' in framed.data and b'target="_blank"' in framed.data  # the session runs in its own tab
+    assert browser.post(f"/s/o/{token}", data=accepted).status_code == 302
+    with app.app_context():
+        person = db.session.get(Study, study_id).participants[0]
+        assert studies.mturk_submit_url(person) == "https://www.mturk.com/mturk/externalSubmit"
+        person.completion_code, person.end_reason, person.finished_at = "MT0001", EndReason.COMPLETED, studies.now()
+        db.session.commit()
+    done = browser.get("/s/done")
+    assert b'action="https://www.mturk.com/mturk/externalSubmit"' in done.data and b'value="3ASG"' in done.data
+    assert "form-action 'self' https://www.mturk.com/mturk/externalSubmit" in done.headers["Content-Security-Policy"]
 
 
 def test_quotas_per_condition_and_balanced_assignment(app, tmp_path):

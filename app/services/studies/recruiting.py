@@ -24,6 +24,7 @@ import secrets
 from collections.abc import Mapping
 from dataclasses import dataclass, field
 
+from flask import current_app
 from sqlalchemy import func, or_, update
 from sqlalchemy.exc import IntegrityError
 
@@ -51,7 +52,7 @@ MAX_USER_AGENT = 512
 # The recruiting platforms' URL parameters: (platform, the participant's id, the others kept with it).
 PLATFORMS = (
     ("prolific", "PROLIFIC_PID", ("STUDY_ID", "SESSION_ID")),
-    ("mturk", "workerId", ("assignmentId", "hitId")),
+    ("mturk", "workerId", ("assignmentId", "hitId", "turkSubmitTo")),
     ("external", "external_id", ()),
 )
 MTURK_PREVIEW = "ASSIGNMENT_ID_NOT_AVAILABLE"
@@ -61,6 +62,9 @@ MTURK_PREVIEW = "ASSIGNMENT_ID_NOT_AVAILABLE"
 # once staff released it (``RELEASED`` in ``external``: the next arrival binds a new browser).
 VISIT_PARAMS = {"prolific": "SESSION_ID", "mturk": "assignmentId"}
 RELEASED = "released_at"
+# Where MTurk may send an ExternalQuestion's answers (its ``turkSubmitTo``); a deployment's
+# ``MTURK_SUBMIT_HOSTS`` replaces the list (tests add a local stand-in that way, never by default).
+MTURK_SUBMIT_HOSTS = ("https://workersandbox.mturk.com", "https://www.mturk.com")
 
 FULL = "This study is full: thank you for your interest."
 PAUSED = "This study is paused and takes no new participants at the moment. Please try again later."
@@ -84,7 +88,7 @@ def parse_arrival(args: Mapping[str, str]) -> Arrival:
 
     Raises:
         StudyProblem: 400 naming the parameter when one is not 1-64 letters,
-            digits, ``_``, ``.`` or ``-``.
+            digits, ``_``, ``.`` or ``-`` (``turkSubmitTo``: not one of ``mturk_submit_hosts()``).
     """
     arrival = Arrival()
     for platform, id_param, others in PLATFORMS:
@@ -92,7 +96,11 @@ def parse_arrival(args: Mapping[str, str]) -> Arrival:
             value = args.get(param)
             if value is None or value == "":
                 continue
-            if not TOKEN_PATTERN.fullmatch(value):
+            if param == "turkSubmitTo":
+                if value.rstrip("/") not in mturk_submit_hosts():
+                    raise StudyProblem(f"the link's turkSubmitTo must be one of {', '.join(mturk_submit_hosts())}", field=param)
+                value = value.rstrip("/")
+            elif not TOKEN_PATTERN.fullmatch(value):
                 raise StudyProblem(f"the link's {param} must be 1-64 letters, digits, '_', '.' or '-'", field=param)
             if param == id_param and arrival.external_id is None:
                 arrival.platform, arrival.external_id = platform, value
@@ -100,6 +108,23 @@ def parse_arrival(args: Mapping[str, str]) -> Arrival:
                 arrival.external[param] = value
     arrival.preview = arrival.external.get("assignmentId") == MTURK_PREVIEW
     return arrival
+
+
+def mturk_submit_hosts() -> tuple[str, ...]:
+    return tuple(current_app.config.get("MTURK_SUBMIT_HOSTS", MTURK_SUBMIT_HOSTS))
+
+
+def mturk_submit_url(participant: Participant) -> str | None:
+    """Where an MTurk worker's page posts their assignment and completion code at the end (None for others)."""
+    host, assignment = participant.external.get("turkSubmitTo"), participant.external.get("assignmentId")
+    if participant.platform != "mturk" or host not in mturk_submit_hosts() or not assignment:
+        return None
+    return host + "/mturk/externalSubmit"
+
+
+def example_frame(study: Study) -> StudyFrame | None:
+    """The frame an MTurk preview shows (the first practice frame, else the first of the study)."""
+    return next(iter(study.frames_of(FrameKind.PRACTICE) or study.frames), None)
 
 
 def open_link_study(token: str) -> Study:

@@ -40,6 +40,7 @@ RULES = {
     "study.entry": (None, {"GET": 200, "POST": 400}),
     "study.link": (None, 410),
     "study.open_link": (None, 410),
+    "study.open_example": (None, 200),
     "study.comprehension": (PARTICIPANT, 403),
     "study.practice": (PARTICIPANT, 403),
     "study.ready": (PARTICIPANT, 403),
