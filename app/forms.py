@@ -30,6 +30,7 @@ from wtforms.widgets import CheckboxInput, ListWidget
 
 from app.services.studies.building import DEFAULT_CONSENT, DEFAULT_INSTRUCTIONS, SUPERPIXEL_OPTIONS
 from egonet.clicks import SUPERPIXEL_DEFAULTS
+from egonet.io import decode_json
 
 
 class Form(FlaskForm):
@@ -122,7 +123,7 @@ class StudyForm(Form):
         for name in (*self.JSON_FIELDS, "practice_trials"):
             text = (getattr(self, name).data or "").strip()
             try:
-                parsed[name] = json.loads(text) if text else None
+                parsed[name] = decode_json(text) if text else None
             except ValueError as exc:
                 getattr(self, name).errors = [*getattr(self, name).errors, f"not valid JSON: {exc}"]
                 return None

@@ -23,9 +23,10 @@ from collections.abc import Callable
 from flask import Flask, Response, current_app, redirect, request, url_for
 from flask_login import current_user
 
-from app.errors import error_response, wants_json
+from app.errors import Problem, error_response, wants_json
 from app.limits import MIN_SECRET_KEY_LENGTH
 from app.models import Role
+from app.validation import request_json
 
 STAFF = frozenset({Role.ADMIN, Role.ANNOTATOR, Role.REVIEWER})
 
@@ -92,10 +93,12 @@ def check_access():
 def check_json_body():
     """before_request hook: a JSON body must be a JSON object, else 400 before any view runs."""
     if request.method in ("POST", "PUT", "PATCH", "DELETE") and request.is_json and request.get_data(cache=True):
-        body = request.get_json(silent=True)
+        try:
+            body = request_json()
+        except Problem as exc:
+            return error_response(400, "bad_request", exc.message, exc.fields)
         if not isinstance(body, dict):
-            reason = "not valid JSON" if body is None else "must be a JSON object"
-            return error_response(400, "bad_request", f"the request body is {reason}", {"body": reason})
+            return error_response(400, "bad_request", "the request body must be a JSON object", {"body": "must be a JSON object"})
     return None
 
 

@@ -21,8 +21,9 @@ from typing import Any
 
 from flask import request
 
-from app.limits import MAX_ID
 from app.errors import Problem
+from app.limits import MAX_ID
+from egonet.io import decode_json
 
 MISSING = object()
 
@@ -192,9 +193,24 @@ def query_int(name: str, *, min: int | None = 1, max: int | None = MAX_ID) -> in
         raise Problem(f"{name}: {exc.message}", fields={name: exc.message}) from None
 
 
+def request_json() -> Any:
+    """The request's body decoded by ``egonet.io.decode_json`` (the one JSON reader), None when empty.
+
+    Raises:
+        Problem: 400 naming the body when it is not JSON (or nests too deep).
+    """
+    data = request.get_data(cache=True)
+    if not data:
+        return None
+    if not request.is_json:
+        raise Problem("the request body is not JSON (Content-Type: application/json)", fields={"body": "not valid JSON"})
+    try:
+        return decode_json(data)
+    except ValueError as exc:
+        raise Problem(f"the request body is not valid JSON: {exc}", fields={"body": "not valid JSON"}) from None
+
+
 def json_body(schema: dict[str, Field]) -> dict:
     """The request's JSON body, validated (see module doc)."""
-    data = request.get_json(silent=True)
-    if data is None and request.get_data(cache=True):
-        raise Problem("the request body is not valid JSON", fields={"body": "not valid JSON"})
+    data = request_json()
     return validate(schema, data if data is not None else {})

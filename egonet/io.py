@@ -18,6 +18,7 @@ Conventions:
 import io as _io
 import json
 import os
+import re
 import tempfile
 import warnings
 from collections.abc import Callable
@@ -33,6 +34,15 @@ from egonet.errors import EgonetError
 IMAGE_SUFFIXES = (".jpg", ".jpeg", ".png")
 VIDEO_SUFFIXES = (".mp4", ".avi", ".mov")
 DEPTH_SUFFIXES = (".png", ".npy", ".npz")
+
+# JSON from users (request bodies, definition files, imports) nests at most
+# this deep; deeper is refused before the decoder, which would recurse.
+MAX_JSON_DEPTH = 100
+_JSON_STRING = re.compile(r'"[^"\\]*(?:\\.[^"\\]*)*"')
+_NOT_BRACKET = bytes(c for c in range(256) if c not in b"[]{}")
+_DEPTH_STEP = np.zeros(256, np.int32)
+_DEPTH_STEP[list(b"[{")] = 1
+_DEPTH_STEP[list(b"]}")] = -1
 
 # Images larger than this are refused before they are decoded, so a small
 # file that claims a huge size (a decompression bomb) costs nothing.
@@ -305,12 +315,37 @@ def parse_intrinsics(data: object, *, path: str | Path = "<json>") -> np.ndarray
     return K
 
 
+def decode_json(data: bytes | str) -> object:
+    """Decode a JSON document from outside (a request body, a file): the project's one JSON reader for
+    what users send, so no document costs more than a linear scan however deep it nests.
+
+    Raises:
+        ValueError: not JSON (a ``json.JSONDecodeError``, or a ``UnicodeDecodeError`` for bytes that are
+            not UTF-8/16/32), or nested deeper than ``MAX_JSON_DEPTH``.
+
+    Example:
+        >>> decode_json(b'{"clicks": [[1, 2]]}')
+        {'clicks': [[1, 2]]}
+    """
+    text = data.decode(json.detect_encoding(data), "surrogatepass") if isinstance(data, bytes | bytearray) else data
+    # The depth after each bracket outside strings (a string's brackets are text), summed in numpy a
+    # mebibyte at a time: deeper than the limit is refused before json.loads, which would recurse.
+    brackets = _JSON_STRING.sub("", text).encode("utf-8", "surrogatepass").translate(None, _NOT_BRACKET)
+    depth = 0
+    for start in range(0, len(brackets), 2**20):
+        running = depth + np.cumsum(_DEPTH_STEP[np.frombuffer(brackets[start:start + 2**20], np.uint8)])
+        if running.max() > MAX_JSON_DEPTH:
+            raise ValueError(f"nested deeper than {MAX_JSON_DEPTH} levels")
+        depth = int(running[-1])
+    return json.loads(text)
+
+
 def read_intrinsics(path: str | Path) -> np.ndarray:
     """Read a JSON intrinsics file (see ``parse_intrinsics``) into K (3, 3)."""
     path = Path(path)
     try:
-        data = json.loads(read_bytes(path))
-    except (UnicodeDecodeError, json.JSONDecodeError) as exc:
+        data = decode_json(read_bytes(path))
+    except ValueError as exc:
         raise MediaError(path, f"not valid JSON ({exc})") from None
     return parse_intrinsics(data, path=path)
 

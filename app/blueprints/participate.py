@@ -31,7 +31,7 @@ from app.extensions import db
 from app.forms import CodeForm
 from app.models import Role
 from app.models.studies import EventKind, FrameKind, Participant, Study, Trial
-from app.security import public, roles
+from app.security import CONTENT_SECURITY_POLICY, public, roles
 from app.services import media, studies
 from app.throttle import address, arrivals_limit, failed, failures_limit, limiter, too_many_attempts
 from app.validation import Bool, Float, Int, List, Obj, Str, json_body
@@ -132,7 +132,8 @@ def _notice(title: str, message: str, status: int) -> tuple[str, int]:
 
 def _refused(exc: studies.StudyProblem):
     """A polite page for a study that takes nobody now (full, paused, closed)."""
-    titles = {"full": "This study is full", "paused": "This study is paused", "closed": "This study is closed"}
+    titles = {"full": "This study is full", "paused": "This study is paused", "closed": "This study is closed",
+              "elsewhere": "Please continue in your first browser"}  # fmt: skip
     return _notice(titles.get(exc.extra.get("reason"), "Not now"), exc.message, exc.status)
 
 
@@ -206,7 +207,8 @@ def link(token: str):
 @arrivals
 def open_link(open_token: str):
     """The study's open link: GET says what the study is (or that it is full, paused or closed); its Start
-    (a POST carrying the platform's parameters) admits, or resumes the participant with the same external id."""
+    (a POST carrying the platform's parameters) admits, or resumes the participant with the same external id
+    from their first browser or with their platform's same visit id (``studies.may_resume``)."""
     study = studies.open_link_study(open_token)
     source = request.args if request.method == "GET" else request.form
     arrival = studies.parse_arrival(source)
@@ -214,22 +216,48 @@ def open_link(open_token: str):
     if refused is not None:
         return refused
     known = studies.by_external_id(study, arrival.external_id)
+    same_browser = known is not None and current_user.is_authenticated and current_user.id == known.user_id
     if request.method == "GET":
-        reason = None if known is not None else studies.availability(study)
+        if known is None:
+            reason = studies.availability(study)
+        else:
+            reason = None if arrival.preview or studies.may_resume(known, arrival, same_browser=same_browser) else "elsewhere"
         if reason is not None:
             return _refused(studies.refusal(reason))
-        return render_template(
+        page = render_template(
             "study/open.html", study=study, arrival=arrival, known=known, params=_platform_params(source),
-            trials=_timed_trials(study), minutes=study.time_limit_s / 60,
+            trials=_timed_trials(study), minutes=study.time_limit_s / 60, example=studies.example_frame(study),
+            framed=request.headers.get("Sec-Fetch-Dest") == "iframe",
         )  # fmt: skip
+        return _with_policy(page, "frame-ancestors", studies.mturk_submit_hosts())
     try:
-        participant = studies.admit(study, arrival, user_agent=request.user_agent.string)
+        participant = studies.admit(study, arrival, user_agent=request.user_agent.string, same_browser=same_browser)
     except studies.StudyProblem as exc:
         if exc.status == 400:
             raise
         return _refused(exc)
     g.admitted = known is None
     return _sign_in(participant)
+
+
+@bp.get("/o/<open_token>/example")
+@public
+@guesses
+def open_example(open_token: str):
+    """The frame an MTurk preview shows with the instructions, before anyone is admitted (no ground truth)."""
+    example = studies.example_frame(studies.open_link_study(open_token))
+    if example is None:
+        raise Problem("this study has no frames", status=404)
+    path = media.absolute_path(example.frame.rgb_path)
+    return send_file(path, mimetype="image/jpeg" if path.suffix.lower() in (".jpg", ".jpeg") else "image/png")
+
+
+def _with_policy(page: str, directive: str, sources) -> Response:
+    """``page`` under the app's Content-Security-Policy with ``directive``'s sources replaced (to let MTurk in)."""
+    response = Response(page, mimetype="text/html")
+    policy = [p for p in CONTENT_SECURITY_POLICY.split("; ") if not p.startswith(directive + " ")]
+    response.headers["Content-Security-Policy"] = "; ".join([*policy, " ".join([directive, *sources])])
+    return response
 
 
 def _platform_params(source) -> dict[str, str]:
@@ -362,7 +390,10 @@ def done():
     if studies.step(participant) != "done":
         return _go_to_step(participant)
     code, redirect_url = studies.completion(participant)
-    return _page("study/done.html", participant, "Done", progress=studies.progress(participant), code=code, redirect_url=redirect_url)
+    mturk_url = studies.mturk_submit_url(participant) if code else None
+    page = _page("study/done.html", participant, "Done", progress=studies.progress(participant), code=code,
+                 redirect_url=None if mturk_url else redirect_url, mturk_url=mturk_url)  # fmt: skip
+    return _with_policy(page, "form-action", ["'self'", *([mturk_url] if mturk_url else [])])
 
 
 def _state_json(state: studies.SessionState) -> dict:

@@ -22,6 +22,7 @@ from app.models import Activity, Role
 from app.models.studies import ANSWERED, EntryKind, FrameKind, Participant, Study, StudyFrame, Trial
 from app.security import roles
 from app.services import ground_truth, studies
+from egonet.io import decode_json
 
 bp = Blueprint("studies", __name__, url_prefix="/studies")
 
@@ -129,7 +130,7 @@ def create_from_file():
     if len(data) > MAX_DEFINITION_BYTES:
         raise Problem("a definition file has at most 1 MiB", status=413, fields={"definition": "too large"})
     try:
-        doc = json.loads(data)
+        doc = decode_json(data)
     except ValueError as exc:
         raise Problem(f"the definition file is not valid JSON: {exc}", fields={"definition": "not valid JSON"}) from None
     study = studies.study_from_definition(doc, created_by=current_user._get_current_object())
@@ -258,6 +259,17 @@ def set_active(study_id: int, participant_id: int):
         raise Problem("active must be 0 or 1", fields={"active": "must be 0 or 1"})
     studies.set_active(person, value == "1")
     flash(f"{person.label} {'activated' if value == '1' else 'deactivated'}.")
+    return redirect(url_for("studies.detail", study_id=study.id) + "#participants")
+
+
+@bp.post("/<int:study_id>/participants/<int:participant_id>/release")
+@roles(Role.ADMIN)
+def release(study_id: int, participant_id: int):
+    """Let an open-link participant who lost their first browser continue in a new one (``studies.release``)."""
+    study = _study(study_id)
+    person = _person(study, participant_id)
+    studies.release(person)
+    flash(f"{person.label} can continue in a new browser: they open the study's link again.")
     return redirect(url_for("studies.detail", study_id=study.id) + "#participants")
 
 

@@ -49,12 +49,13 @@ def study_create_command(file, base_url):
     and nothing is created.
     """
     from app.services.studies import study_from_definition
+    from egonet.io import decode_json
 
     data = file.read_bytes()
     if len(data) > MAX_DEFINITION_BYTES:
         raise click.ClickException(f"{file}: a definition file has at most 1 MiB")
     try:
-        doc = json.loads(data)
+        doc = decode_json(data)
     except ValueError as exc:
         raise click.ClickException(f"{file}: not valid JSON ({exc})") from None
     study = study_from_definition(doc)

@@ -432,6 +432,8 @@ def test_export_and_import_problems_are_one_line(app, runner, tmp_path):
     fails("import-annotations", str(bad), expect="does not match the frame's 64x48")
     (bad / "annotations.json").write_text("{not json")
     fails("import-annotations", str(bad), expect="not valid JSON")
+    (bad / "annotations.json").write_text('{"images": ' + "[" * 50_000 + "]" * 50_000 + "}")
+    fails("import-annotations", str(bad), expect="nested deeper than 100 levels")
     coco = json.loads((out / "annotations.json").read_text())
     coco["annotations"][0]["segmentation"]["counts"] = "!!"
     (bad / "annotations.json").write_text(json.dumps(coco))

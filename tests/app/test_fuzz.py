@@ -31,7 +31,8 @@ scalars = st.none() | st.booleans() | st.integers() | HUGE | st.floats(allow_nan
 values = st.recursive(scalars, lambda inner: st.lists(inner, max_size=5) | st.dictionaries(st.sampled_from(FIELDS), inner, max_size=5), max_leaves=25)
 objects = st.dictionaries(st.sampled_from(FIELDS) | st.text(max_size=10), values, max_size=8)
 RAW = [b"{", b"null", b"[]", b'"x"', b'{"x": NaN}', b'{"x": Infinity, "y": -Infinity}', b'{"x": 1e999}',
-       b"\xff\xfe\x00garbage", b'{"clicks": [{"x": 1e12, "y": -5}]}', b'{"points": []}', b"x" * 20000]
+       b"\xff\xfe\x00garbage", b'{"clicks": [{"x": 1e12, "y": -5}]}', b'{"points": []}', b"x" * 20000,
+       b'{"clicks": ' + b"[" * 50_000 + b"]" * 50_000 + b"}", b'{"points": ' + b'[{"x": ' * 5_000 + b"1" + b"}]" * 5_000 + b"}"]
 bodies = st.one_of(
     objects.map(lambda o: ("json", json.dumps(o).encode())),
     st.sampled_from(RAW).map(lambda b: ("json", b)),

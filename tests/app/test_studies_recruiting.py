@@ -8,7 +8,7 @@ from collections import Counter
 import pytest
 
 from app.extensions import db
-from app.models.studies import ActivityOrder, EntryKind, FrameKind, Participant, Study
+from app.models.studies import ActivityOrder, EndReason, EntryKind, FrameKind, Participant, Study
 from app.services import studies
 from tests.app.access.studies import build_study
 
@@ -130,6 +130,68 @@ def test_prolific_and_mturk_parameters_are_stored_and_the_same_id_resumes(app, t
     assert len(participants_of(app, study_id)) == 3
 
 
+def test_a_platform_id_alone_does_not_resume_a_session(app, admin_client, tmp_path):
+    """A worker id is no credential: the first browser, the platform's same visit id, or staff's release resumes."""
+    study_id, token = open_study(app, tmp_path)
+    worker = {"workerId": "A1WORKER", "hitId": "3HIT"}
+    first, _, start = arrive(app, token, **worker, assignmentId="ASG1")
+    assert start.status_code == 302 and first.post("/s/consent", data={"decision": "agree"}).status_code == 302
+    thief, page, taken = arrive(app, token, **worker)  # the id alone, or with another assignment, in a fresh browser
+    assert page.status_code == 409 and b"continue in your first browser" in page.data
+    assert thief.post(f"/s/o/{token}", data={**worker, "assignmentId": "ASG9"}).status_code == 409
+    assert thief.get("/s/api/current", headers={"Accept": "application/json"}).status_code == 401
+    _, _, same_visit = arrive(app, token, **worker, assignmentId="ASG1")  # the same assignment, a new browser
+    assert same_visit.headers["Location"].endswith("/s/instructions")
+    assert arrive(app, token, **worker, assignmentId="ASG2")[1].status_code == 409
+    again = first.post(f"/s/o/{token}", data={**worker, "assignmentId": "ASG2"})  # returned the HIT, took another
+    assert again.headers["Location"].endswith("/s/instructions")
+    with app.app_context():
+        (person,) = db.session.get(Study, study_id).participants
+        assert person.external == {"assignmentId": "ASG2", "hitId": "3HIT"}
+
+    # Someone took a worker's id before the worker came: staff release it to the worker's browser.
+    early, _, _ = arrive(app, token, workerId="W2", assignmentId="X")
+    real, refused, _ = arrive(app, token, workerId="W2", assignmentId="Y")
+    assert refused.status_code == 409
+    with app.app_context():
+        taken_id = studies.by_external_id(db.session.get(Study, study_id), "W2").id
+    assert b"Release to a new browser" in admin_client.get(f"/studies/{study_id}").data
+    assert admin_client.post(f"/studies/{study_id}/participants/{taken_id}/release").status_code == 302
+    assert real.post(f"/s/o/{token}", data={"workerId": "W2", "assignmentId": "Y"}).headers["Location"].endswith("/s/consent")
+    assert early.get("/s/api/current", headers={"Accept": "application/json"}).status_code == 401  # signed out
+    assert early.post(f"/s/o/{token}", data={"workerId": "W2", "assignmentId": "X"}).status_code == 409
+    with app.app_context():
+        assert db.session.get(Participant, taken_id).external == {"assignmentId": "Y"}
+
+
+def test_an_mturk_hit_previews_without_admitting_and_submits_to_mturk_only(app, tmp_path):
+    study_id, token = open_study(app, tmp_path, completion={"code": "MT0001"})
+    preview = {"assignmentId": "ASSIGNMENT_ID_NOT_AVAILABLE", "hitId": "3HIT", "turkSubmitTo": "https://workersandbox.mturk.com"}
+    browser = app.test_client()
+    page = browser.get(f"/s/o/{token}", query_string=preview, headers={"Sec-Fetch-Dest": "iframe"})
+    assert page.status_code == 200 and b'id="preview-instructions"' in page.data and b"start-open" not in page.data
+    policy = page.headers["Content-Security-Policy"]
+    assert "frame-ancestors https://workersandbox.mturk.com https://www.mturk.com" in policy and "frame-ancestors 'none'" not in policy
+    with browser.get(f"/s/o/{token}/example") as example:
+        assert example.status_code == 200 and example.mimetype.startswith("image/")
+    assert participants_of(app, study_id) == []  # nobody admitted, no clock started
+    for host in ("https://evil.example", "https://www.mturk.com.evil.example", "javascript:alert(1)"):
+        bad = browser.get(f"/s/o/{token}", query_string={**preview, "turkSubmitTo": host}, headers={"Accept": "application/json"})
+        assert bad.status_code == 400 and "turkSubmitTo" in bad.get_json()["fields"]
+    accepted = {"workerId": "A2W", "assignmentId": "3ASG", "hitId": "3HIT", "turkSubmitTo": "https://www.mturk.com"}
+    framed = browser.get(f"/s/o/{token}", query_string=accepted, headers={"Sec-Fetch-Dest": "iframe"})
+    assert b'id="open-tab"' in framed.data and b'target="_blank"' in framed.data  # the session runs in its own tab
+    assert browser.post(f"/s/o/{token}", data=accepted).status_code == 302
+    with app.app_context():
+        person = db.session.get(Study, study_id).participants[0]
+        assert studies.mturk_submit_url(person) == "https://www.mturk.com/mturk/externalSubmit"
+        person.completion_code, person.end_reason, person.finished_at = "MT0001", EndReason.COMPLETED, studies.now()
+        db.session.commit()
+    done = browser.get("/s/done")
+    assert b'action="https://www.mturk.com/mturk/externalSubmit"' in done.data and b'value="3ASG"' in done.data
+    assert "form-action 'self' https://www.mturk.com/mturk/externalSubmit" in done.headers["Content-Security-Policy"]
+
+
 def test_quotas_per_condition_and_balanced_assignment(app, tmp_path):
     conditions = [{"name": "fast", "trial_limit_seconds": 5}, {"name": "slow", "trial_limit_seconds": 20}]
     study_id, token = open_study(app, tmp_path, conditions=conditions, open_link={"quotas": {"fast": 1, "slow": 2}})
@@ -211,7 +273,7 @@ def test_the_same_id_arriving_twice_at_once_is_one_participant(app, tmp_path):
     def arrive_now() -> None:
         with app.app_context():
             barrier.wait()
-            got.append(studies.admit(db.session.get(Study, study_id), studies.Arrival(platform="prolific", external_id="SAME1")).id)
+            got.append(studies.admit(db.session.get(Study, study_id), studies.Arrival(platform="prolific", external_id="SAME1", external={"SESSION_ID": "s1"})).id)
             db.session.remove()
 
     threads = [threading.Thread(target=arrive_now) for _ in range(4)]

@@ -27,6 +27,7 @@ def test_intrinsics_forms_agree(tmp_path):
     "content, reason",
     [
         ("{not json", "not valid JSON"),
+        ("[" * 50_000 + "]" * 50_000, "nested deeper than 100 levels"),
         ('{"fx": 1}', "needs fx, fy, cx, cy"),
         ("[[1, 0], [0, 1]]", "3x3"),
         ('{"fx": -5, "fy": 5, "cx": 1, "cy": 1}', "fx, fy > 0"),

@@ -1,6 +1,5 @@
 """Reading an export back: COCO JSON (every annotation and instance) or PNG masks."""
 
-import json
 from collections.abc import Callable
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -188,8 +187,8 @@ def _read_annotator_trees(root: Path, *, author: str | None, status: Status,
 def _read_coco(path: Path, *, author: str | None, status: Status | None,
                skip_missing: bool) -> tuple[list[_Item], set[str]]:
     try:
-        coco = json.loads(io.read_bytes(path))
-    except (UnicodeDecodeError, json.JSONDecodeError) as exc:
+        coco = io.decode_json(io.read_bytes(path))
+    except ValueError as exc:
         raise ExchangeProblem(f"{path}: not valid JSON ({exc})") from None
     if not isinstance(coco, dict) or not isinstance(coco.get("images"), list) or not isinstance(coco.get("annotations", []), list):
         raise ExchangeProblem(f"{path}: not a COCO file (needs an 'images' list and an 'annotations' list)")

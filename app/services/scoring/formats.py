@@ -9,12 +9,11 @@ number of frames and its 95 % interval.
 
 from __future__ import annotations
 
-import csv
-import io
 import json
 from typing import Any
 
 from app.services.scoring.cells import ALL, MEAN, STATISTIC_LABELS, Cell, Difference, Row, definition
+from app.spreadsheet import csv_text
 from egonet.metrics import threshold_values
 
 
@@ -125,8 +124,7 @@ class ReportFormats(_Json):
 
     def to_csv(self) -> str:
         """One line per row (a group's runs included, with the group's key): n, each statistic, its interval, per column."""
-        out = io.StringIO()
-        writer = csv.writer(out, lineterminator="\n")
+        table = []
         statistics = self.statistics()
         header = ["key", "method", "kind", "group", "metric", "frames", "unanswered"]
         for column in self.columns():
@@ -137,7 +135,6 @@ class ReportFormats(_Json):
                 if any(r.members for r in self.rows):
                     header.append(f"{column} {label} sd")
         header.append("mean over activities")
-        writer.writerow(header)
         for row in self.all_rows():
             line: list[Any] = [row.key, row.name, row.kind, row.group or "", self.metric, self.frames, _blank(row.unanswered)]
             for column in self.columns():
@@ -148,8 +145,8 @@ class ReportFormats(_Json):
                     line += [_num(cell and cell.values.get(s)), _num(ci and ci[0]), _num(ci and ci[1])]
                     if any(r.members for r in self.rows):
                         line.append(_num((cell.sd or {}).get(s)) if cell else "")
-            writer.writerow([*line, row.mean.activities if row.mean else 0])
-        return out.getvalue()
+            table.append([*line, row.mean.activities if row.mean else 0])
+        return csv_text(table, header)
 
     def _tex_cell(self, row: Row, column: str, statistic: str, best: dict[str, int], uniform_n: bool) -> str:
         cell = self.cell(row, column)

@@ -10,8 +10,6 @@ every frame some row has, blank where a row has not got it.
 
 from __future__ import annotations
 
-import csv
-import io
 from collections.abc import Sequence
 from dataclasses import dataclass, field
 from functools import reduce
@@ -24,6 +22,7 @@ from app.models import Sequence as FrameSequence
 from app.services.scoring.report import load_sources
 from app.services.scoring.rows import ScoringProblem
 from app.services.scoring.cells import HUMAN
+from app.spreadsheet import csv_text
 from egonet.metrics import DEFAULT_THRESHOLDS, frame_scores, threshold_values
 
 
@@ -50,19 +49,17 @@ class FrameTable:
 
     def to_csv(self) -> str:
         """One line per frame: its id and label, then each row's best F, threshold and AP."""
-        out = io.StringIO()
-        writer = csv.writer(out, lineterminator="\n")
         header = ["frame_id", "frame", "activity"]
         for key, _, _ in self.rows:
             header += [f"{key} best F", f"{key} threshold", f"{key} AP"]
-        writer.writerow(header)
+        table = []
         for line in self.lines:
             values: list[object] = [line.frame_id, line.label, self.activity]
             for key, _, _ in self.rows:
                 got = line.scores.get(key)
                 values += ["", "", ""] if got is None else [f"{got[0]:.4f}", f"{got[1]:.2f}", "" if got[2] is None else f"{got[2]:.4f}"]
-            writer.writerow(values)
-        return out.getvalue()
+            table.append(values)
+        return csv_text(table, header)
 
 
 def frame_table(

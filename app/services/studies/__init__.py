@@ -62,11 +62,16 @@ from app.services.studies.recruiting import (
     admit,
     availability,
     by_external_id,
+    example_frame,
+    may_resume,
+    mturk_submit_hosts,
+    mturk_submit_url,
     open_link_study,
     order_seed,
     parse_arrival,
     places_taken,
     refusal,
+    release,
     set_active,
 )
 from app.services.studies.session import (

@@ -11,7 +11,6 @@ and browser, for approving payments. Sessions whose deadline passed while
 nobody was there are closed first, so no trial stays pending after time-up.
 """
 
-import csv
 import io as _io
 import json
 import zipfile
@@ -35,6 +34,7 @@ from app.services.studies.definition import definition_of
 from app.services.studies.masks import condition_name, mask_png, trial_soft_mask
 from app.services.studies.overview import progress
 from app.services.studies.session import close_overdue
+from app.spreadsheet import csv_text
 from egonet.clicks import MaskMean
 
 TRIAL_COLUMNS = [
@@ -173,27 +173,28 @@ def _event_rows(study: Study, trial: Trial, truth: _Truth) -> list[dict[str, Any
 
 
 def export_csv(study: Study, table: str) -> str:
-    """One table of the study's results as CSV: ``trials``, ``clicks``, ``events`` or ``participants``."""
+    """One table of the study's results as CSV: ``trials``, ``clicks``, ``events`` or ``participants``.
+
+    Cells go through the one CSV writer (``app.spreadsheet``): what a participant's browser or platform sent
+    (user agent, time zone, external ids) cannot run as a formula in a spreadsheet.
+    """
     _settle(study)
-    out = _io.StringIO()
     if table == "participants":
-        writer = csv.DictWriter(out, fieldnames=PARTICIPANT_COLUMNS, lineterminator="\n")
-        writer.writeheader()
-        for row in participant_rows(study):
-            writer.writerow({**row, "external": json.dumps(row["external"], sort_keys=True) if row["external"] else ""})
-        return out.getvalue()
-    rows_of = {"trials": lambda t: [_trial_row(study, t, truth)], "clicks": lambda t: _click_rows(study, t, truth),
-               "events": lambda t: _event_rows(study, t, truth)}[table]  # fmt: skip
-    columns = {"trials": TRIAL_COLUMNS, "clicks": CLICK_COLUMNS, "events": EVENT_COLUMNS}[table]
-    truth = _Truth(study)
-    writer = csv.DictWriter(out, fieldnames=columns, lineterminator="\n")
-    writer.writeheader()
-    for trial in _study_trials(study):
-        for row in rows_of(trial):
-            if "detail" in row:
-                row["detail"] = json.dumps(row["detail"], sort_keys=True)
-            writer.writerow(row)
-    return out.getvalue()
+        columns, rows = PARTICIPANT_COLUMNS, participant_rows(study)
+    else:
+        truth = _Truth(study)
+        rows_of = {"trials": lambda t: [_trial_row(study, t, truth)], "clicks": lambda t: _click_rows(study, t, truth),
+                   "events": lambda t: _event_rows(study, t, truth)}[table]  # fmt: skip
+        columns = {"trials": TRIAL_COLUMNS, "clicks": CLICK_COLUMNS, "events": EVENT_COLUMNS}[table]
+        rows = (row for trial in _study_trials(study) for row in rows_of(trial))
+    return csv_text(([_csv_cell(column, row[column]) for column in columns] for row in rows), columns)
+
+
+def _csv_cell(column: str, value: Any) -> Any:
+    """JSON columns as one JSON text (an empty ``external`` as nothing), other values as they are."""
+    if column == "external":
+        return json.dumps(value, sort_keys=True) if value else ""
+    return json.dumps(value, sort_keys=True) if column == "detail" else value
 
 
 def participant_rows(study: Study) -> list[dict[str, Any]]:
@@ -315,9 +316,7 @@ def mask_files(study: Study) -> Iterator[tuple[str, bytes]]:
     Names: ``P01/0001-frame12.png`` (participant, trial position, frame id)
     and ``mean/frame12.png``; ``manifest.csv`` lists them.
     """
-    manifest = _io.StringIO()
-    writer = csv.writer(manifest, lineterminator="\n")
-    writer.writerow(["file", "participant", "position", "kind", "frame_id", "activity", "frame_source", "outcome", "participants"])
+    manifest = []
     means: dict[int, MaskMean] = defaultdict(MaskMean)
     for trial in _study_trials(study):
         if trial.outcome not in ANSWERED:
@@ -325,7 +324,7 @@ def mask_files(study: Study) -> Iterator[tuple[str, bytes]]:
         frame = trial.frame
         mask = trial_soft_mask(trial)
         name = f"{trial.participant.label}/{trial.position:04d}-frame{frame.id}.png"
-        writer.writerow([name, trial.participant.label, trial.position, trial.kind.value, frame.id, frame.sequence.activity.name,
+        manifest.append([name, trial.participant.label, trial.position, trial.kind.value, frame.id, frame.sequence.activity.name,
                          frame.source_name, trial.outcome.value, ""])  # fmt: skip
         yield name, mask_png(mask)
         means[frame.id].add(mask)
@@ -333,10 +332,11 @@ def mask_files(study: Study) -> Iterator[tuple[str, bytes]]:
         frame = sf.frame
         if frame.id in means:
             name = f"mean/frame{frame.id}.png"
-            writer.writerow([name, "mean", "", sf.kind.value, frame.id, frame.sequence.activity.name, frame.source_name, "",
+            manifest.append([name, "mean", "", sf.kind.value, frame.id, frame.sequence.activity.name, frame.source_name, "",
                              means[frame.id].count])  # fmt: skip
             yield name, mask_png(means[frame.id].mean())
-    yield "manifest.csv", manifest.getvalue().encode()
+    header = ["file", "participant", "position", "kind", "frame_id", "activity", "frame_source", "outcome", "participants"]
+    yield "manifest.csv", csv_text(manifest, header).encode()
 
 
 class _Chunks(_io.RawIOBase):

@@ -24,6 +24,7 @@ import secrets
 from collections.abc import Mapping
 from dataclasses import dataclass, field
 
+from flask import current_app
 from sqlalchemy import func, or_, update
 from sqlalchemy.exc import IntegrityError
 
@@ -42,7 +43,7 @@ from app.models.studies import (
     Trial,
 )
 from app.services.studies import protocol
-from app.services.studies.common import TOKEN_PATTERN, StudyProblem, check_int
+from app.services.studies.common import TOKEN_PATTERN, StudyProblem, check_int, now
 
 # Access codes: 8 characters without look-alikes (no 0/O, 1/I/L): 31^8, about 10^12.
 CODE_ALPHABET = "ABCDEFGHJKMNPQRSTUVWXYZ23456789"
@@ -51,15 +52,25 @@ MAX_USER_AGENT = 512
 # The recruiting platforms' URL parameters: (platform, the participant's id, the others kept with it).
 PLATFORMS = (
     ("prolific", "PROLIFIC_PID", ("STUDY_ID", "SESSION_ID")),
-    ("mturk", "workerId", ("assignmentId", "hitId")),
+    ("mturk", "workerId", ("assignmentId", "hitId", "turkSubmitTo")),
     ("external", "external_id", ()),
 )
 MTURK_PREVIEW = "ASSIGNMENT_ID_NOT_AVAILABLE"
 """MTurk's ``assignmentId`` while a worker previews a HIT (before accepting it)."""
+# The platform's id of the participant's visit, given only to them with their id: a platform id alone is
+# no credential, so a session resumes from the browser that first arrived, with this same visit id, or
+# once staff released it (``RELEASED`` in ``external``: the next arrival binds a new browser).
+VISIT_PARAMS = {"prolific": "SESSION_ID", "mturk": "assignmentId"}
+RELEASED = "released_at"
+# Where MTurk may send an ExternalQuestion's answers (its ``turkSubmitTo``); a deployment's
+# ``MTURK_SUBMIT_HOSTS`` replaces the list (tests add a local stand-in that way, never by default).
+MTURK_SUBMIT_HOSTS = ("https://workersandbox.mturk.com", "https://www.mturk.com")
 
 FULL = "This study is full: thank you for your interest."
 PAUSED = "This study is paused and takes no new participants at the moment. Please try again later."
 CLOSED = "This study is closed and takes no new participants."
+ELSEWHERE = ("You started this study in another browser: please continue there. If you cannot, write to the "
+             "researchers; they can let you continue here.")
 
 
 @dataclass
@@ -77,7 +88,7 @@ def parse_arrival(args: Mapping[str, str]) -> Arrival:
 
     Raises:
         StudyProblem: 400 naming the parameter when one is not 1-64 letters,
-            digits, ``_``, ``.`` or ``-``.
+            digits, ``_``, ``.`` or ``-`` (``turkSubmitTo``: not one of ``mturk_submit_hosts()``).
     """
     arrival = Arrival()
     for platform, id_param, others in PLATFORMS:
@@ -85,7 +96,11 @@ def parse_arrival(args: Mapping[str, str]) -> Arrival:
             value = args.get(param)
             if value is None or value == "":
                 continue
-            if not TOKEN_PATTERN.fullmatch(value):
+            if param == "turkSubmitTo":
+                if value.rstrip("/") not in mturk_submit_hosts():
+                    raise StudyProblem(f"the link's turkSubmitTo must be one of {', '.join(mturk_submit_hosts())}", field=param)
+                value = value.rstrip("/")
+            elif not TOKEN_PATTERN.fullmatch(value):
                 raise StudyProblem(f"the link's {param} must be 1-64 letters, digits, '_', '.' or '-'", field=param)
             if param == id_param and arrival.external_id is None:
                 arrival.platform, arrival.external_id = platform, value
@@ -93,6 +108,23 @@ def parse_arrival(args: Mapping[str, str]) -> Arrival:
                 arrival.external[param] = value
     arrival.preview = arrival.external.get("assignmentId") == MTURK_PREVIEW
     return arrival
+
+
+def mturk_submit_hosts() -> tuple[str, ...]:
+    return tuple(current_app.config.get("MTURK_SUBMIT_HOSTS", MTURK_SUBMIT_HOSTS))
+
+
+def mturk_submit_url(participant: Participant) -> str | None:
+    """Where an MTurk worker's page posts their assignment and completion code at the end (None for others)."""
+    host, assignment = participant.external.get("turkSubmitTo"), participant.external.get("assignmentId")
+    if participant.platform != "mturk" or host not in mturk_submit_hosts() or not assignment:
+        return None
+    return host + "/mturk/externalSubmit"
+
+
+def example_frame(study: Study) -> StudyFrame | None:
+    """The frame an MTurk preview shows (the first practice frame, else the first of the study)."""
+    return next(iter(study.frames_of(FrameKind.PRACTICE) or study.frames), None)
 
 
 def open_link_study(token: str) -> Study:
@@ -148,8 +180,8 @@ def availability(study: Study) -> str | None:
 
 
 def refusal(reason: str) -> StudyProblem:
-    """The polite refusal of the open link: 409 full or paused, 410 closed (``reason`` says which)."""
-    text = {"full": FULL, "paused": PAUSED, "closed": CLOSED}[reason]
+    """The polite refusal of the open link: 409 full, paused or elsewhere (another browser's session), 410 closed."""
+    text = {"full": FULL, "paused": PAUSED, "closed": CLOSED, "elsewhere": ELSEWHERE}[reason]
     return StudyProblem(text, status=410 if reason == "closed" else 409, reason=reason)
 
 
@@ -164,22 +196,51 @@ def _lock(study: Study) -> None:
     db.session.refresh(study)
 
 
-def admit(study: Study, arrival: Arrival, *, user_agent: str | None = None) -> Participant:
-    """The participant arriving through the open link: the one with this external id, or a new one.
+def may_resume(participant: Participant, arrival: Arrival, *, same_browser: bool) -> bool:
+    """Whether ``arrival`` may continue ``participant``'s session (see ``VISIT_PARAMS``)."""
+    param = VISIT_PARAMS.get(participant.platform)
+    visit = arrival.external.get(param) if param else None
+    return same_browser or (visit is not None and visit == participant.external.get(param)) or RELEASED in participant.external
+
+
+def resume(participant: Participant, arrival: Arrival, *, same_browser: bool) -> Participant:
+    """The participant again, their platform's parameters now this visit's (a new MTurk assignment, say).
+
+    Raises:
+        StudyProblem: 409 (``reason`` elsewhere) when the arrival may not resume them (``may_resume``).
+    """
+    if not may_resume(participant, arrival, same_browser=same_browser):
+        raise refusal("elsewhere")
+    participant.external = {k: v for k, v in participant.external.items() if k != RELEASED} | arrival.external
+    db.session.commit()
+    return participant
+
+
+def release(participant: Participant) -> None:
+    """Let the next arrival with the participant's id continue in a new browser; browsers signed in now are signed out."""
+    participant.external = {**participant.external, RELEASED: now().isoformat()}
+    participant.user.end_sessions()
+    db.session.commit()
+
+
+def admit(study: Study, arrival: Arrival, *, user_agent: str | None = None, same_browser: bool = False) -> Participant:
+    """The participant arriving through the open link: the one with this external id (``resume``), or a new one.
 
     A newcomer needs the study open and a free place within the cap and a
     condition's quota; they get a condition (balanced), a code and their
-    trials, in one transaction.
+    trials, in one transaction. ``same_browser``: this browser is signed in
+    as the participant with this external id.
 
     Raises:
         StudyProblem: 409 (``reason`` full or paused) or 410 (closed) for a
-            newcomer who cannot be admitted; 409 for an MTurk preview.
+            newcomer who cannot be admitted; 409 for an MTurk preview, and
+            (``reason`` elsewhere) for a known id from another browser.
     """
     if arrival.preview:
         raise StudyProblem("accept the HIT first, then open the study", status=409, reason="preview")
     known = by_external_id(study, arrival.external_id)
     if known is not None:
-        return known
+        return resume(known, arrival, same_browser=same_browser)
     _lock(study)
     try:
         reason = availability(study)
@@ -200,7 +261,7 @@ def admit(study: Study, arrival: Arrival, *, user_agent: str | None = None) -> P
         known = by_external_id(study, arrival.external_id)
         if known is None:
             raise
-        return known
+        return resume(known, arrival, same_browser=False)
     return participant
 
 

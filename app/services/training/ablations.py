@@ -16,8 +16,6 @@ initialisation, shuffling and augmentation alike for every model.
 
 from __future__ import annotations
 
-import csv
-import io as text_io
 import json
 import math
 from dataclasses import dataclass, field, replace
@@ -31,6 +29,7 @@ from app.models.training import RunStatus, TrainingRun
 from app.services import ground_truth
 from app.services.training.control import RunRequest, TrainingProblem, create_run
 from app.services.training.predictions import held_out_predictions
+from app.spreadsheet import csv_text
 from egonet.io import write_atomic
 from egonet.metrics import ScoreAccumulator
 
@@ -258,15 +257,11 @@ def write_table(table: AblationTable, out_dir: Path) -> list[Path]:
     """Write ``ablations.md``, ``ablations.csv`` and ``ablations.json`` in ``out_dir`` (atomically)."""
     out_dir.mkdir(parents=True, exist_ok=True)
     records = table_rows(table)
-    buffer = text_io.StringIO()
-    writer = csv.DictWriter(buffer, fieldnames=list(records[0]), lineterminator="\n")
-    writer.writeheader()
-    writer.writerows(records)
     document = {"name": table.name, "made_at": table.made_at, "budget": table.budget, "activities": table.activities,
                 "rows": records, "notes": table.notes}
     files = {
         "ablations.md": table_markdown(table),
-        "ablations.csv": buffer.getvalue(),
+        "ablations.csv": csv_text([[r[k] for k in records[0]] for r in records], list(records[0])),
         "ablations.json": json.dumps(document, indent=2),
     }
     paths = []
