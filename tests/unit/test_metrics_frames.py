@@ -270,7 +270,7 @@ def test_resampler_is_seeded_by_stratum_and_size():
 def test_resamples_are_capped_by_their_memory_and_p_has_a_floor():
     many = Resampler(resamples=100_000)
     assert many.weights("hotel", 3).shape == (1 + 100_000 + 3, 3)
-    with pytest.raises(EgonetError, match="at most 83263 resamples fit these frames") as info:
+    with pytest.raises(EgonetError, match="at most 83261 resamples fit these frames") as info:
         many.weights("cooking", 400)  # 403 frames in all: 40 million weights, refused before any is drawn
     assert info.value.field == "resamples" and MAX_WEIGHTS == 2**25
     assert p_floor(1000) == 1 / 1001 and p_floor(0) == 1.0
