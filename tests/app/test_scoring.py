@@ -175,7 +175,7 @@ def test_people_on_shared_and_own_frames_and_their_unanswered_trials(app, ctx, t
 
     # By default both are scored on the frames both have.
     shared = scoring.build_report(run_ids=[], study_ids=[ids["study"]], baselines=False)
-    assert shared.frames == "shared"
+    assert shared.provenance.frames == "shared"
     check(shared, first, answered[second.id])
     check(shared, second, answered[second.id])
     assert shared.row(f"participant:{first.id}").cells[short].frames_available == 2
@@ -191,7 +191,7 @@ def test_people_on_shared_and_own_frames_and_their_unanswered_trials(app, ctx, t
     # Answered trials only, as before: P02 back on 3 frames, and the table still says 1 was unanswered.
     answered_only = scoring.build_report(run_ids=[], study_ids=[ids["study"]], baselines=False, answered_only=True, frames="each")
     check(answered_only, second, answered[second.id])
-    assert row(answered_only, "P02").unanswered == 1 and answered_only.answered_only
+    assert row(answered_only, "P02").unanswered == 1 and answered_only.provenance.answered_only
 
     # Two studies: names say which study; a participant who has not started is only a note.
     other = build_study(tmp_path / "other", activities=("desk work",), frames=2, per_activity=1, participants=1)
@@ -288,9 +288,12 @@ def test_the_conventions_and_thresholds_against_direct_computations(ctx):
     masks = [truth_mask(f) for f in frames]
     own = [score_maps([p], [m]) for p, m in zip(probs, masks)]  # each frame's own curve
 
-    per_image = row(scoring.build_report(run_ids=[], study_ids=[], metric="per-image"), "centre prior").cells["hotel"]
-    assert per_image.max_f == pytest.approx(np.mean([s.max_f for s in own]), abs=1e-12)
-    assert per_image.ap == pytest.approx(np.mean([s.ap for s in own]), abs=1e-12)
+    ois_mean = row(scoring.build_report(run_ids=[], study_ids=[], metric="ois-mean"), "centre prior").cells["hotel"]
+    assert ois_mean.max_f == pytest.approx(np.mean([s.max_f for s in own]), abs=1e-12)
+    assert ois_mean.ap == pytest.approx(np.mean([s.ap for s in own]), abs=1e-12)
+    mean_curve = row(scoring.build_report(run_ids=[], study_ids=[], metric="mean-curve"), "centre prior").cells["hotel"]
+    expected = score_maps(probs, masks, metric="mean-curve")
+    assert (mean_curve.max_f, mean_curve.ap) == pytest.approx((expected.max_f, expected.ap), abs=1e-12)
 
     # OIS: each frame's counts at its own best threshold (the highest on ties), summed, then F.
     at_best = []
@@ -539,7 +542,7 @@ def test_statistics_are_cached_and_recomputed_when_their_inputs_change(ctx, monk
     assert scored == []  # read back
     assert again.to_json() == first.to_json()
     # The same per-frame counts serve every convention, frame choice and resampling.
-    for view in (dict(metric="per-image"), dict(metric="ods-ois", frames="each"), dict(resamples=50, seed=3)):
+    for view in (dict(metric="ois-mean", empty="zero"), dict(metric="mean-curve"), dict(metric="ods-ois", frames="each"), dict(resamples=50, seed=3)):
         scoring.build_report(study_ids=[], **view)
     assert scored == []
     assert scoring.build_report(study_ids=[], use_cache=False).to_json() == first.to_json()

@@ -116,7 +116,8 @@ def test_csv_and_json_carry_n_and_intervals():
 def test_empty_report_renders():
     empty = scoring.Report(activities=[], rows=[])
     assert "nothing to score" in empty.to_table()
-    assert list(csv.reader(io.StringIO(empty.to_csv())))[0][-3:] == ["mean AP lo", "mean AP hi", "mean over activities"]
+    header = list(csv.reader(io.StringIO(empty.to_csv())))[0]
+    assert header[header.index("mean over activities") - 2 :][:3] == ["mean AP lo", "mean AP hi", "mean over activities"]
     assert "\\begin{tabular}{lcc}" in empty.to_latex()
     assert json.loads(empty.to_json())["rows"] == []
 
@@ -201,9 +202,10 @@ def test_score_command_compares_two_rows(ctx, runner):
     assert set(data["activities"]) == {"cooking", "hotel"} and set(data["mean"]) == {"max_f", "ap"}
     same = json.loads(runner.invoke(args=["egonet", "score", "--compare", "baseline:aop", "baseline:aop", "--format", "json"]).stdout)
     assert same["difference"] == 0 and same["p_value"] == 1.0
-    text = runner.invoke(args=["egonet", "score", "--compare", "baseline:center", "baseline:saliency", "--metric", "per-image"]).stdout
-    assert text.startswith("centre prior [baseline:center] minus saliency [baseline:saliency]") and "p = " in text
-    assert "mean F diff" in text and "per-image" in text
+    text = runner.invoke(args=["egonet", "score", "--compare", "baseline:center", "baseline:saliency", "--metric", "ois-mean"]).stdout
+    assert text.startswith("centre prior [baseline:center] minus saliency [baseline:saliency]")
+    assert re.search(r"difference \(mean over activities\) [+-]\d\.\d{3} \[.*\] p (= \d\.\d{3}|< 0\.001) \(6 frames\)", text)
+    assert "mean F diff" in text and "ois-mean" in text
 
 
 def test_score_command_errors_are_one_line(ctx, runner):
@@ -218,8 +220,10 @@ def test_score_command_errors_are_one_line(ctx, runner):
                          (["--compare", "a"], "--compare")):  # fmt: skip
         result = runner.invoke(args=["egonet", "score", *args])
         assert result.exit_code == 2 and option in result.output, args
-    result = runner.invoke(args=["egonet", "score", "--compare", "a", "b", "--format", "csv"])
-    assert result.exit_code == 2 and "--compare prints a table or JSON" in result.output
+    result = runner.invoke(args=["egonet", "score", "--empty-frames", "none"])
+    assert result.exit_code == 2 and "--empty-frames" in result.output
+    result = runner.invoke(args=["egonet", "score", "--resamples", "100000", "--format", "csv"])  # 6 frames x 100,000: fits
+    assert result.exit_code == 0, result.output
 
 
 # --------------------------------------------------------------------------
@@ -240,7 +244,7 @@ def test_scores_page_shows_the_tables_switches_comparison_plots_and_downloads(ap
     assert html.count('class="pr-plot"') == 3  # all activities, cooking, hotel
     assert "0 unanswered" in html and 'class="ci"' in html and "n 2" in html
     assert f'name="studies" value="{ids["study"]}" checked' in html and f'name="runs" value="{run_id}" checked' in html
-    assert f"/scores/table.csv?chosen=1&amp;runs={run_id}&amp;studies={ids['study']}&amp;metric=pooled&amp;frames=shared&amp;baselines=1" in html
+    assert f"/scores/table.csv?chosen=1&amp;runs={run_id}&amp;studies={ids['study']}&amp;metric=pooled&amp;frames=shared&amp;empty=leave-out&amp;baselines=1" in html
 
     html = admin_client.get(f"/scores/?chosen=1&baselines=1&metric=ods-ois&frames=each&studies={ids['study']}").get_data(as_text=True)
     assert 'id="score-table-ois"' in html and 'name="metric" value="ods-ois" checked' in html and 'name="frames" value="each" checked' in html
@@ -248,7 +252,8 @@ def test_scores_page_shows_the_tables_switches_comparison_plots_and_downloads(ap
 
     page = admin_client.get("/scores/?compare_a=baseline:center&compare_b=baseline:saliency")
     html = page.get_data(as_text=True)
-    assert 'id="comparison"' in html and "centre prior minus saliency" in html and 'class="p-value">p = ' in html
+    assert 'id="comparison"' in html and "centre prior minus saliency" in html
+    assert re.search(r'class="p-value">p (= \d\.\d{3}|&lt; 0\.001)<', html)
     assert '<option value="baseline:center" selected>' in html
 
     page = admin_client.get("/scores/?chosen=1")  # nothing ticked: no rows
@@ -260,7 +265,8 @@ def test_scores_page_shows_the_tables_switches_comparison_plots_and_downloads(ap
         assert response.status_code == 200 and response.mimetype == "text/csv"
         assert 'filename="scores.csv"' in response.headers["Content-Disposition"]
         rows = list(csv.reader(io.StringIO(response.get_data(as_text=True))))
-        assert [r[1] for r in rows[1:]] == ["AOP", "centre prior", "saliency", "GBVS", HANDLED_ROW, "P01"] and rows[1][4] == "per-image"
+        # The old name still works for a release: it is ois-mean, and the download says so.
+        assert [r[1] for r in rows[1:]] == ["AOP", "centre prior", "saliency", "GBVS", HANDLED_ROW, "P01"] and rows[1][4] == "ois-mean"
     with admin_client.get("/scores/table.tex") as response:
         assert response.status_code == 200 and "\\begin{tabular}" in response.get_data(as_text=True)
     with admin_client.get("/scores/table.json?compare_a=baseline:aop&compare_b=baseline:center") as response:
@@ -290,8 +296,9 @@ def test_figures_and_per_image_scores(app, admin_client):
     assert [int(m) for m in re.findall(r'<tr data-frame="(\d+)"', html)] == order
     with admin_client.get("/scores/frames.csv?activity=hotel") as response:
         rows = list(csv.reader(io.StringIO(response.get_data(as_text=True))))
-        assert rows[0][:4] == ["frame_id", "frame", "activity", "baseline:aop best F"] and len(rows) == 4
-        assert 'filename="per-image-hotel.csv"' in response.headers["Content-Disposition"]
+        assert rows[0][:6] == ["frame_id", "frame", "activity", "action-object pixels", "empty frames policy", "baseline:aop best F"]
+        assert len(rows) == 4 and rows[1][3:5] == ["1", "leave-out"]
+        assert 'filename="per-frame-hotel.csv"' in response.headers["Content-Disposition"]
 
 
 def test_scores_pages_refuse_bad_choices(admin_client):
