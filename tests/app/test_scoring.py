@@ -280,6 +280,41 @@ def test_with_one_activity_there_is_no_aop(ctx):
     assert report.notes == ["AOP: no other activity has labelled frames to fit the prior for cooking."]
 
 
+def test_frames_without_an_action_object_follow_the_chosen_policy_and_are_counted(ctx):
+    add_activity("cooking", seed=1)
+    add_activity("hotel", seed=2)
+    rgb = np.random.default_rng(3).integers(0, 255, (*SIZE, 3), dtype=np.uint8)
+    item = FrameItem("hotel-empty", 0, "test hotel empty", rgb=rgb, mask=np.zeros(SIZE, bool), meta={"kind": "visual"})
+    add_frames(activity="hotel", sequence="nothing", items=iter([item]), mask_status=Status.REVIEWED)
+    hotel = frames_by_activity()["hotel"]
+    probs = {f.id: CenterPrior().predict(rgb_of(f), None) for f in hotel}
+    masks = {f.id: truth_mask(f) for f in hotel}
+    empty = next(fid for fid, m in masks.items() if not m.any())
+    own = {fid: score_maps([probs[fid]], [masks[fid]]).max_f for fid in masks if fid != empty}
+
+    pooled = scoring.build_report(run_ids=[], study_ids=[])
+    assert pooled.provenance.empty_frames == {"cooking": 0, "hotel": 1}
+    assert row(pooled, "centre prior").cells["hotel"].n_frames == 4  # pooled: its false positives count
+    assert "Frames without action-object pixels: 1 (hotel 1); pooled counts their false positives" in pooled.to_table()
+
+    left = scoring.build_report(run_ids=[], study_ids=[], metric="ois-mean")  # the default: leave-out
+    cell = row(left, "centre prior").cells["hotel"]
+    assert cell.n_frames == 3 and cell.max_f == pytest.approx(np.mean(list(own.values())), abs=1e-12)
+    assert "policy leave-out: left out of the per-frame means (our choice" in left.to_table()
+    assert json.loads(left.to_json())["empty_frames"]["by_activity"] == {"cooking": 0, "hotel": 1}
+    zero = row(scoring.build_report(run_ids=[], study_ids=[], metric="ois-mean", empty="zero"), "centre prior").cells["hotel"]
+    assert zero.n_frames == 4 and zero.max_f == pytest.approx(sum(own.values()) / 4, abs=1e-12)
+    one = row(scoring.build_report(run_ids=[], study_ids=[], metric="ois-mean", empty="one-if-empty"), "centre prior").cells["hotel"]
+    predicts_nothing = float(probs[empty].max() < 99 / 100)  # empty at the highest threshold: a perfect frame
+    assert one.max_f == pytest.approx((sum(own.values()) + predicts_nothing) / 4, abs=1e-12)
+    frames = scoring.frame_table(activity="hotel")
+    assert [line.no_truth for line in frames.lines].count(True) == 1
+    assert next(line for line in frames.lines if line.no_truth).scores["baseline:center"] == (None, None, None)
+    with pytest.raises(scoring.ScoringProblem, match="empty must be one of leave-out, zero, one-if-empty") as info:
+        scoring.build_report(run_ids=[], study_ids=[], empty="skip")
+    assert info.value.field == "empty"
+
+
 def test_the_conventions_and_thresholds_against_direct_computations(ctx):
     add_activity("cooking", seed=1)
     add_activity("hotel", seed=2)

@@ -243,10 +243,15 @@ class ComparisonFormats(_Json):
         return [*self.activities.items(), (MEAN, self.mean)]
 
     def as_dict(self) -> dict[str, Any]:
-        """The comparison; ``difference``, ``ci``, ``p_value`` and ``p_text`` at the top are the mean MF-like statistic's."""
+        """The comparison; ``difference``, ``ci``, ``p_value`` and ``p_text`` at the top are the mean MF-like statistic's.
+
+        The provenance's bootstrap (the report's ``ci``) is ``bootstrap`` here: ``ci`` is the difference's interval.
+        """
         head = self.headline()
+        facts = self.provenance.as_dict()
+        facts["bootstrap"] = facts.pop("ci")
         return {
-            **self.provenance.as_dict(),
+            **facts,
             "frames": "shared by the two rows",
             "a": {"key": self.a[0], "name": self.a[1]},
             "b": {"key": self.b[0], "name": self.b[1]},
@@ -304,7 +309,8 @@ class ComparisonFormats(_Json):
             "\\midrule",
         ]
         for name, ds in self._lines():
-            cells = [f"{ds[s].value:+.3f} & {_signed(ds[s].ci)} & {tex(self.p_text(ds[s]))}" for s in self.statistics]
+            # "< 0.001" in math mode: a bare < is another glyph in LaTeX's default font encoding.
+            cells = [f"{ds[s].value:+.3f} & {_signed(ds[s].ci)} & ${self.p_text(ds[s])}$" for s in self.statistics]
             lines.append(" & ".join([tex(name), str(next(iter(ds.values())).n_frames), *cells]) + " \\\\")
         lines += ["\\bottomrule", "\\end{tabular}"]
         return "\n".join(lines) + "\n"
