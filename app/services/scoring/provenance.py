@@ -187,7 +187,7 @@ class Provenance:
         n = ", ".join(f"{a} {k}" for a, k in frames.items()) or "none"
         parts = [
             "We score each probability map against its frame's binary action-object mask with the maximum F-score (MF) "
-            f"and average precision (AP) of Bertasius et al. [bertasius2017egonet], thresholding the map at T = {t} "
+            f"and average precision (AP) of Bertasius et al. (RSS 2017) [bertasius2017egonet], thresholding the map at T = {t} "
             f"thresholds t_k = k/{t + 1} (k = 1..{t}; a pixel is positive when its probability is at least t_k; maps are "
             "never normalised), with F = 2PR/(P+R) and AP = sum_k (R_k - R_{k+1}) P_k.",
             f"Convention: {METRIC_TITLES[self.metric]} ({self.metric}).",
@@ -195,9 +195,7 @@ class Provenance:
             "mean over activities; " + ("every row of an activity is scored on the frames all its rows have."
                                         if self.frames == "shared" else "each row is scored on all the frames it has."),
         ]
-        if self.metric in PER_FRAME_MEANS:
-            parts.append(f"Frames without action-object pixels ({sum(self.empty_frames.values())}) are "
-                         f"{EMPTY_TITLES[self.empty].replace('each scores', 'scored as')}.")  # fmt: skip
+        parts.append(self._empty_sentence())
         parts.append(_rows_sentence(rows))
         parts += [f"{m.study}: each click is a Gaussian ({m.sigma}), several clicks combine by their maximum, and each "
                   f"region ({m.regions}) takes the mean of the Gaussian over its pixels." for m in self.human_maps]  # fmt: skip
@@ -210,6 +208,15 @@ class Provenance:
             )
         parts.append(f"Scores were computed with {self.code_version or 'EgoNet Studio'}.")
         return " ".join(parts) + "\n"
+
+    def _empty_sentence(self) -> str:
+        count = sum(self.empty_frames.values())
+        if self.metric not in PER_FRAME_MEANS:
+            return f"Frames without action-object pixels ({count}) count through their false positives."
+        what = EMPTY_TITLES[self.empty].replace("each scores", "scored")
+        if not count:
+            return f"No scored frame is without action-object pixels (such a frame would be {what})."
+        return f"The {count} frames without action-object pixels are {what}."
 
 
 def _rows_sentence(rows: Mapping[str, int]) -> str:
