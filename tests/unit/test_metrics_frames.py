@@ -386,7 +386,7 @@ def test_intervals_cover_the_true_value_about_95_percent_and_the_test_keeps_its_
         sample_a, sample_b = population_a.take(index), population_b.take(index)
         w = resampler.weights("sample", 40)
         # ods-ois holds the pooled statistics too (its max_f and ap are pooled MF and AP).
-        values = {metric: score_frames(sample_a, metric=metric, weights=w) for metric in ("ois-mean", "ods-ois")}
+        values = {metric: score_frames(sample_a, metric=metric, weights=w) for metric in ("ois-mean", "mean-curve", "ods-ois")}
         values["pooled"] = {key: values["ods-ois"][key] for key in ("max_f", "ap")}
         for metric, scores in values.items():
             for key, v in scores.items():
