@@ -6,11 +6,9 @@ from pathlib import Path
 import click
 
 from app.cli.group import bp, progress_bar
+from egonet.metrics import DEFAULT_EMPTY, DEFAULT_RESAMPLES, EMPTY_POLICIES, MAX_RESAMPLES, METRIC_ALIASES, METRICS
 
 FORMATS = {"table": "to_table", "csv": "to_csv", "latex": "to_latex", "json": "to_json"}
-METRICS = ("pooled", "ois-mean", "mean-curve", "ods-ois")
-OLD_METRICS = {"per-image": "ois-mean"}  # deprecated names, accepted until the next release
-EMPTY = ("leave-out", "zero", "one-if-empty")
 
 
 def _ids(ctx, param, value: str | None) -> list[int] | None:
@@ -25,9 +23,9 @@ def _ids(ctx, param, value: str | None) -> list[int] | None:
 
 def _metric(ctx, param, value: str) -> str:
     """The convention's name; an old one says so on stderr (stdout may be data)."""
-    if value in OLD_METRICS:
-        click.echo(f"--metric {value} is deprecated and goes in the next release: use --metric {OLD_METRICS[value]}", err=True)
-        return OLD_METRICS[value]
+    if value in METRIC_ALIASES:
+        click.echo(f"--metric {value} is deprecated and goes in the next release: use --metric {METRIC_ALIASES[value]}", err=True)
+        return METRIC_ALIASES[value]
     return value
 
 
@@ -37,17 +35,17 @@ REPORT_OPTIONS = (
     click.option("--studies", callback=_ids, help="Study ids, comma-separated ('' for none) [default: every study]."),
     click.option("--baselines/--no-baselines", default=True, show_default=True,
                  help="Include the baselines (AOP, centre prior, saliency, GBVS, handled + viewed object)."),
-    click.option("--metric", type=click.Choice([*METRICS, *OLD_METRICS]), default="pooled", show_default=True, callback=_metric,
+    click.option("--metric", type=click.Choice([*METRICS, *METRIC_ALIASES]), default="pooled", show_default=True, callback=_metric,
                  help="pooled: counts summed over an activity's frames; ois-mean: mean of each frame's best F; mean-curve: "
                       "best F of the precision-recall curve averaged over frames; ods-ois: BSDS ODS, OIS and AP "
                       "(per-image: the old name of ois-mean)."),
     click.option("--frames", type=click.Choice(["shared", "each"]), default="shared", show_default=True,
                  help="shared: each activity on the frames every row has there; each: every row on all its frames."),
-    click.option("--empty-frames", "empty", type=click.Choice(EMPTY), default="leave-out", show_default=True,
+    click.option("--empty-frames", "empty", type=click.Choice(EMPTY_POLICIES), default=DEFAULT_EMPTY, show_default=True,
                  help="How ois-mean and mean-curve count a frame without action-object pixels: leave it out, score it 0, "
                       "or 1 where the map predicts nothing at a threshold (one-if-empty)."),
     click.option("--answered-only", is_flag=True, help="Leave out people's unanswered trials (else each counts as an empty map)."),
-    click.option("--resamples", type=click.IntRange(min=0, max=100_000), default=1000, show_default=True,
+    click.option("--resamples", type=click.IntRange(min=0, max=MAX_RESAMPLES), default=DEFAULT_RESAMPLES, show_default=True,
                  help="Bootstrap resamples B (0: no intervals); p-values below 1/(B+1) print as '< 0.001' and the like. "
                       "At most 33.5 million weights (resamples x frames): the error says how many fit."),
     click.option("--seed", type=click.IntRange(min=0), default=0, show_default=True, help="Seed of the bootstrap."),

@@ -310,7 +310,7 @@ def test_frames_without_an_action_object_follow_the_chosen_policy_and_are_counte
     frames = scoring.frame_table(activity="hotel")
     assert [line.no_truth for line in frames.lines].count(True) == 1
     assert next(line for line in frames.lines if line.no_truth).scores["baseline:center"] == (None, None, None)
-    with pytest.raises(scoring.ScoringProblem, match="empty must be one of leave-out, zero, one-if-empty") as info:
+    with pytest.raises(scoring.ScoringProblem, match="empty: must be one of leave-out, zero, one-if-empty") as info:
         scoring.build_report(run_ids=[], study_ids=[], empty="skip")
     assert info.value.field == "empty"
 

@@ -427,5 +427,8 @@ def test_scores_pages_refuse_bad_choices(admin_client):
         assert response.status_code == 400 and "activity" in response.get_json()["fields"]
     with admin_client.get("/scores/frames?sort=run:7", headers={"Accept": "application/json"}) as response:
         assert response.status_code == 400 and "sort" in response.get_json()["fields"]
+    for url in ("/scores/?empty=skip", "/scores/frames?empty=skip", "/scores/comparison.csv"):
+        with admin_client.get(url, headers={"Accept": "application/json"}) as response:
+            assert response.status_code == 400 and set(response.get_json()["fields"]) & {"empty", "compare_a"}, url
     assert admin_client.get("/scores/table.xml").status_code == 404
     assert admin_client.get("/scores/figure.png").status_code == 404

@@ -1,4 +1,4 @@
-"""Per-image scores: every frame of one activity with each row's own best F and AP on it.
+"""Per-frame scores: every frame of one activity with each row's own best F and AP on it.
 
 Read from the same cached per-frame counts as the table
 (``report.load_sources``); each frame's scores are
@@ -26,7 +26,8 @@ from app.services.scoring.report import load_sources
 from app.services.scoring.rows import ScoringProblem
 from app.services.scoring.cells import HUMAN
 from app.spreadsheet import csv_text
-from egonet.metrics import DEFAULT_EMPTY, DEFAULT_THRESHOLDS, EMPTY_POLICIES, frame_scores, threshold_values
+from egonet.metrics import DEFAULT_EMPTY, DEFAULT_THRESHOLDS, frame_scores, threshold_values
+from egonet.metrics.frames import check_empty
 
 
 @dataclass(frozen=True)
@@ -46,7 +47,7 @@ class FrameLine:
 
 @dataclass
 class FrameTable:
-    """The per-image scores of one activity, rows as in the table (a group's runs each on their own)."""
+    """The per-frame scores of one activity, rows as in the table (a group's runs each on their own)."""
 
     activity: str | None
     activities: list[str]
@@ -98,12 +99,13 @@ def frame_table(
         empty: How a frame without action-object pixels scores (``egonet.metrics.EMPTY_POLICIES``).
 
     Raises:
-        ScoringProblem: naming ``activity``, ``frames``, ``sort`` or ``empty``, or as ``build_report``.
+        ScoringProblem: naming ``activity``, ``frames`` or ``sort``, or as ``build_report``.
+        EgonetError: naming ``empty`` (a 400 like the others).
     """
     if frames not in ("shared", "each"):
         raise ScoringProblem(f"frames must be shared or each, got {frames!r}", field="frames")
-    if empty not in EMPTY_POLICIES:
-        raise ScoringProblem(f"empty must be one of {', '.join(EMPTY_POLICIES)}, got {empty!r}", field="empty")
+    check_empty(empty)
+
     found, _ = load_sources(
         run_ids=run_ids, study_ids=study_ids, baselines=baselines, thresholds=thresholds, answered_only=answered_only
     )

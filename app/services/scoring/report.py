@@ -6,7 +6,7 @@ statistics are read back from ``cache`` or scored by ``sources`` and written
 there, then ``rows`` reduces them to the rows of a
 :class:`~app.services.scoring.table.Report` under the chosen convention,
 frames and resamples. :func:`load_sources` is the first half alone (the
-per-image page uses it).
+per-frame page uses it).
 
 A new kind of row registers in :func:`_jobs`: a function that returns
 :class:`_Job` objects (their rows, cache key and how to score them).
@@ -37,17 +37,18 @@ from app.services.scoring.sources import AOP_SIZE, BASELINE_NAMES, CENTER_SIGMA,
 from app.services.scoring.table import Report
 from app.version import code_version
 from egonet.clicks import DEFAULT_SIGMA, METHOD_OPTIONS, SUPERPIXEL_DEFAULTS
+from egonet.errors import EgonetError
 from egonet.metrics import (
     DEFAULT_EMPTY,
     DEFAULT_RESAMPLES,
     DEFAULT_THRESHOLDS,
-    EMPTY_POLICIES,
     MAX_RESAMPLES,
     PER_FRAME_MEANS,
     Resampler,
     resolve_metric,
     threshold_values,
 )
+from egonet.metrics.frames import check_empty
 
 __all__ = ["ScoringProblem", "available_runs", "available_studies", "build_report", "load_sources"]
 
@@ -309,12 +310,11 @@ def _check_view(metric: str, frames: str, empty: str, resamples: int, seed: int)
     """The convention's name (an old one resolved) and the notes that say so."""
     try:
         metric, deprecated = resolve_metric(metric)
-    except ValueError as exc:
-        raise ScoringProblem(str(exc), field="metric") from None
+        check_empty(empty)
+    except EgonetError as exc:
+        raise ScoringProblem(exc.message, field=exc.field) from None
     if frames not in FRAMES:
         raise ScoringProblem(f"frames must be one of {', '.join(FRAMES)}, got {frames!r}", field="frames")
-    if empty not in EMPTY_POLICIES:
-        raise ScoringProblem(f"empty must be one of {', '.join(EMPTY_POLICIES)}, got {empty!r}", field="empty")
     if isinstance(resamples, bool) or not isinstance(resamples, int) or not 0 <= resamples <= MAX_RESAMPLES:
         raise ScoringProblem(f"resamples must be a whole number from 0 to {MAX_RESAMPLES}", field="resamples")
     if isinstance(seed, bool) or not isinstance(seed, int) or seed < 0:
