@@ -5,16 +5,21 @@ bookmarked and its downloads repeat it:
 
 * what to score: ``chosen``, ``runs``, ``studies``, ``baselines`` (without
   ``chosen``: every completed run, every study and the baselines);
-* how: ``metric`` (``pooled``, ``per-image``, ``ods-ois``), ``frames``
-  (``shared``, ``each``), ``answered_only``, ``exclude_failed_checks``,
-  ``by_condition``;
-* ``compare_a`` / ``compare_b``: two row keys to compare;
+* how: ``metric`` (``pooled``, ``ois-mean``, ``mean-curve``, ``ods-ois``;
+  the old ``per-image`` still works, with a note), ``frames`` (``shared``,
+  ``each``), ``empty`` (frames without action-object pixels: ``leave-out``,
+  ``zero``, ``one-if-empty``), ``answered_only``, ``exclude_failed_checks``,
+  ``by_condition``; the page always uses 1,000 resamples (more, from
+  ``flask egonet score --resamples``);
+* ``compare_a`` / ``compare_b``: two row keys to compare (the comparison
+  downloads from ``/scores/comparison.<csv|tex|json>``);
 * ``plotted`` and ``plot``: the rows the precision-recall plots draw.
 """
 
 from flask import Blueprint, Response, render_template, request
 
 from app.services import scoring
+from egonet.metrics import DEFAULT_EMPTY
 
 bp = Blueprint("scores", __name__, url_prefix="/scores")
 
@@ -23,6 +28,7 @@ DOWNLOADS = {
     "tex": ("application/x-tex", lambda r: r.to_latex()),
     "json": ("application/json", lambda r: r.to_json()),
 }
+"""How the table and a comparison (both have the three renderers) download."""
 FIGURES = {"svg": "image/svg+xml", "pdf": "application/pdf"}
 
 
@@ -46,6 +52,7 @@ def _view() -> dict:
     return {
         "metric": request.args.get("metric", "pooled"),
         "frames": request.args.get("frames", "shared"),
+        "empty": request.args.get("empty", DEFAULT_EMPTY),
         "answered_only": request.args.get("answered_only") == "1",
         "exclude_failed_checks": request.args.get("exclude_failed_checks") == "1",
         "by_condition": request.args.get("by_condition") == "1",
@@ -76,6 +83,7 @@ def _query(choice: dict, view: dict, runs: list, studies: list) -> dict:
         "studies": [study.id for study, _ in studies] if choice["study_ids"] is None else choice["study_ids"],
         "metric": view["metric"],
         "frames": view["frames"],
+        "empty": view["empty"],
     }
     if choice["baselines"]:
         query["baselines"] = 1
@@ -110,6 +118,7 @@ def index():
         metrics=scoring.METRIC_TITLES,
         metric_short=scoring.METRIC_SHORT,
         frames=scoring.FRAMES,
+        empty_titles=scoring.EMPTY_TITLES,
         compare=request.args,
     )
 
@@ -121,6 +130,18 @@ def download(table_format: str):
     mimetype, render = DOWNLOADS[table_format]
     headers = {"Content-Disposition": f'attachment; filename="scores.{table_format}"'}
     return Response(render(report), mimetype=mimetype, headers=headers)
+
+
+@bp.get("/comparison.<any(csv, tex, json):table_format>")
+def comparison(table_format: str):
+    """The comparison of ``compare_a`` and ``compare_b`` as CSV, LaTeX or JSON, for the same choice as the page."""
+    keys = _compare()
+    if keys is None:
+        raise scoring.ScoringProblem("compare: choose two rows", fields={"compare_a": "choose a row", "compare_b": "choose a row"})
+    report = scoring.build_report(**_choice(), **_view(), compare_keys=keys)
+    mimetype, render = DOWNLOADS[table_format]
+    headers = {"Content-Disposition": f'attachment; filename="comparison.{table_format}"'}
+    return Response(render(report.comparison), mimetype=mimetype, headers=headers)
 
 
 @bp.get("/figure.<any(svg, pdf):figure_format>")
@@ -142,6 +163,7 @@ def _frame_table():
         **_choice(),
         activity=request.args.get("activity") or None,
         frames=view["frames"],
+        empty=view["empty"],
         answered_only=view["answered_only"],
         sort=request.args.get("sort") or None,
     )
@@ -149,7 +171,7 @@ def _frame_table():
 
 @bp.get("/frames")
 def frames():
-    """Per-image scores: each frame of one activity with every row's own best F and AP on it."""
+    """Per-frame scores: each frame of one activity with every row's own best F and AP on it (what ois-mean averages)."""
     table = _frame_table()
     choice, view = _choice(), _view()
     query = _query(choice, view, scoring.available_runs(), scoring.available_studies())
@@ -159,5 +181,5 @@ def frames():
 @bp.get("/frames.csv")
 def frames_csv():
     table = _frame_table()
-    name = "per-image-" + "".join(ch if ch.isalnum() else "-" for ch in table.activity or "none")
+    name = "per-frame-" + "".join(ch if ch.isalnum() else "-" for ch in table.activity or "none")
     return Response(table.to_csv(), mimetype="text/csv", headers={"Content-Disposition": f'attachment; filename="{name}.csv"'})

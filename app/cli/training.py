@@ -232,13 +232,17 @@ def _csv_list(ctx, param, value: str | None):
 @click.option("--out", "out_dir", type=click.Path(file_okay=False, path_type=Path),
               help="Folder for ablations.md/.csv/.json [default: instance/ablations/<name>].")
 @click.option("--queue", is_flag=True, help="Queue the runs for the worker; write the table later with --table NAME.")
-@click.option("--table", "table_only", metavar="NAME", help="Only write the table of an existing set's finished runs.")
+@click.option("--table", "table_only", metavar="NAME", help="Only write the table (n per activity, 95% intervals) of an existing set's finished runs.")
 def ablations_command(models, seeds, folds, epochs, size, batch_size, lr, init, device, activities, name, out_dir, queue, table_only):
     """Train every paper variant under one split, seeds and budget, and write one table beside the paper's.
 
     Each model and seed is a training run like `flask egonet train` makes
     (same engine, recorded, on the Training and Scores pages). The table
-    gives MF / AP per activity, their mean and the spread over seeds.
+    gives MF / AP per activity, pooled over its n held-out frames (n in each
+    column's title), their mean over activities with the standard deviation
+    over seeds and a 95% BCa bootstrap interval over frames (1000 resamples,
+    seed 0, the same resamples for every seed), the paper's numbers beside,
+    and the code version.
     """
     from flask import current_app
 

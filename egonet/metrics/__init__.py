@@ -17,9 +17,10 @@ area under it (AP). This package fixes the details (see
   ``P_k + R_k = 0``; ``MF = max_k F_k``.
 * ``AP = sum_k (R_k - R_{k+1}) P_k`` with the thresholds in increasing order
   and ``R_{T+1} = 0``.
-* ``score_maps(per_image=True)``: the same counts per map, ``P_k`` and
-  ``R_k`` averaged over the maps at each threshold, then F, MF and AP from
-  those averaged curves.
+* ``score_maps(metric="mean-curve")``: the same counts per map, ``P_k``
+  and ``R_k`` averaged over the maps at each threshold, then F, MF and AP
+  from those averaged curves (maps without positive pixels: see ``frames``,
+  ``empty=``). ``per_image=True`` is its old, deprecated spelling.
 
 Maps are never normalised before thresholding.
 
@@ -32,22 +33,43 @@ Modules:
   :class:`ScoreAccumulator` (streams maps, merges, stores its state) and
   :func:`score_maps`;
 * ``frames``: per-frame counts (:class:`FrameCounts`) and the conventions
-  ``pooled``, ``per-image`` (mean of each frame's best F) and ``ods-ois``
-  (BSDS), scored on any weighting of the frames (:func:`score_frames`);
+  ``pooled``, ``ois-mean`` (mean of each frame's best F; old name
+  ``per-image``), ``mean-curve`` and ``ods-ois`` (BSDS), scored on any
+  weighting of the frames (:func:`score_frames`), with the policies for
+  frames without positive pixels (``EMPTY_POLICIES``);
 * ``bootstrap``: seeded resampling of frames (:class:`Resampler`), BCa
   95 % intervals and paired tests (:class:`Estimate`).
 """
 
 from egonet.metrics.accumulate import ScoreAccumulator, count_stats, score_maps
-from egonet.metrics.bootstrap import DEFAULT_RESAMPLES, Estimate, Resampler, jackknife_weights, resample_weights
+from egonet.metrics.bootstrap import DEFAULT_RESAMPLES, MAX_RESAMPLES, Estimate, Resampler, jackknife_weights, p_floor, resample_weights
 from egonet.metrics.curves import Score, average_precision, curve_from_counts, f_scores, iso_f_curve, precision_recall
-from egonet.metrics.frames import METRICS, FrameCounts, frame_scores, metric_convention, reduce_sums, score_frames, weighted_sums
+from egonet.metrics.frames import (
+    DEFAULT_EMPTY,
+    EMPTY_POLICIES,
+    METRIC_ALIASES,
+    METRICS,
+    PER_FRAME_MEANS,
+    FrameCounts,
+    frame_curves,
+    frame_scores,
+    metric_convention,
+    reduce_sums,
+    resolve_metric,
+    score_frames,
+    weighted_sums,
+)
 from egonet.metrics.thresholds import DEFAULT_THRESHOLDS, Counts, threshold_values
 
 __all__ = [
+    "DEFAULT_EMPTY",
     "DEFAULT_RESAMPLES",
     "DEFAULT_THRESHOLDS",
+    "EMPTY_POLICIES",
+    "MAX_RESAMPLES",
     "METRICS",
+    "METRIC_ALIASES",
+    "PER_FRAME_MEANS",
     "Counts",
     "Estimate",
     "FrameCounts",
@@ -58,13 +80,16 @@ __all__ = [
     "count_stats",
     "curve_from_counts",
     "f_scores",
+    "frame_curves",
     "frame_scores",
     "iso_f_curve",
     "jackknife_weights",
     "metric_convention",
+    "p_floor",
     "precision_recall",
     "reduce_sums",
     "resample_weights",
+    "resolve_metric",
     "score_frames",
     "score_maps",
     "threshold_values",

@@ -9,10 +9,10 @@ thresholding: a map whose values all lie below 0.01 predicts nothing.
 The work is split as in smp's ``get_stats`` / ``fbeta_score``: sufficient
 statistics first (:func:`count_stats` gives per-threshold TP/FP/FN of one map
 from a single histogram pass), then a reduction (:meth:`Score.from_counts`,
-:meth:`Score.from_curves`). :class:`ScoreAccumulator` keeps both the pooled
-counts and the per-image curve sums, so a caller can stream an activity,
-merge activities, and score either way at the end. :func:`score_maps` is the
-one-call entry point.
+:meth:`Score.from_curves`). :class:`ScoreAccumulator` keeps each map's
+counts (:class:`~egonet.metrics.frames.FrameCounts`), so a caller can stream
+an activity, merge activities, and score under any convention at the end.
+:func:`score_maps` is the one-call entry point.
 
 Example:
     >>> import numpy as np
@@ -25,15 +25,20 @@ Example:
 
 from __future__ import annotations
 
+import logging
 from collections.abc import Iterable, Mapping
 
 import numpy as np
 
 from egonet.errors import EgonetError
-from egonet.metrics.curves import Score, curve_from_counts
+from egonet.metrics.curves import Score
+from egonet.metrics.frames import DEFAULT_EMPTY, FrameCounts, check_empty, frame_curves
 from egonet.metrics.thresholds import DEFAULT_THRESHOLDS, Counts, check_beta2, check_thresholds, thresholds_cached
 
-_STATE_KEYS = ("tp", "fp", "fn", "precision_sum", "recall_sum", "n_maps")
+_STATE_KEYS = ("tp", "fp", "positives")
+CURVE_METRICS = ("pooled", "mean-curve")
+"""The conventions with one precision-recall curve, which :func:`score_maps` returns."""
+_log = logging.getLogger(__name__)
 
 
 def _bin_index(prob: np.ndarray, thresholds: int) -> np.ndarray:
@@ -156,12 +161,12 @@ def _mask_name(name: str) -> str:
 
 
 class ScoreAccumulator:
-    """Streams maps in, keeps the sufficient statistics, scores at the end.
+    """Streams maps in, keeps each map's counts, scores at the end.
 
-    Holds the pooled counts (for pooled scores) and the sums of the per-map
-    precision and recall curves (for per-image scores), so either mode can be
-    computed from the same pass and accumulators of several activities can be
-    merged.
+    Holds every map's per-threshold counts (a few kilobytes a map), so the
+    pooled curve, the mean curve and the per-frame conventions
+    (:func:`~egonet.metrics.score_frames` on :meth:`frames`) all come from
+    the same pass, and accumulators of several activities can be merged.
 
     Args:
         thresholds: The number T of thresholds ``k / (T + 1)``.
@@ -175,11 +180,21 @@ class ScoreAccumulator:
 
     def __init__(self, *, thresholds: int = DEFAULT_THRESHOLDS) -> None:
         self.thresholds = check_thresholds(thresholds)
-        zeros = np.zeros(self.thresholds, dtype=np.int64)
-        self.counts = Counts(zeros, zeros.copy(), zeros.copy())
-        self.precision_sum = np.zeros(self.thresholds, dtype=np.float64)
-        self.recall_sum = np.zeros(self.thresholds, dtype=np.float64)
-        self.n_maps = 0
+        self._maps: list[Counts] = []
+
+    @property
+    def n_maps(self) -> int:
+        """How many maps were added."""
+        return len(self._maps)
+
+    @property
+    def counts(self) -> Counts:
+        """The counts pooled over every map, int64 (T,) each."""
+        return self.frames().pooled()
+
+    def frames(self) -> FrameCounts:
+        """Every map's counts, in the order they were added."""
+        return FrameCounts.stack(self._maps, thresholds=self.thresholds)
 
     def add(self, prob: np.ndarray, mask: np.ndarray, *, name: str = "prob") -> Counts:
         """Count one map and add it.
@@ -210,15 +225,10 @@ class ScoreAccumulator:
         Raises:
             ValueError: If the counts do not have T entries.
         """
-        arrays = [np.asarray(c, dtype=np.int64) for c in counts]
+        arrays = [np.array(c, dtype=np.int64) for c in counts]
         if any(a.shape != (self.thresholds,) for a in arrays):
             raise EgonetError(f"counts must hold arrays of shape ({self.thresholds},)", field="counts")
-        for total, a in zip(self.counts, arrays, strict=True):
-            total += a
-        precision, recall = curve_from_counts(Counts(*arrays))
-        self.precision_sum += precision
-        self.recall_sum += recall
-        self.n_maps += 1
+        self._maps.append(Counts(*arrays))
 
     def merge(self, other: ScoreAccumulator) -> None:
         """Add everything another accumulator has seen (e.g. another activity).
@@ -231,95 +241,99 @@ class ScoreAccumulator:
         """
         if other.thresholds != self.thresholds:
             raise EgonetError(f"other has {other.thresholds} thresholds, this accumulator {self.thresholds}", field="other")
-        for total, a in zip(self.counts, other.counts, strict=True):
-            total += a
-        self.precision_sum += other.precision_sum
-        self.recall_sum += other.recall_sum
-        self.n_maps += other.n_maps
+        self._maps.extend(other._maps)
 
-    def state(self) -> dict[str, np.ndarray | int]:
-        """The sufficient statistics as plain arrays, to store and restore later.
+    def state(self) -> dict[str, np.ndarray]:
+        """The maps' counts as plain arrays, to store and restore later.
 
         Returns:
-            ``{"tp", "fp", "fn"}``: int64 (T,) counts, ``{"precision_sum",
-            "recall_sum"}``: float64 (T,) per-map curve sums (copies), and
-            ``"n_maps"``: an int. :meth:`from_state` turns it back into an
-            accumulator.
+            ``{"tp", "fp"}``: int64 (N, T) and ``"positives"``: int64 (N,),
+            copies; :meth:`from_state` turns them back into an accumulator.
 
         Example:
             >>> acc = ScoreAccumulator(thresholds=3)
             >>> _ = acc.add(np.array([[0.8, 0.1]]), np.array([[True, False]]))
-            >>> acc.state()["tp"], acc.state()["n_maps"]
-            (array([1, 1, 1]), 1)
+            >>> acc.state()["tp"], acc.state()["positives"]
+            (array([[1, 1, 1]]), array([1]))
         """
-        return {
-            "tp": self.counts.tp.copy(),
-            "fp": self.counts.fp.copy(),
-            "fn": self.counts.fn.copy(),
-            "precision_sum": self.precision_sum.copy(),
-            "recall_sum": self.recall_sum.copy(),
-            "n_maps": self.n_maps,
-        }
+        frames = self.frames()
+        return {key: getattr(frames, key).copy() for key in _STATE_KEYS}
 
     @classmethod
     def from_state(cls, state: Mapping[str, object], *, thresholds: int = DEFAULT_THRESHOLDS) -> ScoreAccumulator:
-        """An accumulator holding the statistics :meth:`state` returned.
+        """An accumulator holding the counts :meth:`state` returned.
 
         Args:
-            state: ``tp``, ``fp``, ``fn``, ``precision_sum``, ``recall_sum``
-                (array-likes of length T; lists read back from JSON do) and
-                ``n_maps``.
-            thresholds: The number T of thresholds the statistics must have.
+            state: ``tp``, ``fp`` ((N, T) array-likes; lists read back from
+                JSON do) and ``positives`` ((N,)).
+            thresholds: The number T of thresholds the counts must have.
 
         Returns:
             The accumulator, ready to add, merge or score.
 
         Raises:
-            EgonetError: If a key is missing or an array does not have T
-                entries (statistics saved with another number of thresholds).
-
-        Example:
-            >>> acc = ScoreAccumulator(thresholds=3)
-            >>> _ = acc.add(np.array([[0.8, 0.1]]), np.array([[True, False]]))
-            >>> ScoreAccumulator.from_state(acc.state(), thresholds=3).score().max_f
-            1.0
+            EgonetError: If a key is missing or the counts do not have T
+                thresholds (saved with another number of thresholds).
         """
         missing = [key for key in _STATE_KEYS if key not in state]
         if missing:
             raise EgonetError(f"state: has no {missing[0]!r}; pass what ScoreAccumulator.state() returned", field="state")
         acc = cls(thresholds=thresholds)
-        acc.counts = Counts(*(np.array(state[key], dtype=np.int64) for key in ("tp", "fp", "fn")))
-        acc.precision_sum = np.array(state["precision_sum"], dtype=np.float64)
-        acc.recall_sum = np.array(state["recall_sum"], dtype=np.float64)
-        acc.n_maps = int(state["n_maps"])
-        if any(a.shape != (acc.thresholds,) for a in (*acc.counts, acc.precision_sum, acc.recall_sum)):
-            raise EgonetError(f"state: the statistics do not have {acc.thresholds} thresholds", field="state")
+        tp, fp, positives = (np.array(state[key], dtype=np.int64) for key in _STATE_KEYS)
+        if tp.size == 0:
+            return acc
+        if tp.ndim != 2 or tp.shape[1] != acc.thresholds:
+            raise EgonetError(f"state: the counts do not have {acc.thresholds} thresholds", field="state")
+        frames = FrameCounts(tp, fp, positives)  # checks the shapes
+        acc._maps = [Counts(frames.tp[i], frames.fp[i], frames.positives[i] - frames.tp[i]) for i in range(frames.n)]
         return acc
 
-    def score(self, *, beta2: float = 1.0, per_image: bool = False) -> Score:
-        """Reduce the statistics to a :class:`Score`.
+    def score(self, *, beta2: float = 1.0, metric: str = "pooled", empty: str = DEFAULT_EMPTY, per_image: bool | None = None) -> Score:
+        """Reduce the counts to a :class:`Score` (one curve: ``"pooled"`` or ``"mean-curve"``).
 
         Args:
             beta2: Weight of recall in F (beta squared), > 0.
-            per_image: Average per-map curves instead of pooling counts.
+            metric: ``"pooled"`` (counts summed over maps) or
+                ``"mean-curve"`` (each map's P and R averaged over maps).
+            empty: How the mean curve counts a map without positives
+                (``egonet.metrics.frames.EMPTY_POLICIES``).
+            per_image: Deprecated (goes in the next release): True is
+                ``metric="mean-curve"``, False ``"pooled"``.
 
         Returns:
             The score.
 
         Raises:
-            ValueError: If no map was added, or ``beta2`` is not positive.
+            ValueError: If no map was added, ``beta2`` is not positive,
+                ``metric`` has no single curve, or every map of a
+                ``"leave-out"`` mean curve is without positives.
         """
-        if self.n_maps == 0:
-            raise ValueError("no maps were added; score at least one map")
-        if per_image:
-            return Score.from_curves(
-                self.precision_sum / self.n_maps,
-                self.recall_sum / self.n_maps,
-                beta2=beta2,
-                per_image=True,
-                n_maps=self.n_maps,
+        if per_image is not None:
+            metric = "mean-curve" if per_image else "pooled"
+            _log.warning("per_image= is deprecated and goes in the next release: use metric=%r", metric)
+        if metric not in CURVE_METRICS:
+            raise EgonetError(
+                f"metric: must be one of {', '.join(CURVE_METRICS)} for one curve, got {metric!r}; "
+                "score_frames scores the other conventions",
+                field="metric",
             )
-        return Score.from_counts(self.counts, beta2=beta2, n_maps=self.n_maps)
+        if self.n_maps == 0:
+            raise EgonetError("no maps were added; score at least one map", field="probs")
+        frames = self.frames()
+        no_positives = int(np.count_nonzero(frames.positives == 0))
+        if metric == "pooled":
+            return Score.from_counts(frames.pooled(), beta2=beta2, n_maps=self.n_maps, empty_maps=no_positives)
+        precision, recall, counted = frame_curves(frames, empty=check_empty(empty))
+        if not counted.any():
+            raise EgonetError(
+                "empty: every map is without positive pixels, so leaving them out leaves nothing to average; "
+                "use empty='zero' or 'one-if-empty'",
+                field="empty",
+            )
+        return Score.from_curves(
+            precision[counted].mean(axis=0), recall[counted].mean(axis=0), beta2=beta2, metric=metric,
+            n_maps=self.n_maps, empty=empty, empty_maps=no_positives,
+        )  # fmt: skip
 
 
 def score_maps(
@@ -328,19 +342,22 @@ def score_maps(
     *,
     thresholds: int = DEFAULT_THRESHOLDS,
     beta2: float = 1.0,
-    per_image: bool = False,
+    metric: str = "pooled",
+    empty: str = DEFAULT_EMPTY,
+    per_image: bool | None = None,
 ) -> Score:
     """Score probability maps against ground-truth masks (MF and AP).
 
     Definitions (see the module docstring for the full statement):
     thresholds ``t_k = k / (T + 1)``, ``k = 1..T`` (float64), a pixel is
-    positive at ``t_k`` when ``prob >= t_k``; pooled mode sums TP/FP/FN over
+    positive at ``t_k`` when ``prob >= t_k``; ``"pooled"`` sums TP/FP/FN over
     all pixels of all maps, ``P = TP / (TP + FP)`` (1 when nothing is
     predicted), ``R = TP / (TP + FN)`` (0 when there are no positives);
     ``F = (1 + beta2) P R / (beta2 P + R)`` (0 when ``P + R = 0``),
     ``MF = max F``; ``AP = sum_k (R_k - R_{k+1}) P_k`` with increasing
-    thresholds and ``R_{T+1} = 0``; per-image mode averages P and R over maps
-    at each threshold before computing F and AP. Maps are never normalised.
+    thresholds and ``R_{T+1} = 0``; ``"mean-curve"`` averages each map's P
+    and R over the maps at each threshold before computing F and AP (maps
+    without positives as ``empty`` says). Maps are never normalised.
 
     Both arguments are consumed lazily, one pair at a time, so a generator
     can stream a whole activity through without holding it in memory. Map
@@ -352,16 +369,21 @@ def score_maps(
             paired map.
         thresholds: The number T of thresholds (99 gives 0.01 .. 0.99).
         beta2: Weight of recall in F (beta squared); 1 gives F1.
-        per_image: Average per-map curves instead of pooling pixel counts.
+        metric: ``"pooled"`` (default) or ``"mean-curve"``.
+        empty: For ``"mean-curve"``, how a map without positive pixels
+            counts: ``"leave-out"`` (default), ``"zero"`` or ``"one-if-empty"``.
+        per_image: Deprecated (goes in the next release): True is
+            ``metric="mean-curve"``.
 
     Returns:
-        The :class:`Score`.
+        The :class:`Score`; its ``empty_maps`` says how many maps had no
+        positive pixels.
 
     Raises:
         ValueError: If there are no maps, the two iterables differ in length,
             a map is not a 2-D float map in [0, 1] (or holds NaN), a mask is
             not bool or not the size of its map (the message names the index),
-            or ``thresholds`` / ``beta2`` are invalid.
+            or ``thresholds`` / ``beta2`` / ``metric`` / ``empty`` are invalid.
 
     Example:
         >>> probs = [np.array([[0.9, 0.4, 0.2, 0.0]])]
@@ -387,4 +409,4 @@ def score_maps(
         index += 1
     if index == 0:
         raise EgonetError("probs is empty: score at least one map", field="probs")
-    return acc.score(beta2=beta2, per_image=per_image)
+    return acc.score(beta2=beta2, metric=metric, empty=empty, per_image=per_image)

@@ -51,10 +51,15 @@ import numpy as np
 
 from egonet.errors import EgonetError
 
-__all__ = ["DEFAULT_RESAMPLES", "MAX_JACKKNIFE", "Estimate", "Resampler", "jackknife_weights", "resample_weights"]
+__all__ = [
+    "DEFAULT_RESAMPLES", "MAX_JACKKNIFE", "MAX_RESAMPLES", "MAX_WEIGHTS", "Estimate", "Resampler", "jackknife_weights",
+    "p_floor", "resample_weights",
+]  # fmt: skip
 
 DEFAULT_RESAMPLES = 1000
 MAX_RESAMPLES = 100_000
+MAX_WEIGHTS = 2**25
+"""At most this many bootstrap weights (resamples x frames, summed over strata) in one :class:`Resampler`: 270 MB of float64."""
 MAX_JACKKNIFE = 100
 """At most this many jackknife groups per stratum (frame i is in group i mod 100)."""
 
@@ -207,6 +212,11 @@ class Estimate:
         return float(min(1.0, max(2 * min(tail, 1 - tail), 1 / (d.size + 1))))
 
 
+def p_floor(resamples: int) -> float:
+    """The smallest p-value ``resamples`` resamples can give, ``1 / (B + 1)``: a p-value there says only "at most this"."""
+    return 1 / (_check_resamples(resamples) + 1)
+
+
 def _quantiles(ordered: np.ndarray, levels: Sequence[float]) -> tuple[float, ...]:
     """np.quantile's default (linear between order statistics) of sorted values, without its overhead."""
     at = np.clip(np.asarray(levels, dtype=np.float64), 0, 1) * (ordered.size - 1)
@@ -224,7 +234,9 @@ class Resampler:
 
     Raises:
         EgonetError: If ``resamples`` is not an int from 0 to 100,000 or
-            ``seed`` is negative.
+            ``seed`` is negative; :meth:`weights`, when the weights of all
+            strata would pass :data:`MAX_WEIGHTS` (the error says how many
+            resamples fit).
 
     Example:
         >>> r = Resampler(resamples=200, seed=1)
@@ -241,11 +253,20 @@ class Resampler:
             raise EgonetError(f"seed: must be a non-negative int, got {seed!r}", field="seed")
         self.seed = int(seed)
         self._weights: dict[tuple[str, int], np.ndarray] = {}
+        self._frames = 0  # frames of the strata weighed so far
 
     def weights(self, stratum: str, n: int) -> np.ndarray:
         """The weights of ``n`` frames of ``stratum``: float64 (1 + B + G, n), the sample, the resamples, the jackknife."""
         key = (stratum, _check_n(n))
         if key not in self._weights:
+            self._frames += key[1]
+            if self.resamples * self._frames > MAX_WEIGHTS:
+                raise EgonetError(
+                    f"resamples: {self.resamples} resamples of {self._frames} frames would hold "
+                    f"{self.resamples * self._frames:,} bootstrap weights, over the limit of {MAX_WEIGHTS:,} (memory); "
+                    f"at most {MAX_WEIGHTS // self._frames} resamples fit these frames",
+                    field="resamples",
+                )
             rng = np.random.default_rng([self.seed, zlib.crc32(stratum.encode()), key[1]])
             boot = resample_weights(key[1], resamples=self.resamples, rng=rng)
             self._weights[key] = np.vstack([boot, jackknife_weights(key[1])]) if self.resamples else boot

@@ -100,9 +100,12 @@ class Score:
         recall: Recall at each threshold, float64 (T,).
         f: F-score at each threshold, float64 (T,).
         beta2: The beta squared the F-scores use.
-        per_image: Whether the curves are averages over maps (True) or come
-            from pooled counts (False).
+        metric: ``"pooled"`` (the curve of counts summed over maps) or
+            ``"mean-curve"`` (each map's P and R averaged over maps).
         n_maps: The number of maps scored.
+        empty: For a mean curve, how maps without positive pixels counted
+            (``egonet.metrics.frames.EMPTY_POLICIES``); None for pooled.
+        empty_maps: How many of the maps had no positive pixels.
     """
 
     max_f: float
@@ -113,8 +116,15 @@ class Score:
     recall: np.ndarray = field(repr=False)
     f: np.ndarray = field(repr=False)
     beta2: float = 1.0
-    per_image: bool = False
+    metric: str = "pooled"
     n_maps: int = 0
+    empty: str | None = None
+    empty_maps: int = 0
+
+    @property
+    def per_image(self) -> bool:
+        """Deprecated (goes in the next release): whether ``metric`` is ``"mean-curve"``."""
+        return self.metric == "mean-curve"
 
     @classmethod
     def from_curves(
@@ -123,8 +133,10 @@ class Score:
         recall: np.ndarray,
         *,
         beta2: float = 1.0,
-        per_image: bool = False,
+        metric: str = "pooled",
         n_maps: int = 0,
+        empty: str | None = None,
+        empty_maps: int = 0,
     ) -> Score:
         """Reduce a precision/recall curve to F, MF and AP.
 
@@ -132,9 +144,8 @@ class Score:
             precision: Precision at each threshold, increasing thresholds (T,).
             recall: Recall at each threshold (T,).
             beta2: Weight of recall in F (beta squared), > 0.
-            per_image: Recorded on the result: whether the curves are
-                per-map averages.
-            n_maps: Recorded on the result: how many maps were scored.
+            metric, n_maps, empty, empty_maps: Recorded on the result (see
+                the attributes).
 
         Returns:
             The :class:`Score`.
@@ -163,24 +174,27 @@ class Score:
             recall=_readonly(r),
             f=_readonly(f),
             beta2=beta2,
-            per_image=bool(per_image),
+            metric=metric,
             n_maps=int(n_maps),
+            empty=empty,
+            empty_maps=int(empty_maps),
         )
 
     @classmethod
-    def from_counts(cls, counts: Counts, *, beta2: float = 1.0, n_maps: int = 0) -> Score:
+    def from_counts(cls, counts: Counts, *, beta2: float = 1.0, n_maps: int = 0, empty_maps: int = 0) -> Score:
         """Score pooled counts (dataset-level precision and recall).
 
         Args:
             counts: TP/FP/FN summed over maps, arrays (T,).
             beta2: Weight of recall in F (beta squared), > 0.
-            n_maps: Recorded on the result: how many maps were pooled.
+            n_maps, empty_maps: Recorded on the result: how many maps were
+                pooled, and how many of them had no positive pixels.
 
         Returns:
             The pooled :class:`Score`.
         """
         precision, recall = curve_from_counts(counts)
-        return cls.from_curves(precision, recall, beta2=beta2, per_image=False, n_maps=n_maps)
+        return cls.from_curves(precision, recall, beta2=beta2, n_maps=n_maps, empty_maps=empty_maps)
 
 
 def iso_f_curve(f: float, *, beta2: float = 1.0, points: int = 40) -> tuple[np.ndarray, np.ndarray]:

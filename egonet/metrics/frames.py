@@ -1,26 +1,37 @@
-"""Per-frame counts and the three ways of turning them into an activity's scores.
+"""Per-frame counts and the four ways of turning them into an activity's scores.
 
 :class:`FrameCounts` keeps every frame's per-threshold counts (N frames by
 T thresholds), so a score can be computed on any subset of frames (the
 frames two rows share), on resampled frames (the bootstrap), or per frame.
 
-The conventions (``METRICS``), each with MF-like statistics and AP:
+The conventions (``METRICS``), each with MF-like statistics and AP; one name
+each, used by the API, the CLI, the page and every download:
 
 * ``"pooled"`` (the default of the reference, as in the BSDS benchmark):
   TP, FP and FN summed over every pixel of every frame at each threshold,
   then P, R, F; ``max_f`` = MF = max over thresholds, ``ap`` = AP of that
   pooled curve.
-* ``"per-image"``: each frame's own curve; ``max_f`` = the mean over frames
-  of each frame's best F (its MF at its own best threshold), ``ap`` = the
-  mean of the frames' APs.
+* ``"ois-mean"``: each frame's own curve; ``max_f`` = the mean over frames
+  of each frame's best F (its F at its own best threshold, as OIS takes
+  it), ``ap`` = the mean of the frames' APs.
+* ``"mean-curve"``: each frame's own P and R, averaged over frames at each
+  threshold; ``max_f`` = the best F of that mean curve, ``ap`` = its AP
+  (``score_maps(metric="mean-curve")``).
 * ``"ods-ois"`` (BSDS): ``max_f`` = ODS, the best F at one threshold for
   the whole set (the same number as pooled MF); ``ois`` = OIS, F of the
   counts summed over frames each taken at *its own* best threshold (the
   highest one on ties, the fewest false positives); ``ap`` = the pooled AP.
 
-A frame without action-object pixels has recall 0 at every threshold, so
-its own F and AP are 0 whatever the map: it lowers every row's per-image
-mean alike.
+``METRIC_ALIASES`` holds the old name ``"per-image"`` (now ``"ois-mean"``),
+accepted with a logged deprecation line until the next release.
+
+**Frames without action-object pixels** have no recall, so their own F is
+undefined. The two per-frame means (``ois-mean``, ``mean-curve``) take one
+of ``EMPTY_POLICIES`` (``empty=``): ``"leave-out"`` (the default, our
+choice: the mean is over frames with something to find), ``"zero"`` (the
+frame scores 0 whatever the map: P = R = 0) or ``"one-if-empty"`` (P = R =
+1 at the thresholds where the map predicts nothing, else 0). Pooled counts
+and ODS/OIS need no policy: such a frame adds its false positives.
 
 Each convention splits into ``features`` (a vector per frame, (N, D)) and
 ``reduce`` (statistics from sums of those vectors, (B, D)), so that a
@@ -40,12 +51,13 @@ Example:
     >>> counts = FrameCounts.stack([a, b])
     >>> {k: round(float(v[0]), 3) for k, v in score_frames(counts, metric="ods-ois").items()}
     {'max_f': 0.8, 'ap': 0.75, 'ois': 0.857}
-    >>> round(float(score_frames(counts, metric="per-image")["max_f"][0]), 3)
+    >>> round(float(score_frames(counts, metric="ois-mean")["max_f"][0]), 3)
     0.833
 """
 
 from __future__ import annotations
 
+import logging
 from collections.abc import Sequence
 from dataclasses import dataclass
 
@@ -55,7 +67,10 @@ from egonet.errors import EgonetError
 from egonet.metrics.curves import average_precision, f_scores, precision_recall
 from egonet.metrics.thresholds import Counts, check_beta2, check_thresholds
 
-__all__ = ["METRICS", "FrameCounts", "frame_scores", "metric_convention", "reduce_sums", "score_frames", "weighted_sums"]
+__all__ = [
+    "DEFAULT_EMPTY", "EMPTY_POLICIES", "METRICS", "METRIC_ALIASES", "PER_FRAME_MEANS", "FrameCounts", "frame_curves", "frame_scores",
+    "metric_convention", "reduce_sums", "resolve_metric", "score_frames", "weighted_sums",
+]  # fmt: skip
 
 
 @dataclass(frozen=True, eq=False)
@@ -139,78 +154,152 @@ class FrameCounts:
         return Counts(tp, self.fp.sum(axis=0), np.int64(self.positives.sum()) - tp)
 
 
-def _curves(tp: np.ndarray, fp: np.ndarray, positives: np.ndarray, beta2: float) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-    precision, recall = precision_recall(tp, fp, positives[..., None])
-    return precision, recall, f_scores(precision, recall, beta2=beta2)
+EMPTY_POLICIES = ("leave-out", "zero", "one-if-empty")
+"""How the per-frame means count a frame without action-object pixels (see the module)."""
+DEFAULT_EMPTY = "leave-out"
+"""Our choice (the paper does not say): the per-frame means are over frames with something to find."""
 
 
-def frame_scores(counts: FrameCounts, *, beta2: float = 1.0) -> dict[str, np.ndarray]:
+def check_empty(empty: str) -> str:
+    """``empty`` if it is one of :data:`EMPTY_POLICIES`, else an error listing them."""
+    if empty not in EMPTY_POLICIES:
+        raise EgonetError(f"empty: must be one of {', '.join(EMPTY_POLICIES)}, got {empty!r}", field="empty")
+    return empty
+
+
+def frame_curves(counts: FrameCounts, *, empty: str = DEFAULT_EMPTY) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Each frame's precision and recall at every threshold, frames without positives as ``empty`` says.
+
+    Args:
+        counts: The frames' counts.
+        empty: One of :data:`EMPTY_POLICIES`.
+
+    Returns:
+        ``(precision, recall, counted)``: float64 (N, T), (N, T) and bool
+        (N,); ``counted`` is False for the frames ``"leave-out"`` leaves out
+        (their curves are 0).
+    """
+    check_empty(empty)
+    precision, recall = precision_recall(counts.tp, counts.fp, counts.positives[:, None])
+    none = counts.positives == 0
+    hit = (counts.fp[none] == 0).astype(np.float64) if empty == "one-if-empty" else 0.0
+    precision[none] = recall[none] = hit
+    return precision, recall, ~none if empty == "leave-out" else np.ones(counts.n, bool)
+
+
+def frame_scores(counts: FrameCounts, *, beta2: float = 1.0, empty: str = DEFAULT_EMPTY) -> dict[str, np.ndarray]:
     """Each frame's own scores: its best F, its AP and the threshold index of its best F.
 
     Args:
         counts: The frames' counts.
         beta2: Weight of recall in F (beta squared), > 0.
+        empty: How a frame without positives scores (:data:`EMPTY_POLICIES`).
 
     Returns:
-        ``{"max_f": float64 (N,), "ap": float64 (N,), "best": int (N,)}``;
-        ``best`` is the index of the highest threshold reaching the frame's
-        best F (the fewest false positives among the ties).
+        ``{"max_f": float64 (N,), "ap": float64 (N,), "best": int (N,),
+        "counted": bool (N,)}``; ``best`` is the index of the highest
+        threshold reaching the frame's best F (the fewest false positives
+        among the ties); frames left out (``counted`` False) have NaN scores.
     """
     beta2 = check_beta2(beta2)
-    precision, recall, f = _curves(counts.tp, counts.fp, counts.positives, beta2)
+    precision, recall, counted = frame_curves(counts, empty=empty)
+    f = f_scores(precision, recall, beta2=beta2)
     best = counts.thresholds - 1 - np.argmax(f[:, ::-1], axis=1)
-    return {"max_f": f.max(axis=1, initial=0.0), "ap": average_precision(precision, recall), "best": best}
+    out = {"max_f": f.max(axis=1, initial=0.0), "ap": average_precision(precision, recall), "best": best, "counted": counted}
+    for key in ("max_f", "ap"):
+        out[key][~counted] = np.nan
+    return out
+
+
+def _divide(sums: np.ndarray, counted: np.ndarray) -> np.ndarray:
+    """Sums (B, D) over the counted frames (B,); NaN where no frame counted."""
+    return np.divide(sums, counted[:, None], out=np.full(sums.shape, np.nan, sums.dtype), where=counted[:, None] > 0)
 
 
 class _Pooled:
     statistics = ("max_f", "ap")
 
-    def features(self, counts: FrameCounts, *, beta2: float) -> np.ndarray:
+    def features(self, counts: FrameCounts, *, beta2: float, empty: str) -> np.ndarray:
         return np.hstack([counts.tp, counts.fp, counts.positives[:, None]]).astype(np.float64)
 
-    def reduce(self, sums: np.ndarray, frames: np.ndarray, *, thresholds: int, beta2: float) -> dict[str, np.ndarray]:
+    def reduce(self, sums: np.ndarray, *, thresholds: int, beta2: float) -> dict[str, np.ndarray]:
         t = thresholds
-        precision, recall, f = _curves(sums[:, :t], sums[:, t : 2 * t], sums[:, 2 * t], beta2)
-        return {"max_f": f.max(axis=1), "ap": average_precision(precision, recall)}
+        precision, recall = precision_recall(sums[:, :t], sums[:, t : 2 * t], sums[:, 2 * t, None])
+        return {"max_f": f_scores(precision, recall, beta2=beta2).max(axis=1), "ap": average_precision(precision, recall)}
 
 
-class _PerImage:
+class _OisMean:
     statistics = ("max_f", "ap")
 
-    def features(self, counts: FrameCounts, *, beta2: float) -> np.ndarray:
-        own = frame_scores(counts, beta2=beta2)
-        return np.stack([own["max_f"], own["ap"]], axis=1)
+    def features(self, counts: FrameCounts, *, beta2: float, empty: str) -> np.ndarray:
+        own = frame_scores(counts, beta2=beta2, empty=empty)
+        return np.nan_to_num(np.stack([own["max_f"], own["ap"], own["counted"]], axis=1))
 
-    def reduce(self, sums: np.ndarray, frames: np.ndarray, *, thresholds: int, beta2: float) -> dict[str, np.ndarray]:
-        return {"max_f": sums[:, 0] / frames, "ap": sums[:, 1] / frames}
+    def reduce(self, sums: np.ndarray, *, thresholds: int, beta2: float) -> dict[str, np.ndarray]:
+        means = _divide(sums[:, :2], sums[:, 2])
+        return {"max_f": means[:, 0], "ap": means[:, 1]}
+
+
+class _MeanCurve:
+    statistics = ("max_f", "ap")
+
+    def features(self, counts: FrameCounts, *, beta2: float, empty: str) -> np.ndarray:
+        precision, recall, counted = frame_curves(counts, empty=empty)
+        return np.hstack([precision, recall, counted[:, None]])
+
+    def reduce(self, sums: np.ndarray, *, thresholds: int, beta2: float) -> dict[str, np.ndarray]:
+        curves = _divide(sums[:, :-1], sums[:, -1])
+        precision, recall = curves[:, :thresholds], curves[:, thresholds:]
+        best = np.where(sums[:, -1] > 0, f_scores(precision, recall, beta2=beta2).max(axis=1), np.nan)
+        return {"max_f": best, "ap": average_precision(precision, recall)}
 
 
 class _OdsOis:
     statistics = ("max_f", "ap", "ois")
 
-    def features(self, counts: FrameCounts, *, beta2: float) -> np.ndarray:
-        best = frame_scores(counts, beta2=beta2)["best"]
+    def features(self, counts: FrameCounts, *, beta2: float, empty: str) -> np.ndarray:
+        best = frame_scores(counts, beta2=beta2, empty="zero")["best"]
         rows = np.arange(counts.n)
         at_best = np.stack([counts.tp[rows, best], counts.fp[rows, best], counts.positives], axis=1)
-        return np.hstack([_Pooled().features(counts, beta2=beta2), at_best.astype(np.float64)])
+        return np.hstack([_Pooled().features(counts, beta2=beta2, empty=empty), at_best.astype(np.float64)])
 
-    def reduce(self, sums: np.ndarray, frames: np.ndarray, *, thresholds: int, beta2: float) -> dict[str, np.ndarray]:
-        out = _Pooled().reduce(sums[:, :-3], frames, thresholds=thresholds, beta2=beta2)
+    def reduce(self, sums: np.ndarray, *, thresholds: int, beta2: float) -> dict[str, np.ndarray]:
+        out = _Pooled().reduce(sums[:, :-3], thresholds=thresholds, beta2=beta2)
         precision, recall = precision_recall(sums[:, -3], sums[:, -2], sums[:, -1])
         out["ois"] = f_scores(precision, recall, beta2=beta2)
         return out
 
 
-METRICS = {"pooled": _Pooled(), "per-image": _PerImage(), "ods-ois": _OdsOis()}
+METRICS = {"pooled": _Pooled(), "ois-mean": _OisMean(), "mean-curve": _MeanCurve(), "ods-ois": _OdsOis()}
 """The conventions by name; ``METRICS[name].statistics`` are the keys its scores have."""
+PER_FRAME_MEANS = ("ois-mean", "mean-curve")
+"""The conventions that average over frames, where :data:`EMPTY_POLICIES` apply."""
+METRIC_ALIASES = {"per-image": "ois-mean"}
+"""Old names, accepted until the next release: old name -> name."""
+
+_log = logging.getLogger(__name__)
 
 
-def metric_convention(metric: str) -> _Pooled | _PerImage | _OdsOis:
-    """The convention called ``metric``, or an error listing the valid names."""
-    try:
-        return METRICS[metric]
-    except (KeyError, TypeError):
-        raise EgonetError(f"metric must be one of {', '.join(METRICS)}, got {metric!r}", field="metric") from None
+def resolve_metric(metric: str) -> tuple[str, str | None]:
+    """``(name, deprecation line)``: the convention's name for ``metric`` and, for an old name, a line saying so (else None).
+
+    Raises:
+        EgonetError: If ``metric`` is neither a convention nor an old name, listing the conventions.
+    """
+    if isinstance(metric, str) and metric in METRIC_ALIASES:
+        name = METRIC_ALIASES[metric]
+        return name, f"metric {metric!r} is deprecated and goes in the next release: it is now called {name!r}"
+    if not isinstance(metric, str) or metric not in METRICS:
+        raise EgonetError(f"metric: must be one of {', '.join(METRICS)}, got {metric!r}", field="metric")
+    return metric, None
+
+
+def metric_convention(metric: str) -> _Pooled | _OisMean | _MeanCurve | _OdsOis:
+    """The convention called ``metric`` (an old name logs its deprecation line), or an error listing the valid names."""
+    name, deprecated = resolve_metric(metric)
+    if deprecated:
+        _log.warning(deprecated)
+    return METRICS[name]
 
 
 def weighted_sums(
@@ -219,8 +308,9 @@ def weighted_sums(
     metric: str = "pooled",
     weights: np.ndarray | None = None,
     beta2: float = 1.0,
+    empty: str = DEFAULT_EMPTY,
     resampled_in_float32: bool = False,
-) -> tuple[np.ndarray, np.ndarray]:
+) -> np.ndarray:
     """The first half of :func:`score_frames`: the weighted sums of the frames' feature vectors.
 
     Sums of disjoint sets of frames add up: the sums of two activities'
@@ -232,17 +322,19 @@ def weighted_sums(
         metric: The convention (see the module).
         weights: Float64 (B, N) with a positive sum per row; None: ones (1, N).
         beta2: Weight of recall in F (beta squared), > 0.
+        empty: How the per-frame means count a frame without positives
+            (:data:`EMPTY_POLICIES`).
         resampled_in_float32: Compute every row but the first in float32,
             several times faster: exact while a sum stays below 2^24 (16.7
             million pixels), about 1e-7 relative error above; meant for
             bootstrap rows, the first row (the sample) staying exact.
 
     Returns:
-        ``(sums, frames)``: float64 (B, D) and the weights' row sums (B,).
+        The sums, float64 (B, D).
 
     Raises:
         EgonetError: If there are no frames, ``weights`` has another shape
-            or a row without weight, or ``metric`` is unknown.
+            or a row without weight, or ``metric`` or ``empty`` is unknown.
     """
     convention = metric_convention(metric)
     beta2 = check_beta2(beta2)
@@ -251,7 +343,7 @@ def weighted_sums(
     w = np.ones((1, counts.n)) if weights is None else np.asarray(weights, dtype=np.float64)
     if w.ndim != 2 or w.shape[1] != counts.n or not (w.sum(axis=1) > 0).all():
         raise EgonetError(f"weights: must be (B, {counts.n}) with a positive sum per row, got shape {w.shape}", field="weights")
-    features = convention.features(counts, beta2=beta2)
+    features = convention.features(counts, beta2=beta2, empty=check_empty(empty))
     sums = np.empty((w.shape[0], features.shape[1]))
     first = 1 if resampled_in_float32 else w.shape[0]
     sums[:first] = w[:first] @ features
@@ -262,7 +354,7 @@ def weighted_sums(
         for rows in _blocks(fast.shape[0], size=200_000 // (counts.n * features.shape[1])):
             np.matmul(fast[rows], fast_features, out=out[rows])
         sums[first:] = out
-    return sums, w.sum(axis=1)
+    return sums
 
 
 def _blocks(total: int, *, size: int) -> list[slice]:
@@ -278,19 +370,12 @@ def _blocks(total: int, *, size: int) -> list[slice]:
 
 
 def reduce_sums(
-    sums: np.ndarray,
-    frames: np.ndarray,
-    *,
-    metric: str,
-    thresholds: int,
-    beta2: float = 1.0,
-    resampled_in_float32: bool = False,
+    sums: np.ndarray, *, metric: str, thresholds: int, beta2: float = 1.0, resampled_in_float32: bool = False
 ) -> dict[str, np.ndarray]:
     """The second half of :func:`score_frames`: a convention's statistics from weighted sums.
 
     Args:
         sums: Weighted sums of feature vectors, float64 (B, D), from :func:`weighted_sums`.
-        frames: The weights' row sums, (B,).
         metric: The convention the sums were made for.
         thresholds: The number T of thresholds of the counts.
         beta2: Weight of recall in F (beta squared), > 0.
@@ -298,38 +383,52 @@ def reduce_sums(
             (about 1e-7 relative error, meant for bootstrap rows).
 
     Returns:
-        ``{statistic: float64 (B,)}``.
+        ``{statistic: float64 (B,)}``; NaN where a per-frame mean has no
+        frame to average (every frame left out).
     """
     convention = metric_convention(metric)
-    sums, frames = np.asarray(sums, dtype=np.float64), np.asarray(frames, dtype=np.float64)
+    sums = np.asarray(sums, dtype=np.float64)
     thresholds, beta2 = check_thresholds(thresholds), check_beta2(beta2)
     first = min(1, sums.shape[0]) if resampled_in_float32 else sums.shape[0]
-    parts = [convention.reduce(sums[:first], frames[:first], thresholds=thresholds, beta2=beta2)]
+    parts = [convention.reduce(sums[:first], thresholds=thresholds, beta2=beta2)]
     fast = sums[first:].astype(np.float32)
-    parts += [convention.reduce(fast[rows], frames[first:][rows], thresholds=thresholds, beta2=beta2) for rows in _blocks(fast.shape[0], size=256)]
+    parts += [convention.reduce(fast[rows], thresholds=thresholds, beta2=beta2) for rows in _blocks(fast.shape[0], size=256)]
     return {key: np.concatenate([np.asarray(part[key], dtype=np.float64) for part in parts]) for key in parts[0]}
 
 
 def score_frames(
-    counts: FrameCounts, *, metric: str = "pooled", weights: np.ndarray | None = None, beta2: float = 1.0
+    counts: FrameCounts,
+    *,
+    metric: str = "pooled",
+    weights: np.ndarray | None = None,
+    beta2: float = 1.0,
+    empty: str = DEFAULT_EMPTY,
 ) -> dict[str, np.ndarray]:
     """Score the frames under a convention, once per row of ``weights``.
 
     Args:
         counts: The frames' counts (N >= 1).
-        metric: ``"pooled"``, ``"per-image"`` or ``"ods-ois"`` (see the module).
+        metric: ``"pooled"``, ``"ois-mean"``, ``"mean-curve"`` or
+            ``"ods-ois"`` (see the module; ``"per-image"`` is the old name
+            of ``"ois-mean"``).
         weights: How many times each frame counts, one score per row,
             float64 (B, N); None scores the frames once each (B = 1).
             Bootstrap multiplicities (:func:`egonet.metrics.resample_weights`)
             give resampled scores.
         beta2: Weight of recall in F (beta squared), > 0.
+        empty: How ``ois-mean`` and ``mean-curve`` count a frame without
+            positives: ``"leave-out"`` (default), ``"zero"`` or ``"one-if-empty"``.
 
     Returns:
-        ``{statistic: float64 (B,)}``, the convention's statistics.
+        ``{statistic: float64 (B,)}``, the convention's statistics (NaN
+        where a per-frame mean has no frame left to average).
 
     Raises:
         EgonetError: If there are no frames, ``weights`` is not (B, N) with
-            a positive sum in every row, or ``metric`` is unknown.
+            a positive sum in every row, or ``metric`` or ``empty`` is unknown.
     """
-    sums, frames = weighted_sums(counts, metric=metric, weights=weights, beta2=beta2)
-    return reduce_sums(sums, frames, metric=metric, thresholds=counts.thresholds, beta2=beta2)
+    name, deprecated = resolve_metric(metric)
+    if deprecated:
+        _log.warning(deprecated)
+    sums = weighted_sums(counts, metric=name, weights=weights, beta2=beta2, empty=empty)
+    return reduce_sums(sums, metric=name, thresholds=counts.thresholds, beta2=beta2)

@@ -17,9 +17,10 @@ import torch
 from app.extensions import db
 from app.models import Activity
 from app.models.training import RunStatus, TrainingRun
-from app.services import training
+from app.services import ground_truth, training
 from app.services.demo import create_demo
 from app.services.training import ablations
+from egonet.metrics import score_maps
 from tests.unit.test_init import full_vgg16, tiny_vgg16
 
 BUDGET = ["--folds", "single", "--epochs", "1", "--size", "16x12", "--batch-size", "2", "--device", "cpu",
@@ -34,6 +35,13 @@ def demo(app):
     with app.app_context():
         create_demo(frames_per_activity=2, unlabelled_fraction=0, width=32, height=24)
         return dict(db.session.execute(db.select(Activity.name, Activity.id)).all())
+
+
+def held_out(run: TrainingRun, activity: str) -> list:
+    """The run's held-out (map, truth mask) pairs of one activity."""
+    pairs = [(f, p) for f, p in training.held_out_predictions(run) if f.sequence.activity.name == activity]
+    truths = ground_truth.ground_truths([f.id for f, _ in pairs])
+    return [(p, ground_truth.mask_of(truths[f.id])) for f, p in pairs]
 
 
 def all_runs() -> list[TrainingRun]:
@@ -95,18 +103,31 @@ def test_markdown_puts_the_papers_numbers_beside_and_the_seed_spread():
     row = ablations.ModelRow(
         model="egonet-dhg", description="DHG stream only", paper=(0.369, 0.208), runs=[4, 5],
         per_activity={"cooking": (0.5, 0.25)}, mean=(0.45, 0.3), spread=(0.0212, 0.01), aop=(0.4, None),
+        n={"cooking": 7}, ci=((0.41, 0.49), None),
     )
     table = ablations.AblationTable(
         name="t", budget={"folds": "single", "epochs": 1, "width": 16, "height": 12, "batch_size": 2, "lr": 0.000192,
                           "device": "cpu", "seeds": [0, 1], "init": None, "frames": 4},
         activities=["cooking", "dining"], rows=[row], notes=["run 6 (egonet, seed 0) is failed: left out"],
+        resamples=500, seed=2, code_version="egonet-studio 0.1.0 (git abc1234)",
     )
     text = ablations.table_markdown(table)
     assert "single folds, 1 epochs at 16x12, batch 2, lr 0.000192, seeds 0, 1, 4 labelled frames, random initialisation" in text
-    assert "| egonet-dhg | 0.369 / 0.208 | 0.500 / 0.250 | – | 0.450 ± 0.021 | 0.300 ± 0.010 | 0.400 / – | 4, 5 |" in text
+    assert "| model | paper MF / AP | cooking MF / AP (n 7) | dining MF / AP (n 0) | mean MF | mean AP |" in text
+    assert "| egonet-dhg | 0.369 / 0.208 | 0.500 / 0.250 | – | 0.450 ± 0.021 [0.410, 0.490] | 0.300 ± 0.010 | 0.400 / – | 4, 5 |" in text
+    assert "MF and AP pooled over each activity's n held-out frames." in text and "95% BCa bootstrap over held-out frames" in text
+    assert "(500 resamples, seed 2). Code: egonet-studio 0.1.0 (git abc1234)." in text
     assert "- run 6 (egonet, seed 0) is failed: left out" in text
     record = ablations.table_rows(table)[0]
     assert record["cooking max_f"] == 0.5 and record["dining ap"] is None and record["sd_max_f"] == 0.0212
+    assert (record["cooking n"], record["mean_max_f_lo"], record["mean_max_f_hi"], record["mean_ap_lo"]) == (7, 0.41, 0.49, None)
+    assert (record["resamples"], record["bootstrap_seed"], record["code_version"]) == (500, 2, "egonet-studio 0.1.0 (git abc1234)")
+
+
+def test_ablations_help_states_n_and_intervals(runner):
+    text = " ".join(runner.invoke(args=["egonet", "ablations", "--help"]).output.split())
+    assert "pooled over its n held-out frames" in text and "95% BCa bootstrap interval over frames" in text
+    assert "n per activity, 95% intervals" in text
 
 
 @pytest.mark.slow
@@ -122,15 +143,17 @@ def test_ablations_train_recorded_runs_and_write_the_table(app, demo, runner, tm
         assert [(r.model_name, r.seed) for r in runs] == [("egonet-lite", 0), ("egonet-lite", 1)]
         assert all(r.status is RunStatus.DONE and r.config["ablation"] == "tiny" for r in runs)
         assert len({tuple(c.test_frame_ids) for r in runs for c in r.checkpoints}) == 1  # one split for all
-        per_run = [ablations._scores(r) for r in runs]
+        per_run = [{a: score_maps(*zip(*held_out(r, a))) for a in ("cooking", "dining")} for r in runs]
 
     markdown = (out / "ablations.md").read_text()
     assert "single folds, 1 epochs at 16x12, batch 2" in markdown and "random initialisation" in markdown
-    mean_mf = [(s["cooking"][0] + s["dining"][0]) / 2 for s in per_run]
+    mean_mf = [(s["cooking"].max_f + s["dining"].max_f) / 2 for s in per_run]
     rows = list(csv.DictReader((out / "ablations.csv").read_text().splitlines()))
     assert [r["model"] for r in rows] == ["egonet-lite"] and rows[0]["seeds"] == "2"
     assert float(rows[0]["mean_max_f"]) == pytest.approx(sum(mean_mf) / 2)
     assert float(rows[0]["sd_max_f"]) == pytest.approx(abs(mean_mf[0] - mean_mf[1]) / 2 ** 0.5)
+    assert int(rows[0]["cooking n"]) == per_run[0]["cooking"].n_maps and rows[0]["resamples"] == "1000"
+    assert float(rows[0]["mean_max_f_lo"]) <= float(rows[0]["mean_max_f"]) <= float(rows[0]["mean_max_f_hi"])
     document = json.loads((out / "ablations.json").read_text())
     assert document["budget"]["seeds"] == [0, 1] and document["activities"] == ["cooking", "dining"]
 

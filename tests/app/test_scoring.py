@@ -175,7 +175,7 @@ def test_people_on_shared_and_own_frames_and_their_unanswered_trials(app, ctx, t
 
     # By default both are scored on the frames both have.
     shared = scoring.build_report(run_ids=[], study_ids=[ids["study"]], baselines=False)
-    assert shared.frames == "shared"
+    assert shared.provenance.frames == "shared"
     check(shared, first, answered[second.id])
     check(shared, second, answered[second.id])
     assert shared.row(f"participant:{first.id}").cells[short].frames_available == 2
@@ -191,7 +191,7 @@ def test_people_on_shared_and_own_frames_and_their_unanswered_trials(app, ctx, t
     # Answered trials only, as before: P02 back on 3 frames, and the table still says 1 was unanswered.
     answered_only = scoring.build_report(run_ids=[], study_ids=[ids["study"]], baselines=False, answered_only=True, frames="each")
     check(answered_only, second, answered[second.id])
-    assert row(answered_only, "P02").unanswered == 1 and answered_only.answered_only
+    assert row(answered_only, "P02").unanswered == 1 and answered_only.provenance.answered_only
 
     # Two studies: names say which study; a participant who has not started is only a note.
     other = build_study(tmp_path / "other", activities=("desk work",), frames=2, per_activity=1, participants=1)
@@ -280,6 +280,41 @@ def test_with_one_activity_there_is_no_aop(ctx):
     assert report.notes == ["AOP: no other activity has labelled frames to fit the prior for cooking."]
 
 
+def test_frames_without_an_action_object_follow_the_chosen_policy_and_are_counted(ctx):
+    add_activity("cooking", seed=1)
+    add_activity("hotel", seed=2)
+    rgb = np.random.default_rng(3).integers(0, 255, (*SIZE, 3), dtype=np.uint8)
+    item = FrameItem("hotel-empty", 0, "test hotel empty", rgb=rgb, mask=np.zeros(SIZE, bool), meta={"kind": "visual"})
+    add_frames(activity="hotel", sequence="nothing", items=iter([item]), mask_status=Status.REVIEWED)
+    hotel = frames_by_activity()["hotel"]
+    probs = {f.id: CenterPrior().predict(rgb_of(f), None) for f in hotel}
+    masks = {f.id: truth_mask(f) for f in hotel}
+    empty = next(fid for fid, m in masks.items() if not m.any())
+    own = {fid: score_maps([probs[fid]], [masks[fid]]).max_f for fid in masks if fid != empty}
+
+    pooled = scoring.build_report(run_ids=[], study_ids=[])
+    assert pooled.provenance.empty_frames == {"cooking": 0, "hotel": 1}
+    assert row(pooled, "centre prior").cells["hotel"].n_frames == 4  # pooled: its false positives count
+    assert "Frames without action-object pixels: 1 (hotel 1); pooled counts their false positives" in pooled.to_table()
+
+    left = scoring.build_report(run_ids=[], study_ids=[], metric="ois-mean")  # the default: leave-out
+    cell = row(left, "centre prior").cells["hotel"]
+    assert cell.n_frames == 3 and cell.max_f == pytest.approx(np.mean(list(own.values())), abs=1e-12)
+    assert "policy leave-out: left out of the per-frame means (our choice" in left.to_table()
+    assert json.loads(left.to_json())["empty_frames"]["by_activity"] == {"cooking": 0, "hotel": 1}
+    zero = row(scoring.build_report(run_ids=[], study_ids=[], metric="ois-mean", empty="zero"), "centre prior").cells["hotel"]
+    assert zero.n_frames == 4 and zero.max_f == pytest.approx(sum(own.values()) / 4, abs=1e-12)
+    one = row(scoring.build_report(run_ids=[], study_ids=[], metric="ois-mean", empty="one-if-empty"), "centre prior").cells["hotel"]
+    predicts_nothing = float(probs[empty].max() < 99 / 100)  # empty at the highest threshold: a perfect frame
+    assert one.max_f == pytest.approx((sum(own.values()) + predicts_nothing) / 4, abs=1e-12)
+    frames = scoring.frame_table(activity="hotel")
+    assert [line.no_truth for line in frames.lines].count(True) == 1
+    assert next(line for line in frames.lines if line.no_truth).scores["baseline:center"] == (None, None, None)
+    with pytest.raises(scoring.ScoringProblem, match="empty: must be one of leave-out, zero, one-if-empty") as info:
+        scoring.build_report(run_ids=[], study_ids=[], empty="skip")
+    assert info.value.field == "empty"
+
+
 def test_the_conventions_and_thresholds_against_direct_computations(ctx):
     add_activity("cooking", seed=1)
     add_activity("hotel", seed=2)
@@ -288,9 +323,12 @@ def test_the_conventions_and_thresholds_against_direct_computations(ctx):
     masks = [truth_mask(f) for f in frames]
     own = [score_maps([p], [m]) for p, m in zip(probs, masks)]  # each frame's own curve
 
-    per_image = row(scoring.build_report(run_ids=[], study_ids=[], metric="per-image"), "centre prior").cells["hotel"]
-    assert per_image.max_f == pytest.approx(np.mean([s.max_f for s in own]), abs=1e-12)
-    assert per_image.ap == pytest.approx(np.mean([s.ap for s in own]), abs=1e-12)
+    ois_mean = row(scoring.build_report(run_ids=[], study_ids=[], metric="ois-mean"), "centre prior").cells["hotel"]
+    assert ois_mean.max_f == pytest.approx(np.mean([s.max_f for s in own]), abs=1e-12)
+    assert ois_mean.ap == pytest.approx(np.mean([s.ap for s in own]), abs=1e-12)
+    mean_curve = row(scoring.build_report(run_ids=[], study_ids=[], metric="mean-curve"), "centre prior").cells["hotel"]
+    expected = score_maps(probs, masks, metric="mean-curve")
+    assert (mean_curve.max_f, mean_curve.ap) == pytest.approx((expected.max_f, expected.ap), abs=1e-12)
 
     # OIS: each frame's counts at its own best threshold (the highest on ties), summed, then F.
     at_best = []
@@ -539,7 +577,7 @@ def test_statistics_are_cached_and_recomputed_when_their_inputs_change(ctx, monk
     assert scored == []  # read back
     assert again.to_json() == first.to_json()
     # The same per-frame counts serve every convention, frame choice and resampling.
-    for view in (dict(metric="per-image"), dict(metric="ods-ois", frames="each"), dict(resamples=50, seed=3)):
+    for view in (dict(metric="ois-mean", empty="zero"), dict(metric="mean-curve"), dict(metric="ods-ois", frames="each"), dict(resamples=50, seed=3)):
         scoring.build_report(study_ids=[], **view)
     assert scored == []
     assert scoring.build_report(study_ids=[], use_cache=False).to_json() == first.to_json()

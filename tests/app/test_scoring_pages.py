@@ -113,10 +113,73 @@ def test_csv_and_json_carry_n_and_intervals():
     assert "unweighted mean" in data["definition"] and "bootstrap" in data["definition"]
 
 
+PROVENANCE = scoring.Provenance(
+    metric="ois-mean", empty_frames={"cooking": 2, "hotel": 0}, resamples=1000, seed=7,
+    human_maps=(scoring.HumanMaps('study 1 "pilot"', "hierarchical regions (fine_regions 1000, level 0.35)", "click Gaussians of sigma 60 px"),),
+    code_version="egonet-studio 0.1.0 (git abc1234)",
+)  # fmt: skip
+
+
+def test_every_format_says_how_the_table_was_made():
+    report = hand_report()
+    report.provenance = PROVENANCE
+    facts = dict(PROVENANCE.facts())
+    assert list(facts) == ["Metric", "Frames", "95% CI", "Frames without action-object pixels", "People's maps", "Code"]
+    assert facts["Metric"].startswith("ois-mean - OIS-mean: the mean over frames") and "99 thresholds t_k = k/100" in facts["Metric"]
+    assert facts["95% CI"].startswith("BCa (bias-corrected and accelerated) bootstrap over frames") and "1000 resamples, seed 7; not paired" in facts["95% CI"]
+    assert facts["Frames without action-object pixels"] == "2 (cooking 2); policy leave-out: left out of the per-frame means (our choice: the paper does not say)"
+    assert facts["People's maps"] == 'study 1 "pilot": hierarchical regions (fine_regions 1000, level 0.35); click Gaussians of sigma 60 px'
+
+    text = report.to_table()
+    assert all(f"{label}: {fact}." in text for label, fact in facts.items())
+    tex = report.to_latex()
+    assert "% Code: egonet-studio 0.1.0 (git abc1234)." in tex and "% Frames without action-object pixels: 2 (cooking 2); policy leave-out" in tex
+    rows = list(csv.DictReader(io.StringIO(report.to_csv())))
+    assert {(r["metric"], r["thresholds"], r["empty frames policy"], r["empty frames"], r["resamples"], r["bootstrap seed"], r["ci"],
+             r["paired"], r["code version"]) for r in rows} == {("ois-mean", "99", "leave-out", "2", "1000", "7", "BCa 95%", "0",
+                                                                "egonet-studio 0.1.0 (git abc1234)")}  # fmt: skip
+    assert rows[0]["people's maps"].startswith('study 1 "pilot": hierarchical regions')
+    data = json.loads(report.to_json())
+    assert list(data)[:2] == ["frames", "metric"] and data["code_version"] == "egonet-studio 0.1.0 (git abc1234)"
+    assert data["empty_frames"] == {"policy": "leave-out", "count": 2, "by_activity": {"cooking": 2, "hotel": 0}, "applies": True,
+                                    "means": scoring.EMPTY_TITLES["leave-out"]}  # fmt: skip
+    assert data["ci"] == {"level": 0.95, "method": scoring.provenance.CI_METHOD, "resamples": 1000, "seed": 7, "paired": False, "p_floor": 1 / 1001}
+    assert data["human_maps"][0]["sigma"] == "click Gaussians of sigma 60 px" and len(data["threshold_values"]) == 99
+
+
+def hand_comparison(p_values: tuple[float, float], resamples: int) -> scoring.Comparison:
+    """Run 1 minus AOP: cooking's difference at the floor of ``resamples``, the mean's not."""
+    cooking = {"max_f": scoring.Difference(0.1, (0.05, 0.15), p_values[0], 10), "ap": scoring.Difference(-0.05, (-0.1, 0.0), 0.05, 10)}
+    mean = {"max_f": scoring.Difference(0.05, (0.0, 0.1), p_values[1], 20), "ap": scoring.Difference(0.0, (-0.05, 0.05), 1.0, 20)}
+    provenance = scoring.Provenance(resamples=resamples, paired=True, code_version="v")
+    return scoring.Comparison(("run:1", "lite"), ("baseline:aop", "AOP"), ("max_f", "ap"), {"cooking": cooking}, mean, provenance)
+
+
+def test_p_values_at_the_floor_say_so_in_every_format():
+    assert [scoring.p_text(p, b) for p, b in ((1 / 1001, 1000), (1 / 101, 100), (1 / 5001, 5000), (0.0005, 100_000), (0.0234, 1000), (None, 0))] == [
+        "< 0.001", "< 0.01", "< 0.0002", "0.0005", "0.023", "-"]  # fmt: skip
+    comparison = hand_comparison((1 / 1001, 0.0234), 1000)
+    text = comparison.to_text()
+    assert "MF difference (mean over activities) +0.050 [+0.000, +0.100] p = 0.023 (20 frames)." in text
+    assert re.search(r"^cooking\s+10\s+\+0\.100\s+\[\+0\.050, \+0\.150\]\s+< 0\.001", text, re.M) and "0.001 " not in text.replace("< 0.001", "")
+    assert "paired: both rows on the same resamples of the frames they share; p two-sided, written < 0.001 at its floor 1/(B+1)" in text
+    rows = list(csv.DictReader(io.StringIO(comparison.to_csv())))
+    assert [(r["activity"], r["statistic"], r["p"]) for r in rows] == [("cooking", "MF", "< 0.001"), ("cooking", "AP", "0.050"),
+                                                                      ("mean", "MF", "0.023"), ("mean", "AP", "1.000")]  # fmt: skip
+    assert rows[0]["paired"] == "1" and rows[0]["code version"] == "v"
+    assert "cooking & 10 & +0.100 & [+0.050, +0.150] & $< 0.001$" in comparison.to_latex()
+    data = json.loads(comparison.to_json())
+    assert data["activities"]["cooking"]["max_f"]["p_text"] == "< 0.001" and data["activities"]["cooking"]["max_f"]["p_value"] == 1 / 1001
+    assert data["p_text"] == "0.023" and data["ci"] == [0.0, 0.1] and data["bootstrap"]["paired"] is True and data["bootstrap"]["p_floor"] == 1 / 1001
+    # With more resamples the floor moves down, and so does what is printed.
+    assert "< 0.0002" in hand_comparison((1 / 5001, 0.5), 5000).to_text()
+
+
 def test_empty_report_renders():
     empty = scoring.Report(activities=[], rows=[])
     assert "nothing to score" in empty.to_table()
-    assert list(csv.reader(io.StringIO(empty.to_csv())))[0][-3:] == ["mean AP lo", "mean AP hi", "mean over activities"]
+    header = list(csv.reader(io.StringIO(empty.to_csv())))[0]
+    assert header[header.index("mean over activities") - 2 :][:3] == ["mean AP lo", "mean AP hi", "mean over activities"]
     assert "\\begin{tabular}{lcc}" in empty.to_latex()
     assert json.loads(empty.to_json())["rows"] == []
 
@@ -201,9 +264,56 @@ def test_score_command_compares_two_rows(ctx, runner):
     assert set(data["activities"]) == {"cooking", "hotel"} and set(data["mean"]) == {"max_f", "ap"}
     same = json.loads(runner.invoke(args=["egonet", "score", "--compare", "baseline:aop", "baseline:aop", "--format", "json"]).stdout)
     assert same["difference"] == 0 and same["p_value"] == 1.0
-    text = runner.invoke(args=["egonet", "score", "--compare", "baseline:center", "baseline:saliency", "--metric", "per-image"]).stdout
-    assert text.startswith("centre prior [baseline:center] minus saliency [baseline:saliency]") and "p = " in text
-    assert "mean F diff" in text and "per-image" in text
+    text = runner.invoke(args=["egonet", "score", "--compare", "baseline:center", "baseline:saliency", "--metric", "ois-mean"]).stdout
+    assert text.startswith("centre prior [baseline:center] minus saliency [baseline:saliency]")
+    assert re.search(r"difference \(mean over activities\) [+-]\d\.\d{3} \[.*\] p (= \d\.\d{3}|< 0\.001) \(6 frames\)", text)
+    assert "mean F diff" in text and "ois-mean" in text
+
+
+def test_p_values_at_the_floor_on_the_page_and_in_every_download_and_more_resamples_lower_it(ctx, runner, admin_client):
+    add_activity("cooking", seed=1)
+    add_activity("hotel", seed=2)
+    compare = ["egonet", "score", "--compare", "baseline:center", "baseline:saliency", "--metric", "ois-mean"]
+    floors = {"table": "p < 0.001 (6 frames)", "csv": ",< 0.001,", "latex": "$< 0.001$", "json": '"p_text": "< 0.001"'}
+    for fmt, floor in floors.items():
+        result = runner.invoke(args=[*compare, "--format", fmt])
+        assert result.exit_code == 0 and floor in result.stdout, fmt
+    query = "compare_a=baseline:center&compare_b=baseline:saliency&metric=ois-mean"
+    assert 'class="p-value">p &lt; 0.001<' in admin_client.get(f"/scores/?{query}").get_data(as_text=True)
+    for fmt, floor in (("csv", ",< 0.001,"), ("tex", "$< 0.001$"), ("json", '"p_text": "< 0.001"')):
+        with admin_client.get(f"/scores/comparison.{fmt}?{query}") as response:
+            assert response.status_code == 200 and floor in response.get_data(as_text=True), fmt
+            assert f'filename="comparison.{fmt}"' in response.headers["Content-Disposition"]
+    data = json.loads(runner.invoke(args=[*compare, "--format", "json", "--resamples", "20000"]).stdout)
+    assert data["p_text"] == "< 0.00005" and data["bootstrap"]["resamples"] == 20000 and data["p_value"] == pytest.approx(1 / 20001)
+
+
+def test_report_command_writes_the_facts_or_a_methods_paragraph(ctx, runner, tmp_path):
+    from app.version import code_version
+
+    ids = build_study(tmp_path, activities=("cooking", "hotel"), frames=3, per_activity=2, participants=1, sigma_px=6.0)
+    answer(db.session.get(Participant, ids["participants"][0]), lambda t: studies.Answer(clicks=[(20.0, 15.0, 300.0)]))
+    result = runner.invoke(args=["egonet", "report", "--metric", "per-image"])
+    assert result.exit_code == 0, result.output
+    assert "--metric per-image is deprecated and goes in the next release: use --metric ois-mean" in result.stderr
+    lines = result.stdout.splitlines()
+    assert lines[0].startswith("Metric: ois-mean - OIS-mean") and lines[3].startswith("Frames without action-object pixels: none; policy leave-out")
+    assert f'People\'s maps: study {ids["study"]} "' in result.stdout and "click Gaussians of sigma 6 px" in result.stdout
+    assert lines[-1] == f"Code: {code_version()}." and code_version().startswith("egonet-studio ")
+
+    out = tmp_path / "methods.txt"
+    result = runner.invoke(args=["egonet", "report", "--methods", "--resamples", "2000", "--seed", "4", "--out", str(out)])
+    assert result.exit_code == 0 and result.stdout == "" and f"written: {out}" in result.stderr
+    text = out.read_text()
+    report = scoring.build_report(resamples=2000, seed=4)
+    frames = report.frames_per_activity()
+    assert f"({sum(frames.values())} frames: cooking {frames['cooking']}, hotel {frames['hotel']})" in text
+    assert "T = 99 thresholds t_k = k/100" in text and "Convention: Pooled: max F and AP of the pixel counts" in text
+    assert "bias-corrected and accelerated (BCa) bootstrap intervals over frames" in text and "B = 2000 resamples (seed 4)" in text
+    assert "reported as p < 0.0005" in text and "Rows: 5 baselines on every labelled frame" in text and "1 participant of the human study" in text
+    assert "each click is a Gaussian (click Gaussians of sigma 6 px" in text and f"computed with {code_version()}." in text
+    assert "@inproceedings{bertasius2017egonet," in text and "title     = {First-Person Action-Object Detection with {EgoNet}}," in text
+    assert "author    = {Gedas Bertasius and Hyun Soo Park and Stella X. Yu and Jianbo Shi}" in text and "year      = {2017}" in text
 
 
 def test_score_command_errors_are_one_line(ctx, runner):
@@ -218,8 +328,10 @@ def test_score_command_errors_are_one_line(ctx, runner):
                          (["--compare", "a"], "--compare")):  # fmt: skip
         result = runner.invoke(args=["egonet", "score", *args])
         assert result.exit_code == 2 and option in result.output, args
-    result = runner.invoke(args=["egonet", "score", "--compare", "a", "b", "--format", "csv"])
-    assert result.exit_code == 2 and "--compare prints a table or JSON" in result.output
+    result = runner.invoke(args=["egonet", "score", "--empty-frames", "none"])
+    assert result.exit_code == 2 and "--empty-frames" in result.output
+    result = runner.invoke(args=["egonet", "score", "--resamples", "100000", "--format", "csv"])  # 6 frames x 100,000: fits
+    assert result.exit_code == 0, result.output
 
 
 # --------------------------------------------------------------------------
@@ -237,10 +349,13 @@ def test_scores_page_shows_the_tables_switches_comparison_plots_and_downloads(ap
         assert name in html
     assert "Pooled: max F and AP of the pixel counts summed over all frames of an activity" in html  # the convention, up front
     assert 'name="metric" value="pooled" checked' in html and 'name="frames" value="shared" checked' in html
+    assert 'name="empty" value="leave-out" checked' in html and 'value="mean-curve"' in html and 'value="per-image"' not in html
+    assert '<details class="provenance" id="provenance">' in html and "<dt>Code</dt><dd>egonet-studio " in html
+    assert "<dt>Frames without action-object pixels</dt><dd>none; pooled counts their false positives" in html
     assert html.count('class="pr-plot"') == 3  # all activities, cooking, hotel
     assert "0 unanswered" in html and 'class="ci"' in html and "n 2" in html
     assert f'name="studies" value="{ids["study"]}" checked' in html and f'name="runs" value="{run_id}" checked' in html
-    assert f"/scores/table.csv?chosen=1&amp;runs={run_id}&amp;studies={ids['study']}&amp;metric=pooled&amp;frames=shared&amp;baselines=1" in html
+    assert f"/scores/table.csv?chosen=1&amp;runs={run_id}&amp;studies={ids['study']}&amp;metric=pooled&amp;frames=shared&amp;empty=leave-out&amp;baselines=1" in html
 
     html = admin_client.get(f"/scores/?chosen=1&baselines=1&metric=ods-ois&frames=each&studies={ids['study']}").get_data(as_text=True)
     assert 'id="score-table-ois"' in html and 'name="metric" value="ods-ois" checked' in html and 'name="frames" value="each" checked' in html
@@ -248,7 +363,8 @@ def test_scores_page_shows_the_tables_switches_comparison_plots_and_downloads(ap
 
     page = admin_client.get("/scores/?compare_a=baseline:center&compare_b=baseline:saliency")
     html = page.get_data(as_text=True)
-    assert 'id="comparison"' in html and "centre prior minus saliency" in html and 'class="p-value">p = ' in html
+    assert 'id="comparison"' in html and "centre prior minus saliency" in html
+    assert re.search(r'class="p-value">p (= \d\.\d{3}|&lt; 0\.001)<', html)
     assert '<option value="baseline:center" selected>' in html
 
     page = admin_client.get("/scores/?chosen=1")  # nothing ticked: no rows
@@ -260,7 +376,8 @@ def test_scores_page_shows_the_tables_switches_comparison_plots_and_downloads(ap
         assert response.status_code == 200 and response.mimetype == "text/csv"
         assert 'filename="scores.csv"' in response.headers["Content-Disposition"]
         rows = list(csv.reader(io.StringIO(response.get_data(as_text=True))))
-        assert [r[1] for r in rows[1:]] == ["AOP", "centre prior", "saliency", "GBVS", HANDLED_ROW, "P01"] and rows[1][4] == "per-image"
+        # The old name still works for a release: it is ois-mean, and the download says so.
+        assert [r[1] for r in rows[1:]] == ["AOP", "centre prior", "saliency", "GBVS", HANDLED_ROW, "P01"] and rows[1][4] == "ois-mean"
     with admin_client.get("/scores/table.tex") as response:
         assert response.status_code == 200 and "\\begin{tabular}" in response.get_data(as_text=True)
     with admin_client.get("/scores/table.json?compare_a=baseline:aop&compare_b=baseline:center") as response:
@@ -290,8 +407,9 @@ def test_figures_and_per_image_scores(app, admin_client):
     assert [int(m) for m in re.findall(r'<tr data-frame="(\d+)"', html)] == order
     with admin_client.get("/scores/frames.csv?activity=hotel") as response:
         rows = list(csv.reader(io.StringIO(response.get_data(as_text=True))))
-        assert rows[0][:4] == ["frame_id", "frame", "activity", "baseline:aop best F"] and len(rows) == 4
-        assert 'filename="per-image-hotel.csv"' in response.headers["Content-Disposition"]
+        assert rows[0][:6] == ["frame_id", "frame", "activity", "action-object pixels", "empty frames policy", "baseline:aop best F"]
+        assert len(rows) == 4 and rows[1][3:5] == ["1", "leave-out"]
+        assert 'filename="per-frame-hotel.csv"' in response.headers["Content-Disposition"]
 
 
 def test_scores_pages_refuse_bad_choices(admin_client):
@@ -309,5 +427,8 @@ def test_scores_pages_refuse_bad_choices(admin_client):
         assert response.status_code == 400 and "activity" in response.get_json()["fields"]
     with admin_client.get("/scores/frames?sort=run:7", headers={"Accept": "application/json"}) as response:
         assert response.status_code == 400 and "sort" in response.get_json()["fields"]
+    for url in ("/scores/?empty=skip", "/scores/frames?empty=skip", "/scores/comparison.csv"):
+        with admin_client.get(url, headers={"Accept": "application/json"}) as response:
+            assert response.status_code == 400 and set(response.get_json()["fields"]) & {"empty", "compare_a"}, url
     assert admin_client.get("/scores/table.xml").status_code == 404
     assert admin_client.get("/scores/figure.png").status_code == 404

@@ -1,4 +1,4 @@
-"""The Scores page in real Chromium at 1280x800: runs of three seeds, the baselines and two people; every switch, a comparison, the plots, the per-image table."""
+"""The Scores page in real Chromium at 1280x800: runs of three seeds, the baselines and two people; every switch, a comparison, the plots, the per-frame table."""
 
 import re
 from datetime import timedelta
@@ -55,7 +55,7 @@ def rows_of(page, statistic: str = "max_f") -> list[str]:
     return [n.split("\n")[0].strip() for n in page.locator(f"#score-table-{statistic} tbody tr:not(.group):visible th.method").all_inner_texts()]
 
 
-def test_scores_page_switches_seeds_comparison_plots_and_per_image(live_app, live_server, browser):
+def test_scores_page_switches_seeds_comparison_plots_and_per_frame_scores(live_app, live_server, browser):
     with live_app.app_context():
         create_demo(frames_per_activity=3, unlabelled_fraction=0, seed=1, width=160, height=120)
         chosen = db.session.execute(db.select(Activity.id).where(Activity.name.in_(["cooking", "hotel"]))).scalars().all()
@@ -91,10 +91,10 @@ def test_scores_page_switches_seeds_comparison_plots_and_per_image(live_app, liv
     assert page.locator(f'#score-table-ap button.seeds-toggle[data-group="{group}"]').inner_text() == "hide 3 seeds"  # in step
     screenshot(page, "scores-seeds-open")
 
-    # The per-image convention: the page reloads with it and says so.
-    page.locator("#score-choice input[name=metric][value=per-image]").check()
-    page.wait_for_url(re.compile(r"metric=per-image"))
-    assert page.locator("#convention .metric-name").inner_text().startswith("Per image: the mean over frames")
+    # The ois-mean convention: the page reloads with it and says so.
+    page.locator("#score-choice input[name=metric][value=ois-mean]").check()
+    page.wait_for_url(re.compile(r"metric=ois-mean"))
+    assert page.locator("#convention .metric-name").inner_text().startswith("OIS-mean: the mean over frames")
     assert page.locator("h2.stat-title").first.inner_text().startswith("mean F")
     # Each row on all its frames: P02's empty maps count, and best is marked only among rows on the same frames.
     page.locator("#score-choice input[name=frames][value=each]").check()
@@ -102,7 +102,7 @@ def test_scores_page_switches_seeds_comparison_plots_and_per_image(live_app, liv
     assert "all frames each row has" in page.locator("#convention .frames-name").inner_text()
     # P01 against P02 only (the machines are on other frames), and the cell says so.
     assert page.locator('#score-table-max_f tr[data-row^="participant:"] td.best .best-of').first.inner_text() == "best of 2"
-    screenshot(page, "scores-per-image-each")
+    screenshot(page, "scores-ois-mean-each")
 
     # Compare the seed group with AOP on their shared frames.
     page.select_option("select[name=compare_a]", group)
@@ -110,7 +110,7 @@ def test_scores_page_switches_seeds_comparison_plots_and_per_image(live_app, liv
     page.click("#compare-form button[type=submit]")
     page.wait_for_load_state("networkidle")
     headline = page.locator("#comparison .headline").inner_text()
-    assert headline.startswith("egonet-lite (3 seeds) minus AOP: mean F difference (mean over activities)") and re.search(r"p = \d\.\d{3}", headline)
+    assert headline.startswith("egonet-lite (3 seeds) minus AOP: mean F difference (mean over activities)") and re.search(r"p (= \d\.\d{3}|< 0\.001)", headline)
     assert "Fewer than 10 shared frames in cooking" in page.locator("#comparison").inner_text()
     assert page.locator("#comparison .compare-table tbody tr").count() == 8  # seven activities and the mean
     page.locator("#comparison").scroll_into_view_if_needed()
@@ -130,8 +130,8 @@ def test_scores_page_switches_seeds_comparison_plots_and_per_image(live_app, liv
     page.locator("#curves").scroll_into_view_if_needed()
     screenshot(page, "scores-plots")
 
-    # Per-image scores of one activity, worst frames of the seed group's first run first.
-    page.click("#per-image-link")
+    # Per-frame scores of one activity, worst frames of the seed group's first run first.
+    page.click("#per-frame-link")
     page.wait_for_load_state("networkidle")
     page.select_option("select[name=activity]", "hotel")
     page.select_option("select[name=sort]", f"run:{runs[-1]}")
@@ -139,5 +139,5 @@ def test_scores_page_switches_seeds_comparison_plots_and_per_image(live_app, liv
     page.wait_for_load_state("networkidle")
     assert page.locator("#frame-table tbody tr").count() == 3  # frames=each travelled along: every hotel frame
     assert page.locator("#frame-table small.unanswered").count() >= 1  # P02's unanswered trial, an empty map
-    screenshot(page, "scores-per-image-table")
+    screenshot(page, "scores-per-frame-table")
     context.close()

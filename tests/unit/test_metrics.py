@@ -1,6 +1,6 @@
 """Tests for egonet.metrics: hand-checked cases and a direct reference.
 
-The per-frame conventions (pooled, per-image, ODS/OIS), the bootstrap and
+The per-frame conventions (pooled, ois-mean, mean-curve, ODS/OIS), the bootstrap and
 the paired test are in tests/unit/test_metrics_frames.py.
 """
 
@@ -43,10 +43,20 @@ def direct_curve(tp, fp, fn):
     return p, r
 
 
-def direct_score(probs, masks, thresholds, beta2, per_image):
+def direct_frame_curve(tp, fp, fn, empty):
+    """A map's own curve; a map without positives as the policy says (None: left out)."""
+    if tp[0] + fn[0] > 0:
+        return direct_curve(tp, fp, fn)
+    if empty == "leave-out":
+        return None
+    hit = np.array([1.0 if b == 0 and empty == "one-if-empty" else 0.0 for b in fp])
+    return hit, hit
+
+
+def direct_score(probs, masks, thresholds, beta2, metric, empty="leave-out"):
     per_map = [direct_counts(p, m, thresholds) for p, m in zip(probs, masks)]
-    if per_image:
-        curves = [direct_curve(*c) for c in per_map]
+    if metric == "mean-curve":
+        curves = [c for c in (direct_frame_curve(*m, empty) for m in per_map) if c is not None]
         prec = np.mean([c[0] for c in curves], axis=0)
         rec = np.mean([c[1] for c in curves], axis=0)
     else:
@@ -97,7 +107,7 @@ def test_eight_pixels_score():
     assert s.max_f == pytest.approx(0.8, abs=1e-15)
     assert s.best_threshold == 0.25
     assert s.ap == pytest.approx(41 / 48, abs=1e-15)
-    assert s.n_maps == 1 and not s.per_image
+    assert s.n_maps == 1 and s.metric == "pooled" and s.empty_maps == 0
 
 
 def test_eight_pixels_beta2():
@@ -142,7 +152,7 @@ def test_boundaries_float32_compared_exactly():
     assert fp[50 - 1] == 1 and fp[51 - 1] == 0  # 0.5 reaches t_50
 
 
-def test_per_image_vs_pooled():
+def test_mean_curve_vs_pooled():
     # T = 1 (threshold 0.5).
     # map A: probs [0.9, 0.9], mask [T, F]            -> TP 1, FP 1, FN 0: P 1/2, R 1
     # map B: probs [0, 0, 0, 0.9], mask [T, T, T, F]  -> TP 0, FP 1, FN 3: P 0, R 0
@@ -153,10 +163,39 @@ def test_per_image_vs_pooled():
     pooled = score_maps(probs, masks, thresholds=1)
     assert pooled.max_f == pytest.approx(2 / 7, abs=1e-15)
     assert pooled.ap == pytest.approx(1 / 12, abs=1e-15)
-    per = score_maps(probs, masks, thresholds=1, per_image=True)
-    assert per.per_image and per.n_maps == 2
+    per = score_maps(probs, masks, thresholds=1, metric="mean-curve")
+    assert per.metric == "mean-curve" and per.n_maps == 2 and per.empty == "leave-out" and per.empty_maps == 0
     assert per.max_f == pytest.approx(1 / 3, abs=1e-15)
     assert per.ap == pytest.approx(1 / 8, abs=1e-15)
+
+
+def test_per_image_is_the_old_name_of_the_mean_curve(caplog):
+    probs, masks = [np.array([[0.9, 0.1]]), np.array([[0.2, 0.7]])], [np.array([[True, False]]), np.array([[True, True]])]
+    old = score_maps(probs, masks, per_image=True)
+    assert "per_image= is deprecated" in caplog.text and "metric='mean-curve'" in caplog.text
+    new = score_maps(probs, masks, metric="mean-curve")
+    assert (old.max_f, old.ap, old.metric) == (new.max_f, new.ap, "mean-curve") and old.per_image
+    assert not score_maps(probs, masks, per_image=False).per_image
+    with pytest.raises(EgonetError, match="score_frames scores the other conventions") as info:
+        score_maps(probs, masks, metric="ois-mean")
+    assert info.value.field == "metric"
+
+
+def test_maps_without_positives_in_the_mean_curve():
+    # T = 1 (0.5). A: one positive found, P 1 R 1. B: no positive, nothing predicted. C: no positive, one false positive.
+    probs = [np.array([[0.9]]), np.array([[0.1]]), np.array([[0.8]])]
+    masks = [np.array([[True]]), np.array([[False]]), np.array([[False]])]
+    by_policy = {empty: score_maps(probs, masks, thresholds=1, metric="mean-curve", empty=empty) for empty in ("leave-out", "zero", "one-if-empty")}
+    assert by_policy["leave-out"].max_f == 1.0  # A alone
+    assert by_policy["zero"].max_f == pytest.approx(1 / 3, abs=1e-15)  # P = R = 1/3
+    assert by_policy["one-if-empty"].max_f == pytest.approx(2 / 3, abs=1e-15)  # B counts as 1: P = R = 2/3
+    assert {s.empty_maps for s in by_policy.values()} == {2} and by_policy["zero"].empty == "zero"
+    assert score_maps(probs, masks, thresholds=1).empty_maps == 2  # pooled: said, no policy
+    with pytest.raises(EgonetError, match="nothing to average") as info:
+        score_maps(probs[1:], masks[1:], metric="mean-curve")
+    assert info.value.field == "empty"
+    with pytest.raises(EgonetError, match="leave-out, zero, one-if-empty"):
+        score_maps(probs, masks, metric="mean-curve", empty="skip")
 
 
 def test_no_positives():
@@ -182,8 +221,8 @@ def test_perfect_prediction():
     rng = np.random.default_rng(1)
     masks = [rng.random((7, 9)) < 0.3 for _ in range(3)]
     probs = [m.astype(np.float32) for m in masks]
-    for per_image in (False, True):
-        s = score_maps(probs, masks, per_image=per_image)
+    for metric in ("pooled", "mean-curve"):
+        s = score_maps(probs, masks, metric=metric)
         assert s.max_f == 1.0
         assert s.ap == 1.0
 
@@ -236,13 +275,13 @@ def test_counts_match_direct(dtype, thresholds):
             np.testing.assert_array_equal(a, b)
 
 
-@pytest.mark.parametrize("per_image", [False, True])
+@pytest.mark.parametrize(("metric", "empty"), [("pooled", "leave-out"), ("mean-curve", "leave-out"), ("mean-curve", "zero"), ("mean-curve", "one-if-empty")])
 @pytest.mark.parametrize("beta2", [1.0, 0.3, 2.0])
-def test_score_matches_direct(per_image, beta2):
+def test_score_matches_direct(metric, empty, beta2):
     rng = np.random.default_rng(7)
-    probs, masks = random_maps(rng, np.float32, 99, n=5)
-    s = score_maps(iter(probs), iter(masks), beta2=beta2, per_image=per_image)
-    prec, rec, f, ap = direct_score(probs, masks, 99, beta2, per_image)
+    probs, masks = random_maps(rng, np.float32, 99, n=5)  # one map without positives
+    s = score_maps(iter(probs), iter(masks), beta2=beta2, metric=metric, empty=empty)
+    prec, rec, f, ap = direct_score(probs, masks, 99, beta2, metric, empty)
     np.testing.assert_allclose(s.precision, prec, rtol=0, atol=1e-12)
     np.testing.assert_allclose(s.recall, rec, rtol=0, atol=1e-12)
     np.testing.assert_allclose(s.f, f, rtol=0, atol=1e-12)
@@ -283,27 +322,27 @@ def test_accumulator_merge_equals_one_pass():
     for p, m in zip(probs[2:], masks[2:]):
         b.add(p, m)
     a.merge(b)
-    for per_image in (False, True):
-        merged = a.score(per_image=per_image)
-        whole = score_maps(probs, masks, per_image=per_image)
+    for metric in ("pooled", "mean-curve"):
+        merged = a.score(metric=metric)
+        whole = score_maps(probs, masks, metric=metric)
         np.testing.assert_allclose(merged.f, whole.f, rtol=0, atol=1e-15)
         assert merged.ap == pytest.approx(whole.ap, abs=1e-15)
         assert merged.n_maps == 6
 
 
 def test_accumulator_state_of_eight_pixels():
-    # Two copies of the eight pixels: the counts double, each curve sum is twice the map's curve.
+    # Two copies of the eight pixels: each map's counts, pooled they double.
     acc = ScoreAccumulator(thresholds=3)
     acc.add(EIGHT_PROB, EIGHT_MASK)
     acc.add(EIGHT_PROB, EIGHT_MASK)
     state = acc.state()
-    np.testing.assert_array_equal(state["tp"], [8, 6, 4])
-    np.testing.assert_array_equal(state["fp"], [4, 2, 0])
-    np.testing.assert_array_equal(state["fn"], [0, 2, 4])
-    np.testing.assert_allclose(state["precision_sum"], [4 / 3, 3 / 2, 2.0], rtol=0, atol=1e-15)
-    np.testing.assert_allclose(state["recall_sum"], [2.0, 3 / 2, 1.0], rtol=0, atol=1e-15)
-    assert state["n_maps"] == 2
-    state["tp"][0] = 0  # a copy: the accumulator keeps its counts
+    np.testing.assert_array_equal(state["tp"], [[4, 3, 2], [4, 3, 2]])
+    np.testing.assert_array_equal(state["fp"], [[2, 1, 0], [2, 1, 0]])
+    np.testing.assert_array_equal(state["positives"], [4, 4])
+    np.testing.assert_array_equal(acc.counts.tp, [8, 6, 4])
+    np.testing.assert_array_equal(acc.counts.fn, [0, 2, 4])
+    assert acc.n_maps == 2 and acc.frames().n == 2
+    state["tp"][0, 0] = 0  # a copy: the accumulator keeps its counts
     assert acc.counts.tp[0] == 8
 
 
@@ -314,18 +353,19 @@ def test_accumulator_state_round_trip():
     for p, m in zip(probs, masks):
         acc.add(p, m)
     # As a JSON cache stores it: plain lists.
-    stored = {k: v.tolist() if isinstance(v, np.ndarray) else v for k, v in acc.state().items()}
+    stored = {k: v.tolist() for k, v in acc.state().items()}
     back = ScoreAccumulator.from_state(stored, thresholds=9)
     for key, value in acc.state().items():
         np.testing.assert_array_equal(back.state()[key], value)
-    assert back.counts.tp.dtype == np.int64 and back.precision_sum.dtype == np.float64
-    for per_image in (False, True):
-        assert back.score(per_image=per_image).ap == acc.score(per_image=per_image).ap
+    assert back.counts.tp.dtype == np.int64 and back.n_maps == 3
+    for metric in ("pooled", "mean-curve"):
+        assert back.score(metric=metric).ap == acc.score(metric=metric).ap
+    assert ScoreAccumulator.from_state({"tp": [], "fp": [], "positives": []}).n_maps == 0
     with pytest.raises(EgonetError, match="do not have 99 thresholds") as info:
         ScoreAccumulator.from_state(stored)
     assert info.value.field == "state"
-    with pytest.raises(EgonetError, match="has no 'n_maps'"):
-        ScoreAccumulator.from_state({k: v for k, v in stored.items() if k != "n_maps"}, thresholds=9)
+    with pytest.raises(EgonetError, match="has no 'positives'"):
+        ScoreAccumulator.from_state({k: v for k, v in stored.items() if k != "positives"}, thresholds=9)
 
 
 def test_iso_f_curve():

@@ -1,4 +1,4 @@
-"""egonet.metrics per frame: the three conventions, the bootstrap, the paired test.
+"""egonet.metrics per frame: the four conventions, frames without positives, the bootstrap, the paired test.
 
 Hand-computed small cases, a direct (slow, loop-per-threshold) computation
 from tests/unit/test_metrics.py, and a coverage study of the intervals.
@@ -10,6 +10,8 @@ import pytest
 from egonet.errors import EgonetError
 from statistics import NormalDist
 
+from egonet.metrics.bootstrap import MAX_WEIGHTS
+
 from egonet.metrics import (
     METRICS,
     Counts,
@@ -20,10 +22,12 @@ from egonet.metrics import (
     frame_scores,
     jackknife_weights,
     resample_weights,
+    p_floor,
+    resolve_metric,
     score_frames,
     score_maps,
 )
-from tests.unit.test_metrics import direct_counts, direct_curve, random_maps
+from tests.unit.test_metrics import direct_counts, direct_curve, direct_frame_curve, direct_score, random_maps
 
 # Two frames, T = 3 thresholds (0.25, 0.5, 0.75):
 #   A: prob 0.9 0.6 0.4 0.3, mask T F T F (2 positives)
@@ -36,7 +40,8 @@ from tests.unit.test_metrics import direct_counts, direct_curve, random_maps
 #      best F 1 at .25; AP = 1
 # pooled: t=.25 TP 4 FP 2 (4 positives): P 2/3 R 1 F 4/5; t=.5 TP 1 FP 1: P 1/2 R 1/4 F 1/3;
 #         t=.75 TP 1 FP 0: P 1 R 1/4 F 2/5 -> MF 4/5; AP = (3/4)(2/3) + 0 + (1/4) 1 = 3/4
-# per image: mean F (2/3 + 1) / 2 = 5/6, mean AP (3/4 + 1) / 2 = 7/8
+# ois-mean: mean F (2/3 + 1) / 2 = 5/6, mean AP (3/4 + 1) / 2 = 7/8
+# mean-curve: P (3/4, 3/4, 1), R (1, 1/4, 1/4): F (6/7, 3/8, 2/5) -> MF 6/7; AP = (3/4)(3/4) + 0 + (1/4) 1 = 13/16
 # OIS: A at .75 (TP 1, FP 0) + B at .25 (TP 2, FP 0) = TP 3 FP 0 of 4: P 1 R 3/4 F 6/7
 A = (np.array([[0.9, 0.6, 0.4, 0.3]]), np.array([[True, False, True, False]]))
 B = (np.array([[0.3, 0.3]]), np.array([[True, True]]))
@@ -56,7 +61,8 @@ def test_two_frames_by_hand():
     np.testing.assert_array_equal(counts.fp, [[2, 1, 0], [0, 0, 0]])
     np.testing.assert_array_equal(counts.positives, [2, 2])
     assert scalar(score_frames(counts, metric="pooled")) == pytest.approx({"max_f": 4 / 5, "ap": 3 / 4}, abs=1e-15)
-    assert scalar(score_frames(counts, metric="per-image")) == pytest.approx({"max_f": 5 / 6, "ap": 7 / 8}, abs=1e-15)
+    assert scalar(score_frames(counts, metric="ois-mean")) == pytest.approx({"max_f": 5 / 6, "ap": 7 / 8}, abs=1e-15)
+    assert scalar(score_frames(counts, metric="mean-curve")) == pytest.approx({"max_f": 6 / 7, "ap": 13 / 16}, abs=1e-15)
     assert scalar(score_frames(counts, metric="ods-ois")) == pytest.approx({"max_f": 4 / 5, "ap": 3 / 4, "ois": 6 / 7}, abs=1e-15)
     own = frame_scores(counts)
     np.testing.assert_allclose(own["max_f"], [2 / 3, 1.0], rtol=0, atol=1e-15)
@@ -73,7 +79,7 @@ def test_pooled_is_score_maps():
     assert got == {"max_f": expected.max_f, "ap": expected.ap}  # exactly the same arithmetic
 
 
-def direct_conventions(probs, masks, thresholds, beta2):
+def direct_conventions(probs, masks, thresholds, beta2, empty):
     """Every convention computed frame by frame with one comparison per threshold (no histograms, no weights)."""
     per_frame = [direct_counts(p, m, thresholds) for p, m in zip(probs, masks)]
 
@@ -85,10 +91,11 @@ def direct_conventions(probs, masks, thresholds, beta2):
 
     best_f, aps, at_best = [], [], []
     for tp, fp, fn in per_frame:
-        p, r = direct_curve(tp, fp, fn)
-        f = f_of(p, r)
-        best_f.append(f.max())
-        aps.append(ap_of(p, r))
+        own = direct_frame_curve(tp, fp, fn, empty)
+        if own is not None:
+            best_f.append(f_of(*own).max())
+            aps.append(ap_of(*own))
+        f = f_of(*direct_curve(tp, fp, fn))
         k = max(i for i in range(thresholds) if f[i] == f.max())  # the highest threshold on ties
         at_best.append((tp[k], fp[k], fn[k]))
     p, r = direct_curve(*(sum(c[i] for c in per_frame) for i in range(3)))
@@ -97,19 +104,21 @@ def direct_conventions(probs, masks, thresholds, beta2):
     r_ois = tp / (tp + fn) if tp + fn else 0.0
     return {
         "pooled": {"max_f": f_of(p, r).max(), "ap": ap_of(p, r)},
-        "per-image": {"max_f": np.mean(best_f), "ap": np.mean(aps)},
+        "ois-mean": {"max_f": np.mean(best_f), "ap": np.mean(aps)},
+        "mean-curve": dict(zip(("max_f", "ap"), direct_score(probs, masks, thresholds, beta2, "mean-curve", empty)[2:])),
         "ods-ois": {"max_f": f_of(p, r).max(), "ap": ap_of(p, r), "ois": f_of([p_ois], [r_ois])[0]},
     }
 
 
-@pytest.mark.parametrize(("thresholds", "beta2"), [(99, 1.0), (7, 0.3), (255, 2.0)])
-def test_conventions_match_a_direct_computation(thresholds, beta2):
+@pytest.mark.parametrize(("thresholds", "beta2", "empty"), [(99, 1.0, "leave-out"), (7, 0.3, "zero"), (255, 2.0, "one-if-empty")])
+def test_conventions_match_a_direct_computation(thresholds, beta2, empty):
     rng = np.random.default_rng(thresholds)
     probs, masks = random_maps(rng, np.float32, thresholds, n=7)  # one map without positives
     counts = FrameCounts.stack([count_stats(p, m, thresholds=thresholds) for p, m in zip(probs, masks)])
-    expected = direct_conventions(probs, masks, thresholds, beta2)
+    expected = direct_conventions(probs, masks, thresholds, beta2, empty)
+    expected["mean-curve"]["max_f"] = expected["mean-curve"]["max_f"].max()
     for metric in METRICS:
-        got = scalar(score_frames(counts, metric=metric, beta2=beta2))
+        got = scalar(score_frames(counts, metric=metric, beta2=beta2, empty=empty))
         assert got == pytest.approx(expected[metric], abs=1e-12), metric
 
 
@@ -128,13 +137,44 @@ def test_weights_count_frames_as_repeats(metric):
 
 def test_a_frame_without_positives():
     empty = count_stats(np.array([[0.95, 0.2, 0.0]]), np.zeros((1, 3), bool), thresholds=3)
-    own = frame_scores(FrameCounts.stack([empty]))
-    assert own["max_f"][0] == 0 and own["ap"][0] == 0
-    assert own["best"][0] == 2  # every F is 0: the highest threshold, the fewest false positives
-    counts = FrameCounts.stack([count_stats(*B, thresholds=3), empty])
-    # OIS adds B's counts at 0.25 and the empty frame's at 0.75 (one false positive, 0.95): P 2/3, R 1.
-    assert scalar(score_frames(counts, metric="ods-ois"))["ois"] == pytest.approx(0.8, abs=1e-15)
-    assert scalar(score_frames(counts, metric="per-image"))["max_f"] == 0.5
+    quiet = count_stats(np.array([[0.3, 0.1, 0.0]]), np.zeros((1, 3), bool), thresholds=3)  # empty from 0.5 up
+    own = frame_scores(FrameCounts.stack([empty, quiet]), empty="zero")
+    np.testing.assert_array_equal(own["max_f"], [0, 0])
+    np.testing.assert_array_equal(own["ap"], [0, 0])
+    np.testing.assert_array_equal(own["best"], [2, 2])  # every F is 0: the highest threshold, the fewest false positives
+    one = frame_scores(FrameCounts.stack([empty, quiet]), empty="one-if-empty")
+    np.testing.assert_array_equal(one["max_f"], [0, 1])  # the map predicts nothing at 0.5 and 0.75
+    np.testing.assert_array_equal(one["ap"], [0, 1])
+    left = frame_scores(FrameCounts.stack([empty, quiet]))
+    assert np.isnan(left["max_f"]).all() and not left["counted"].any()
+    counts = FrameCounts.stack([count_stats(*B, thresholds=3), empty, quiet])
+    # OIS adds B's counts at 0.25 and the empty frames' at 0.75 (one false positive, 0.95): P 2/3, R 1.
+    for policy in ("leave-out", "zero", "one-if-empty"):
+        assert scalar(score_frames(counts, metric="ods-ois", empty=policy))["ois"] == pytest.approx(0.8, abs=1e-15)
+    mean_f = {policy: scalar(score_frames(counts, metric="ois-mean", empty=policy))["max_f"] for policy in ("leave-out", "zero", "one-if-empty")}
+    assert mean_f == pytest.approx({"leave-out": 1.0, "zero": 1 / 3, "one-if-empty": 2 / 3}, abs=1e-15)
+    # Left out, a resample of empty frames alone has nothing to average: NaN, not a number made up.
+    only_empty = score_frames(counts, metric="mean-curve", weights=np.array([[1.0, 1, 1], [0, 2, 1]]))
+    assert only_empty["max_f"][0] == 1.0 and np.isnan(only_empty["max_f"][1])
+
+
+def test_per_image_is_the_old_name_of_ois_mean(caplog):
+    counts = two_frames()
+    assert scalar(score_frames(counts, metric="per-image")) == scalar(score_frames(counts, metric="ois-mean"))
+    assert "'per-image' is deprecated" in caplog.text and "now called 'ois-mean'" in caplog.text
+    assert resolve_metric("per-image") == ("ois-mean", "metric 'per-image' is deprecated and goes in the next release: it is now called 'ois-mean'")
+    assert resolve_metric("mean-curve") == ("mean-curve", None) and "per-image" not in METRICS
+
+
+def test_the_two_per_frame_means_differ():
+    # The issue's case in small: the mean of each frame's best F is not the best F of the mean curve.
+    rng = np.random.default_rng(27)
+    probs, masks = random_maps(rng, np.float32, 99, n=8)
+    counts = FrameCounts.stack([count_stats(p, m) for p, m in zip(probs, masks)])
+    ois_mean = scalar(score_frames(counts, metric="ois-mean"))["max_f"]
+    mean_curve = scalar(score_frames(counts, metric="mean-curve"))["max_f"]
+    assert mean_curve == pytest.approx(score_maps(probs, masks, metric="mean-curve").max_f, abs=1e-12)
+    assert abs(ois_mean - mean_curve) > 0.003  # 0.450 and 0.447 here; 5/6 and 6/7 in test_two_frames_by_hand
 
 
 def test_frame_counts_take_pool_and_refuse_bad_counts():
@@ -163,9 +203,12 @@ def test_frame_counts_take_pool_and_refuse_bad_counts():
 
 def test_score_frames_refuses_bad_input():
     counts = two_frames()
-    with pytest.raises(EgonetError, match="pooled, per-image, ods-ois") as info:
+    with pytest.raises(EgonetError, match="pooled, ois-mean, mean-curve, ods-ois") as info:
         score_frames(counts, metric="mean")
     assert info.value.field == "metric"
+    with pytest.raises(EgonetError, match="leave-out, zero, one-if-empty") as info:
+        score_frames(counts, metric="ois-mean", empty="drop")
+    assert info.value.field == "empty"
     with pytest.raises(EgonetError, match="no frames"):
         score_frames(FrameCounts.stack([], thresholds=3))
     with pytest.raises(EgonetError, match=r"\(B, 2\)") as info:
@@ -222,6 +265,15 @@ def test_resampler_is_seeded_by_stratum_and_size():
             Resampler(resamples=bad)
     with pytest.raises(EgonetError, match="seed"):
         Resampler(seed=-2)
+
+
+def test_resamples_are_capped_by_their_memory_and_p_has_a_floor():
+    many = Resampler(resamples=100_000)
+    assert many.weights("hotel", 3).shape == (1 + 100_000 + 3, 3)
+    with pytest.raises(EgonetError, match="at most 83261 resamples fit these frames") as info:
+        many.weights("cooking", 400)  # 403 frames in all: 40 million weights, refused before any is drawn
+    assert info.value.field == "resamples" and MAX_WEIGHTS == 2**25
+    assert p_floor(1000) == 1 / 1001 and p_floor(0) == 1.0
 
 
 NORMAL = NormalDist()
@@ -334,7 +386,7 @@ def test_intervals_cover_the_true_value_about_95_percent_and_the_test_keeps_its_
         sample_a, sample_b = population_a.take(index), population_b.take(index)
         w = resampler.weights("sample", 40)
         # ods-ois holds the pooled statistics too (its max_f and ap are pooled MF and AP).
-        values = {metric: score_frames(sample_a, metric=metric, weights=w) for metric in ("per-image", "ods-ois")}
+        values = {metric: score_frames(sample_a, metric=metric, weights=w) for metric in ("ois-mean", "mean-curve", "ods-ois")}
         values["pooled"] = {key: values["ods-ois"][key] for key in ("max_f", "ap")}
         for metric, scores in values.items():
             for key, v in scores.items():

@@ -17,8 +17,11 @@ Rows, in this order:
 
 Columns are the activities and their mean. Every cell holds the chosen
 convention's statistics (``egonet.metrics.frames``: ``pooled``, the
-default, ``per-image`` or ``ods-ois``), their 95 % bootstrap intervals and
-the number of frames scored. By default (``frames="shared"``) every row of
+default, ``ois-mean``, ``mean-curve`` or ``ods-ois``), their 95 % bootstrap
+intervals and the number of frames scored. Frames without action-object
+pixels are counted and, in the per-frame means, treated as the ``empty``
+policy says (left out by default). Every report carries its
+:class:`Provenance` (how its numbers were made, down to the code version). By default (``frames="shared"``) every row of
 an activity is scored on the frames all those rows have; ``"each"`` scores
 each row on all its frames and marks the best only among rows on the same
 frames. Runs that differ only in their seed are grouped (mean and standard
@@ -46,9 +49,11 @@ The package, one module per concern:
 * ``rows``: frames per row (shared or each), seed groups, intervals, paired comparisons;
 * ``cells``: the table's labels, cells, curves, rows and paired differences;
 * ``table``: :class:`Report` and a :class:`Comparison`;
-* ``formats``: their renderers (text, CSV, LaTeX, JSON), mixins of the two;
+* ``provenance``: :class:`Provenance`, the facts every format carries, the
+  methods paragraph and the seed paper's BibTeX; :func:`p_text`;
+* ``formats``: their renderers (text, CSV, LaTeX, JSON, methods), mixins of the two;
 * ``plots``: :func:`pr_plot` (the page's SVG) and :func:`pr_figure` (SVG/PDF files);
-* ``perframe``: :func:`frame_table`, per-image scores of one activity.
+* ``perframe``: :func:`frame_table`, each frame's own scores in one activity.
 """
 
 from app.services.scoring.perframe import FrameTable, frame_table
@@ -68,6 +73,7 @@ from app.services.scoring.cells import (
     Row,
     definition,
 )
+from app.services.scoring.provenance import EMPTY_TITLES, HumanMaps, Provenance, p_text
 from app.services.scoring.table import Comparison, Report
 
 __all__ = [
@@ -82,9 +88,12 @@ __all__ = [
     "Comparison",
     "Curve",
     "Difference",
+    "EMPTY_TITLES",
     "FrameTable",
+    "HumanMaps",
     "Plot",
     "PlotLine",
+    "Provenance",
     "Report",
     "Row",
     "ScoringProblem",
@@ -95,6 +104,7 @@ __all__ = [
     "definition",
     "frame_table",
     "load_sources",
+    "p_text",
     "pr_figure",
     "pr_plot",
 ]

@@ -25,18 +25,23 @@ FRAMES = {
 
 STATISTIC_LABELS = {
     "pooled": {"max_f": "MF", "ap": "AP"},
-    "per-image": {"max_f": "mean F", "ap": "mean AP"},
+    "ois-mean": {"max_f": "mean F", "ap": "mean AP"},
+    "mean-curve": {"max_f": "mean-curve MF", "ap": "mean-curve AP"},
     "ods-ois": {"max_f": "ODS", "ois": "OIS", "ap": "AP"},
 }
 """Column labels of each convention's statistics, in the order they are shown."""
 
 METRIC_TITLES = {
     "pooled": "Pooled: max F and AP of the pixel counts summed over all frames of an activity",
-    "per-image": "Per image: the mean over frames of each frame's best F, and of each frame's AP",
+    "ois-mean": "OIS-mean: the mean over frames of each frame's best F (at its own threshold), and of each frame's AP",
+    "mean-curve": "Mean curve: max F and AP of the precision-recall curve averaged over frames",
     "ods-ois": "BSDS ODS / OIS: best F at one threshold for the activity (ODS), at each frame's own (OIS), and AP",
 }
 
-METRIC_SHORT = {"pooled": "pixels pooled per activity (default)", "per-image": "mean of each frame's best F", "ods-ois": "BSDS ODS / OIS"}
+METRIC_SHORT = {
+    "pooled": "pixels pooled per activity (default)", "ois-mean": "mean of each frame's best F",
+    "mean-curve": "best F of the mean curve", "ods-ois": "BSDS ODS / OIS",
+}  # fmt: skip
 """What the metric selector says beside each convention's name."""
 
 METRIC_DEFINITIONS = {
@@ -45,10 +50,13 @@ METRIC_DEFINITIONS = {
         "(R_k - R_{k+1}) P_k, with P = TP / (TP + FP) (1 when nothing is predicted) and R = TP / (TP + FN) "
         "computed from the pixel counts summed over all the frames of the activity."
     ),
-    "per-image": (
+    "ois-mean": (
         "Each frame gets its own precision-recall curve; mean F is the mean over frames of each frame's best F "
-        "(at its own best threshold) and mean AP the mean of the frames' APs. A frame without action-object "
-        "pixels scores 0 in every row."
+        "(at its own best threshold) and mean AP the mean of the frames' APs."
+    ),
+    "mean-curve": (
+        "Each frame gets its own precision P_k and recall R_k at each threshold; these are averaged over the frames, "
+        "and mean-curve MF is the maximum over thresholds of F of the averaged curve, mean-curve AP its average precision."
     ),
     "ods-ois": (
         "ODS (optimal dataset scale) is the best F at one threshold for all frames of the activity, from pooled "

@@ -1,10 +1,12 @@
-"""The report and a comparison written out: plain text, CSV, LaTeX (booktabs) and JSON.
+"""The report and a comparison written out: plain text, CSV, LaTeX (booktabs), JSON and a methods paragraph.
 
 The renderers are mixins of ``table``'s :class:`Report` and :class:`Comparison`
 (``self`` is the report or the comparison), so this module needs only the
-table's parts. Every format says first which convention, frames and
-intervals its numbers are (``Report.describe``), and every cell carries its
-number of frames and its 95 % interval.
+table's parts. Every format carries the numbers' provenance
+(``provenance.Provenance``: convention, thresholds, frames, frames without
+action-object pixels, bootstrap, people's maps, code version), and every
+cell its number of frames and its 95 % interval; p-values go through
+``provenance.p_text`` (``< 0.001`` at the bootstrap's floor).
 """
 
 from __future__ import annotations
@@ -13,8 +15,8 @@ import json
 from typing import Any
 
 from app.services.scoring.cells import ALL, MEAN, STATISTIC_LABELS, Cell, Difference, Row, definition
+from app.services.scoring.provenance import BIBTEX
 from app.spreadsheet import csv_text
-from egonet.metrics import threshold_values
 
 
 def _fmt(value: float | None, digits: int = 3) -> str:
@@ -31,10 +33,6 @@ def _num(value: float | None) -> str:
 
 def _signed(ci: tuple[float, float] | None) -> str:
     return "" if ci is None else f"[{ci[0]:+.3f}, {ci[1]:+.3f}]"
-
-
-def _p(p: float | None) -> str:
-    return "-" if p is None else f"{p:.3f}"
 
 
 def _blank(value: int | None) -> str | int:
@@ -72,8 +70,8 @@ def _cell_dict(cell: Cell, statistics: list[str]) -> dict[str, Any]:
     return out
 
 
-def _difference_dict(d: Difference) -> dict[str, Any]:
-    return {"difference": d.value, "ci": None if d.ci is None else list(d.ci), "p_value": d.p_value, "n_frames": d.n_frames}
+def _difference_dict(d: Difference, p_text: str) -> dict[str, Any]:
+    return {"difference": d.value, "ci": None if d.ci is None else list(d.ci), "p_value": d.p_value, "p_text": p_text, "n_frames": d.n_frames}
 
 
 class _Json:
@@ -117,36 +115,35 @@ class ReportFormats(_Json):
         if self.partial_means():
             lines.append("* mean over the activities that row has frames in.")
         if any(r.unanswered for r in self.rows):
-            counted = "left out" if self.answered_only else "scored as empty maps"
+            counted = "left out" if self.provenance.answered_only else "scored as empty maps"
             lines.append("Unanswered trials (" + counted + "): " + ", ".join(f"{r.name} {r.unanswered}" for r in self.rows if r.unanswered is not None) + ".")
         lines += self.notes
         return "\n".join(lines).rstrip() + "\n"
 
     def to_csv(self) -> str:
-        """One line per row (a group's runs included, with the group's key): n, each statistic, its interval, per column."""
-        table = []
+        """One line per row (a group's runs included, with the group's key): n, each statistic, its interval, per column; then the provenance."""
         statistics = self.statistics()
+        grouped = any(r.members for r in self.rows)
+        facts = self.provenance.columns()
         header = ["key", "method", "kind", "group", "metric", "frames", "unanswered"]
         for column in self.columns():
             header.append(f"{column} frames")
             for s in statistics:
                 label = self.label(s)
-                header += [f"{column} {label}", f"{column} {label} lo", f"{column} {label} hi"]
-                if any(r.members for r in self.rows):
-                    header.append(f"{column} {label} sd")
-        header.append("mean over activities")
+                header += [f"{column} {label}", f"{column} {label} lo", f"{column} {label} hi"] + ([f"{column} {label} sd"] if grouped else [])
+        lines = []
         for row in self.all_rows():
-            line: list[Any] = [row.key, row.name, row.kind, row.group or "", self.metric, self.frames, _blank(row.unanswered)]
+            line: list[Any] = [row.key, row.name, row.kind, row.group or "", self.metric, self.provenance.frames, _blank(row.unanswered)]
             for column in self.columns():
                 cell = self.cell(row, column)
                 line.append("" if cell is None else cell.n_frames)
                 for s in statistics:
                     ci = cell.ci.get(s) if cell else None
                     line += [_num(cell and cell.values.get(s)), _num(ci and ci[0]), _num(ci and ci[1])]
-                    if any(r.members for r in self.rows):
+                    if grouped:
                         line.append(_num((cell.sd or {}).get(s)) if cell else "")
-            table.append([*line, row.mean.activities if row.mean else 0])
-        return csv_text(table, header)
+            lines.append([*line, row.mean.activities if row.mean else 0, *facts.values()])
+        return csv_text(lines, header=[*header, "mean over activities", *facts])
 
     def _tex_cell(self, row: Row, column: str, statistic: str, best: dict[str, int], uniform_n: bool) -> str:
         cell = self.cell(row, column)
@@ -220,21 +217,11 @@ class ReportFormats(_Json):
         return out
 
     def as_dict(self) -> dict[str, Any]:
-        """Everything, curves included, with what the numbers are at the top (``frames``, ``metric``)."""
+        """Everything, curves included, with what the numbers are and how they were made at the top (``frames``, ``metric``...)."""
         out = {
-            "frames": self.frames,
-            "metric": self.metric,
-            "answered_only": self.answered_only,
+            **self.provenance.as_dict(),
             "statistics": {s: self.label(s) for s in self.statistics()},
             "definition": self.definition(),
-            "ci": {
-                "level": 0.95,
-                "method": "BCa (bias-corrected and accelerated) bootstrap over frames, resampled within each activity",
-                "resamples": self.resamples,
-                "seed": self.seed,
-            },
-            "thresholds": self.thresholds,
-            "threshold_values": threshold_values(self.thresholds).tolist(),
             "activities": self.activities,
             "rows": [self._row_dict(row) for row in self.all_rows()],
             "notes": self.notes,
@@ -243,50 +230,92 @@ class ReportFormats(_Json):
             out["comparison"] = self.comparison.as_dict()
         return out
 
+    def to_methods(self) -> str:
+        """A methods paragraph with this report's facts filled in, and the seed paper's BibTeX entry."""
+        kinds = {kind: sum(1 for r in self.rows if r.kind == kind) for kind in ("model", "baseline", "human")}
+        return self.provenance.methods(frames=self.frames_per_activity(), rows=kinds) + "\n" + BIBTEX
+
 
 class ComparisonFormats(_Json):
-    """A comparison as text (the headline, a line per activity) and JSON."""
+    """A comparison as text (the headline, a line per activity), CSV, LaTeX and JSON."""
+
+    def _lines(self) -> list[tuple[str, dict[str, Difference]]]:
+        return [*self.activities.items(), (MEAN, self.mean)]
 
     def as_dict(self) -> dict[str, Any]:
-        """The comparison; ``difference``, ``ci`` and ``p_value`` at the top are the mean MF-like statistic's."""
+        """The comparison; ``difference``, ``ci``, ``p_value`` and ``p_text`` at the top are the mean MF-like statistic's.
+
+        The provenance's bootstrap (the report's ``ci``) is ``bootstrap`` here: ``ci`` is the difference's interval.
+        """
         head = self.headline()
+        facts = self.provenance.as_dict()
+        facts["bootstrap"] = facts.pop("ci")
         return {
+            **facts,
             "frames": "shared by the two rows",
-            "metric": self.metric,
             "a": {"key": self.a[0], "name": self.a[1]},
             "b": {"key": self.b[0], "name": self.b[1]},
             "statistic": "max_f",
             "column": MEAN,
-            "difference": head.value,
-            "ci": None if head.ci is None else list(head.ci),
-            "p_value": head.p_value,
-            "n_frames": head.n_frames,
+            **_difference_dict(head, self.p_text(head)),
             "test": "paired BCa bootstrap over the shared frames, resampled within each activity (two-sided)",
-            "resamples": self.resamples,
-            "seed": self.seed,
-            "mean": {s: _difference_dict(d) for s, d in self.mean.items()},
-            "activities": {a: {s: _difference_dict(d) for s, d in ds.items()} for a, ds in self.activities.items()},
+            "mean": {s: _difference_dict(d, self.p_text(d)) for s, d in self.mean.items()},
+            "activities": {a: {s: _difference_dict(d, self.p_text(d)) for s, d in ds.items()} for a, ds in self.activities.items()},
             "definition": definition(self.metric),
         }
 
     def to_text(self) -> str:
-        """The comparison as lines: the headline, then a line per activity and the mean."""
+        """The comparison as lines: the headline, then a line per activity and the mean, then the provenance."""
         labels = STATISTIC_LABELS[self.metric]
         head = self.headline()
         lines = [
             f"{self.a[1]} [{self.a[0]}] minus {self.b[1]} [{self.b[0]}], on the frames both have ({self.metric} convention).",
-            f"{labels['max_f']} difference (mean over activities) {head.value:+.3f} {_signed(head.ci)} p = {_p(head.p_value)} ({head.n_frames} frames).",
-            f"Paired BCa bootstrap over frames within each activity, {self.resamples} resamples, seed {self.seed}; p two-sided.",
+            f"{labels['max_f']} difference (mean over activities) {head.value:+.3f} {_signed(head.ci)} p {_p_equals(self.p_text(head))} ({head.n_frames} frames).",
+            *(f"{label}: {text}." for label, text in self.provenance.facts()),
             "",
         ]
         header = f"{'activity':<20}{'n':>6}"
         for s in self.statistics:
-            header += f"  {labels[s] + ' diff':>12}  {'95% CI':<18}{'p':>6}"
+            header += f"  {labels[s] + ' diff':>12}  {'95% CI':<18}{'p':>8}"
         lines.append(header)
-        for name, ds in [*self.activities.items(), (MEAN, self.mean)]:
+        for name, ds in self._lines():
             text = f"{name:<20}{next(iter(ds.values())).n_frames:>6}"
             for s in self.statistics:
                 d = ds[s]
-                text += f"  {d.value:>+12.3f}  {_signed(d.ci):<18}{_p(d.p_value):>6}"
+                text += f"  {d.value:>+12.3f}  {_signed(d.ci):<18}{self.p_text(d):>8}"
             lines.append(text.rstrip())
         return "\n".join(lines) + "\n"
+
+    def to_csv(self) -> str:
+        """One line per activity, the mean last, and statistic: n, the difference, its interval, p; then the provenance."""
+        facts = self.provenance.columns()
+        header = ["a", "b", "metric", "activity", "frames", "statistic", "difference", "lo", "hi", "p", *facts]
+        lines = [
+            [self.a[0], self.b[0], self.metric, name, d.n_frames, STATISTIC_LABELS[self.metric][s], _num(d.value),
+             _num(d.ci and d.ci[0]), _num(d.ci and d.ci[1]), self.p_text(d), *facts.values()]
+            for name, ds in self._lines() for s, d in ds.items()
+        ]  # fmt: skip
+        return csv_text(lines, header=header)
+
+    def to_latex(self) -> str:
+        """A booktabs tabular: a line per activity and the mean, each statistic's difference, interval and p."""
+        labels = STATISTIC_LABELS[self.metric]
+        lines = [f"% {tex(self.a[1])} [{tex(self.a[0])}] minus {tex(self.b[1])} [{tex(self.b[0])}], on the frames both have."]
+        lines += [f"% {tex(label)}: {tex(text)}." for label, text in self.provenance.facts()]
+        lines += [
+            "\\begin{tabular}{lr" + "ccc" * len(self.statistics) + "}",
+            "\\toprule",
+            " & ".join(["Activity", "$n$", *(f"{tex(labels[s])} diff. & 95\\% CI & $p$" for s in self.statistics)]) + " \\\\",
+            "\\midrule",
+        ]
+        for name, ds in self._lines():
+            # "< 0.001" in math mode: a bare < is another glyph in LaTeX's default font encoding.
+            cells = [f"{ds[s].value:+.3f} & {_signed(ds[s].ci)} & ${self.p_text(ds[s])}$" for s in self.statistics]
+            lines.append(" & ".join([tex(name), str(next(iter(ds.values())).n_frames), *cells]) + " \\\\")
+        lines += ["\\bottomrule", "\\end{tabular}"]
+        return "\n".join(lines) + "\n"
+
+
+def _p_equals(text: str) -> str:
+    """``"= 0.012"`` or ``"< 0.001"``: a p-value after its letter."""
+    return text if text.startswith("<") else f"= {text}"

@@ -1,11 +1,14 @@
-"""Per-image scores: every frame of one activity with each row's own best F and AP on it.
+"""Per-frame scores: every frame of one activity with each row's own best F and AP on it.
 
 Read from the same cached per-frame counts as the table
 (``report.load_sources``); each frame's scores are
 ``egonet.metrics.frame_scores``: its own precision-recall curve, its best F
-(at its own best threshold) and its AP. With ``frames="shared"`` the frames
-are those every row has in the activity, as in the table; with ``"each"``
-every frame some row has, blank where a row has not got it.
+(at its own best threshold) and its AP, the numbers the ``ois-mean``
+convention averages. A frame without action-object pixels scores as the
+``empty`` policy says (none under ``leave-out``: it is marked, not scored).
+With ``frames="shared"`` the frames are those every row has in the
+activity, as in the table; with ``"each"`` every frame some row has, blank
+where a row has not got it.
 """
 
 from __future__ import annotations
@@ -23,22 +26,28 @@ from app.services.scoring.report import load_sources
 from app.services.scoring.rows import ScoringProblem
 from app.services.scoring.cells import HUMAN
 from app.spreadsheet import csv_text
-from egonet.metrics import DEFAULT_THRESHOLDS, frame_scores, threshold_values
+from egonet.metrics import DEFAULT_EMPTY, DEFAULT_THRESHOLDS, frame_scores, threshold_values
+from egonet.metrics.frames import check_empty
 
 
 @dataclass(frozen=True)
 class FrameLine:
-    """One frame: its id, where it is, and each row's (best F, its threshold, AP) on it (None: the row has not got it)."""
+    """One frame: its id, where it is, and each row's (best F, its threshold, AP) on it (None: the row has not got it).
+
+    A frame without action-object pixels (``no_truth``) left out by the
+    ``leave-out`` policy has ``(None, None, None)``.
+    """
 
     frame_id: int
     label: str
-    scores: dict[str, tuple[float, float, float | None] | None]
+    scores: dict[str, tuple[float | None, float | None, float | None] | None]
     answered: dict[str, bool] = field(default_factory=dict)  # people: False for an unanswered trial
+    no_truth: bool = False
 
 
 @dataclass
 class FrameTable:
-    """The per-image scores of one activity, rows as in the table (a group's runs each on their own)."""
+    """The per-frame scores of one activity, rows as in the table (a group's runs each on their own)."""
 
     activity: str | None
     activities: list[str]
@@ -46,20 +55,25 @@ class FrameTable:
     lines: list[FrameLine]
     frames: str = "shared"
     sort: str | None = None
+    empty: str = DEFAULT_EMPTY
 
     def to_csv(self) -> str:
-        """One line per frame: its id and label, then each row's best F, threshold and AP."""
-        header = ["frame_id", "frame", "activity"]
+        """One line per frame: its id and label, whether it has action-object pixels, then each row's best F, threshold and AP."""
+        header = ["frame_id", "frame", "activity", "action-object pixels", "empty frames policy"]
         for key, _, _ in self.rows:
             header += [f"{key} best F", f"{key} threshold", f"{key} AP"]
-        table = []
+        lines = []
         for line in self.lines:
-            values: list[object] = [line.frame_id, line.label, self.activity]
+            values: list[object] = [line.frame_id, line.label, self.activity, int(not line.no_truth), self.empty]
             for key, _, _ in self.rows:
-                got = line.scores.get(key)
-                values += ["", "", ""] if got is None else [f"{got[0]:.4f}", f"{got[1]:.2f}", "" if got[2] is None else f"{got[2]:.4f}"]
-            table.append(values)
-        return csv_text(table, header)
+                got = line.scores.get(key) or (None, None, None)
+                values += [_fixed(got[0], 4), _fixed(got[1], 2), _fixed(got[2], 4)]
+            lines.append(values)
+        return csv_text(lines, header=header)
+
+
+def _fixed(value: float | None, digits: int) -> str:
+    return "" if value is None else f"{value:.{digits}f}"
 
 
 def frame_table(
@@ -72,6 +86,7 @@ def frame_table(
     answered_only: bool = False,
     sort: str | None = None,
     thresholds: int = DEFAULT_THRESHOLDS,
+    empty: str = DEFAULT_EMPTY,
 ) -> FrameTable:
     """Every frame of one activity with each chosen row's own scores on it.
 
@@ -81,12 +96,16 @@ def frame_table(
         frames: ``"shared"`` or ``"each"`` (see the module).
         sort: A row key: frames by that row's best F, lowest first (where a
             model fails); None: by frame id.
+        empty: How a frame without action-object pixels scores (``egonet.metrics.EMPTY_POLICIES``).
 
     Raises:
         ScoringProblem: naming ``activity``, ``frames`` or ``sort``, or as ``build_report``.
+        EgonetError: naming ``empty`` (a 400 like the others).
     """
     if frames not in ("shared", "each"):
         raise ScoringProblem(f"frames must be shared or each, got {frames!r}", field="frames")
+    check_empty(empty)
+
     found, _ = load_sources(
         run_ids=run_ids, study_ids=study_ids, baselines=baselines, thresholds=thresholds, answered_only=answered_only
     )
@@ -102,15 +121,18 @@ def frame_table(
     combine = np.intersect1d if frames == "shared" else np.union1d
     ids = reduce(combine, [f for _, f in having]) if having else np.zeros(0, np.int64)
     t = threshold_values(thresholds)
-    scores: dict[str, dict[int, tuple[float, float, float | None]]] = {}
+    scores: dict[str, dict[int, tuple[float | None, float | None, float | None]]] = {}
     answered: dict[str, dict[int, bool]] = {}
+    no_truth: set[int] = set()
     for source, own in having:
         mine = np.intersect1d(ids, own)
-        own_scores = frame_scores(source.stats.select(mine))
+        counts = source.stats.select(mine)
+        own_scores = frame_scores(counts, empty=empty)
+        no_truth |= set(mine[counts.positives == 0].tolist())
         human = source.kind == HUMAN
         scores[source.key] = {
-            int(fid): (float(f), float(t[b]), None if human else float(ap))
-            for fid, f, b, ap in zip(mine, own_scores["max_f"], own_scores["best"], own_scores["ap"], strict=True)
+            int(fid): (float(f), float(t[b]), None if human else float(ap)) if kept else (None, None, None)
+            for fid, f, b, ap, kept in zip(mine, own_scores["max_f"], own_scores["best"], own_scores["ap"], own_scores["counted"], strict=True)
         }
         if human:
             flags = source.stats.answered[np.searchsorted(source.stats.ids, mine)]
@@ -122,13 +144,15 @@ def frame_table(
             labels.get(fid, f"frame {fid}"),
             {key: s.get(fid) for key, s in scores.items()},
             {key: a[fid] for key, a in answered.items() if fid in a},
+            fid in no_truth,
         )
         for fid in ids.tolist()
     ]
     if sort is not None:
-        lines.sort(key=lambda line: (line.scores.get(sort) is None, (line.scores.get(sort) or (0.0,))[0], line.frame_id))
+        best_f = {line.frame_id: (line.scores.get(sort) or (None,))[0] for line in lines}
+        lines.sort(key=lambda line: (best_f[line.frame_id] is None, best_f[line.frame_id] or 0.0, line.frame_id))
     rows = [(s.key, s.name, s.kind) for s, _ in having]
-    return FrameTable(activity, activities, rows, lines, frames=frames, sort=sort)
+    return FrameTable(activity, activities, rows, lines, frames=frames, sort=sort, empty=empty)
 
 
 def _labels(frame_ids: list[int]) -> dict[int, str]:

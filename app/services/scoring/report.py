@@ -6,7 +6,7 @@ statistics are read back from ``cache`` or scored by ``sources`` and written
 there, then ``rows`` reduces them to the rows of a
 :class:`~app.services.scoring.table.Report` under the chosen convention,
 frames and resamples. :func:`load_sources` is the first half alone (the
-per-image page uses it).
+per-frame page uses it).
 
 A new kind of row registers in :func:`_jobs`: a function that returns
 :class:`_Job` objects (their rows, cache key and how to score them).
@@ -30,12 +30,25 @@ from app.models.training import Prediction, TrainingRun
 from app.services import studies as studies_service
 from app.services import training
 from app.services.scoring import cache, sources
-from app.services.scoring.rows import Scorer, ScoringProblem, Source, build_rows, compare
-from app.services.scoring.sources import AOP_SIZE, BASELINE_NAMES, CENTER_SIGMA, SALIENCY, Scored, Truth
 from app.services.scoring.cells import BASELINE, FRAMES, HUMAN, MODEL
+from app.services.scoring.provenance import HumanMaps, Provenance
+from app.services.scoring.rows import Scorer, ScoringProblem, Source, build_rows, compare, frames_without_truth, without_frames_without_truth
+from app.services.scoring.sources import AOP_SIZE, BASELINE_NAMES, CENTER_SIGMA, SALIENCY, Scored, Truth
 from app.services.scoring.table import Report
-from egonet.metrics import DEFAULT_RESAMPLES, DEFAULT_THRESHOLDS, METRICS, Resampler, threshold_values
-from egonet.metrics.bootstrap import MAX_RESAMPLES
+from app.version import code_version
+from egonet.clicks import DEFAULT_SIGMA, METHOD_OPTIONS, SUPERPIXEL_DEFAULTS
+from egonet.errors import EgonetError
+from egonet.metrics import (
+    DEFAULT_EMPTY,
+    DEFAULT_RESAMPLES,
+    DEFAULT_THRESHOLDS,
+    MAX_RESAMPLES,
+    PER_FRAME_MEANS,
+    Resampler,
+    resolve_metric,
+    threshold_values,
+)
+from egonet.metrics.frames import check_empty
 
 __all__ = ["ScoringProblem", "available_runs", "available_studies", "build_report", "load_sources"]
 
@@ -293,15 +306,20 @@ def load_sources(
     return out, notes
 
 
-def _check_view(metric: str, frames: str, resamples: int, seed: int) -> None:
-    if metric not in METRICS:
-        raise ScoringProblem(f"metric must be one of {', '.join(METRICS)}, got {metric!r}", field="metric")
+def _check_view(metric: str, frames: str, empty: str, resamples: int, seed: int) -> tuple[str, list[str]]:
+    """The convention's name (an old one resolved) and the notes that say so."""
+    try:
+        metric, deprecated = resolve_metric(metric)
+        check_empty(empty)
+    except EgonetError as exc:
+        raise ScoringProblem(exc.message, field=exc.field) from None
     if frames not in FRAMES:
         raise ScoringProblem(f"frames must be one of {', '.join(FRAMES)}, got {frames!r}", field="frames")
     if isinstance(resamples, bool) or not isinstance(resamples, int) or not 0 <= resamples <= MAX_RESAMPLES:
         raise ScoringProblem(f"resamples must be a whole number from 0 to {MAX_RESAMPLES}", field="resamples")
     if isinstance(seed, bool) or not isinstance(seed, int) or seed < 0:
         raise ScoringProblem("seed must be a whole number >= 0", field="seed")
+    return metric, [f"{deprecated}."] if deprecated else []
 
 
 def build_report(
@@ -312,6 +330,7 @@ def build_report(
     thresholds: int = DEFAULT_THRESHOLDS,
     metric: str = "pooled",
     frames: str = "shared",
+    empty: str = DEFAULT_EMPTY,
     answered_only: bool = False,
     resamples: int = DEFAULT_RESAMPLES,
     seed: int = 0,
@@ -329,10 +348,13 @@ def build_report(
         study_ids: Studies whose participants to include; None for all.
         baselines: Include AOP, the centre prior, saliency, GBVS and the handled + viewed object.
         thresholds: The number T of thresholds ``k / (T + 1)``.
-        metric: The convention: ``"pooled"``, ``"per-image"`` or ``"ods-ois"``
-            (``egonet.metrics.frames``).
+        metric: The convention: ``"pooled"``, ``"ois-mean"``,
+            ``"mean-curve"`` or ``"ods-ois"`` (``egonet.metrics.frames``;
+            ``"per-image"``, the old name of ``"ois-mean"``, adds a note).
         frames: ``"shared"``: score each activity on the frames every row
             there has; ``"each"``: every row on all its frames.
+        empty: How the per-frame means count a frame without action-object
+            pixels: ``"leave-out"`` (default), ``"zero"`` or ``"one-if-empty"``.
         answered_only: Leave out participants' unanswered trials (by default
             each counts as an empty map).
         resamples: Bootstrap resamples for the 95 % intervals (0: none).
@@ -348,34 +370,59 @@ def build_report(
         on_progress: Called with the number of frames just scored.
 
     Returns:
-        The :class:`Report`.
+        The :class:`Report`, its ``provenance`` filled in.
 
     Raises:
         ScoringProblem: naming ``runs``, ``studies``, ``thresholds``,
-            ``metric``, ``frames``, ``resamples``, ``seed`` or ``compare``.
+            ``metric``, ``frames``, ``empty``, ``resamples``, ``seed`` or ``compare``.
 
     Example::
 
-        report = build_report(run_ids=[3], study_ids=[1], metric="per-image")
+        report = build_report(run_ids=[3], study_ids=[1], metric="ois-mean")
         print(report.to_table())
     """
-    _check_view(metric, frames, resamples, seed)
-    found, notes = load_sources(
+    metric, notes = _check_view(metric, frames, empty, resamples, seed)
+    found, loaded = load_sources(
         run_ids=run_ids, study_ids=study_ids, baselines=baselines, thresholds=thresholds, answered_only=answered_only,
         exclude_failed_checks=exclude_failed_checks, by_condition=by_condition, use_cache=use_cache,
         on_start=on_start, on_progress=on_progress,
     )
-    return _scored(found, notes, thresholds=thresholds, metric=metric, frames=frames, answered_only=answered_only,
-                   resamples=resamples, seed=seed, compare_keys=compare_keys)
-
-
-def _scored(found: list[Source], notes: list[str], *, thresholds: int, metric: str, frames: str, answered_only: bool,
-            resamples: int, seed: int, compare_keys: tuple[str, str] | None) -> Report:
-    """The loaded sources as the report's rows, under the convention and frame choice, with the comparison asked for."""
-    scorer = Scorer(metric, Resampler(resamples=resamples, seed=seed))
-    rows, activities, frame_notes = build_rows(found, frames=frames, scorer=scorer)
-    comparison = compare(found, *compare_keys, scorer=scorer) if compare_keys else None
-    return Report(
-        activities=activities, rows=rows, thresholds=thresholds, metric=metric, frames=frames, answered_only=answered_only,
-        resamples=resamples, seed=seed, notes=frame_notes + notes, comparison=comparison,
+    provenance = Provenance(
+        metric=metric, thresholds=thresholds, frames=frames, empty=empty, empty_frames=frames_without_truth(found),
+        answered_only=answered_only, resamples=resamples, seed=seed, human_maps=_human_maps(found), code_version=code_version(),
     )
+    return _scored(found, notes + loaded, provenance, compare_keys=compare_keys)
+
+
+def _scored(found: list[Source], notes: list[str], provenance: Provenance, *, compare_keys: tuple[str, str] | None) -> Report:
+    """The loaded sources as the report's rows, under the provenance's convention and frames, with the comparison asked for."""
+    if provenance.metric in PER_FRAME_MEANS and provenance.empty == "leave-out":
+        found, left = without_frames_without_truth(found)
+        notes = notes + left
+    scorer = Scorer(provenance.metric, Resampler(resamples=provenance.resamples, seed=provenance.seed), provenance.empty)
+    rows, activities, frame_notes = build_rows(found, frames=provenance.frames, scorer=scorer)
+    comparison = compare(found, *compare_keys, scorer=scorer, provenance=provenance) if compare_keys else None
+    return Report(activities=activities, rows=rows, provenance=provenance, notes=frame_notes + notes, comparison=comparison)
+
+
+def _human_maps(found: list[Source]) -> tuple[HumanMaps, ...]:
+    """How each study with a human row made its participants' maps: regions and click width."""
+    people = [int(s.key.split(":", 1)[1]) for s in found if s.kind == HUMAN]
+    if not people:
+        return ()
+    chosen = db.session.execute(
+        db.select(Study).where(Study.id.in_(db.select(Participant.study_id).where(Participant.id.in_(people)))).order_by(Study.id)
+    ).scalars()
+    return tuple(HumanMaps(f'study {s.id} "{s.name}"', _regions(s.superpixels or {}), _sigma(s)) for s in chosen)
+
+
+def _regions(settings: dict[str, Any]) -> str:
+    method = settings.get("method", SUPERPIXEL_DEFAULTS.method)
+    options = ", ".join(f"{k} {settings.get(k, getattr(SUPERPIXEL_DEFAULTS, k))}" for k in METHOD_OPTIONS.get(method, ()))
+    return f"{method} regions ({options}), mean of the Gaussian over each region"
+
+
+def _sigma(study: Study) -> str:
+    if study.sigma_scaled:
+        return f"click Gaussians of sigma {DEFAULT_SIGMA:g} px at {studies_service.REFERENCE_WIDTH} px wide, scaled to each frame's width ({study.sigma_px:g} px on the widest)"
+    return f"click Gaussians of sigma {study.sigma_px:g} px at the frames' native resolution"

@@ -15,13 +15,18 @@
   the mean over activities and the pooled ``all`` reuse those resamples.
 * **Comparisons.** Two rows on the frames both have, with the same
   resamples: the paired differences, their intervals and p-values.
+* **Frames without action-object pixels** are counted per activity
+  (:func:`frames_without_truth`); when a per-frame mean leaves them out
+  they are taken out of every source first (:func:`without_frames_without_truth`),
+  so the n of each cell, the shared frames and the resamples are those of
+  the frames averaged.
 """
 
 from __future__ import annotations
 
 import hashlib
 from collections.abc import Sequence
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 from functools import reduce
 
 import numpy as np
@@ -29,8 +34,9 @@ import numpy as np
 from app.errors import Problem
 from app.services.scoring.cache import FrameStats
 from app.services.scoring.cells import ALL, HUMAN, STATISTIC_LABELS, Cell, Curve, Difference, Row
+from app.services.scoring.provenance import Provenance
 from app.services.scoring.table import Comparison
-from egonet.metrics import Estimate, FrameCounts, Resampler, curve_from_counts, f_scores, reduce_sums, weighted_sums
+from egonet.metrics import DEFAULT_EMPTY, Estimate, FrameCounts, Resampler, curve_from_counts, f_scores, reduce_sums, weighted_sums
 
 Values = dict[str, Estimate]
 """Each statistic's estimate: on the frames, on each resample, with each jackknife group left out."""
@@ -63,6 +69,30 @@ class Source:
     signature: str | None = None
     label: str = ""
     seed: int | None = None
+
+
+def frames_without_truth(sources: Sequence[Source]) -> dict[str, int]:
+    """Per activity (every activity a source has), how many distinct frames of the sources have no action-object pixel."""
+    found: dict[str, set[int]] = {}
+    for source in sources:
+        none = source.stats.counts.positives == 0
+        for activity in np.unique(source.stats.activities).tolist():
+            found.setdefault(activity, set())
+        for fid, activity in zip(source.stats.ids[none].tolist(), source.stats.activities[none].tolist(), strict=True):
+            found[activity].add(fid)
+    return {a: len(ids) for a, ids in sorted(found.items())}
+
+
+def without_frames_without_truth(sources: Sequence[Source]) -> tuple[list[Source], list[str]]:
+    """The sources without their frames that have no action-object pixel, and notes for the sources left with none."""
+    kept, notes = [], []
+    for source in sources:
+        some = source.stats.counts.positives > 0
+        if some.any():
+            kept.append(replace(source, stats=source.stats.take(some)))
+        else:
+            notes.append(f"{source.name}: none of its frames has action-object pixels; all are left out.")
+    return kept, notes
 
 
 @dataclass
@@ -125,6 +155,7 @@ class Scorer:
 
     metric: str
     resampler: Resampler
+    empty: str = DEFAULT_EMPTY
     _scored: dict[tuple[str, str], dict[str, Values]] = field(default_factory=dict, repr=False)
 
     @property
@@ -156,19 +187,19 @@ class Scorer:
         """
         thresholds, b = member.stats.counts.thresholds, self.resampler.resamples
         sums = {
-            a: weighted_sums(member.stats.select(ids), metric=self.metric, weights=self.resampler.weights(a, ids.size), resampled_in_float32=True)
+            a: weighted_sums(member.stats.select(ids), metric=self.metric, weights=self.resampler.weights(a, ids.size),
+                             empty=self.empty, resampled_in_float32=True)
             for a, ids in chosen.items()
-        }
+        }  # fmt: skip
         out: dict[str, Values] = {}
-        for a, (s, n) in sums.items():
-            reduced = reduce_sums(s, n, metric=self.metric, thresholds=thresholds, resampled_in_float32=True)
+        for a, s in sums.items():
+            reduced = reduce_sums(s, metric=self.metric, thresholds=thresholds, resampled_in_float32=True)
             out[a] = {k: self.resampler.estimate(v) for k, v in reduced.items()}
         if sums:
-            head = [sum(parts[i][: 1 + b] for parts in sums.values()) for i in (0, 1)]
-            jack = [[head[i][0] - parts[i][0] + parts[i][1 + b :] for parts in sums.values()] for i in (0, 1)]
-            reduced = reduce_sums(np.vstack([head[0], *jack[0]]), np.concatenate([head[1], *jack[1]]), metric=self.metric,
-                                  thresholds=thresholds, resampled_in_float32=True)  # fmt: skip
-            splits = np.cumsum([1 + b] + [len(j) for j in jack[1]])[:-1]
+            head = sum(part[: 1 + b] for part in sums.values())
+            jack = [head[0] - part[0] + part[1 + b :] for part in sums.values()]
+            reduced = reduce_sums(np.vstack([head, *jack]), metric=self.metric, thresholds=thresholds, resampled_in_float32=True)
+            splits = np.cumsum([1 + b] + [len(j) for j in jack])[:-1]
             out[ALL] = {}
             for k, v in reduced.items():
                 parts = np.split(v, splits)
@@ -305,7 +336,7 @@ def build_rows(sources: Sequence[Source], *, frames: str, scorer: Scorer) -> tup
     return rows, activities, notes
 
 
-def compare(sources: Sequence[Source], key_a: str, key_b: str, *, scorer: Scorer) -> Comparison:
+def compare(sources: Sequence[Source], key_a: str, key_b: str, *, scorer: Scorer, provenance: Provenance) -> Comparison:
     """Row ``key_a`` minus row ``key_b`` on the frames both have, per activity and for the mean over activities.
 
     Raises:
@@ -341,10 +372,8 @@ def compare(sources: Sequence[Source], key_a: str, key_b: str, *, scorer: Scorer
     return Comparison(
         a=(a.key, a.name),
         b=(b.key, b.name),
-        metric=scorer.metric,
         statistics=tuple(statistics),
         activities={act: {s: summary(d[s], int(shared[act].size)) for s in statistics} for act, d in differences.items()},
         mean={s: summary(Estimate.stratified_mean([d[s] for d in differences.values()]), n_all) for s in statistics},
-        resamples=scorer.resampler.resamples,
-        seed=scorer.resampler.seed,
+        provenance=replace(provenance, paired=True),
     )

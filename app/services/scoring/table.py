@@ -1,9 +1,10 @@
 """The score table itself: the report and a paired comparison.
 
 :class:`Report` holds the rows (models, baselines, people) by activity
-columns and their mean, under one metric convention and one frame choice;
-its renderers (``formats``) write it as plain text, CSV, LaTeX or JSON.
-Nothing here reads the database: ``report`` fills it.
+columns and their mean, and the :class:`~app.services.scoring.provenance.Provenance`
+of its numbers (convention, frames, bootstrap, code version...); its
+renderers (``formats``) write both as plain text, CSV, LaTeX, JSON or a
+methods paragraph. Nothing here reads the database: ``report`` fills it.
 """
 
 from __future__ import annotations
@@ -11,9 +12,9 @@ from __future__ import annotations
 from collections import defaultdict
 from dataclasses import dataclass, field
 
-from app.services.scoring.cells import BASELINE, FRAMES, HUMAN, KIND_TITLES, MEAN, METRIC_TITLES, MODEL, PALETTE, STATISTIC_LABELS, Cell, Difference, Row, definition
+from app.services.scoring.cells import BASELINE, HUMAN, KIND_TITLES, MEAN, MODEL, PALETTE, STATISTIC_LABELS, Cell, Difference, Row, definition
 from app.services.scoring.formats import ComparisonFormats, ReportFormats
-from egonet.metrics import DEFAULT_RESAMPLES, DEFAULT_THRESHOLDS
+from app.services.scoring.provenance import Provenance
 
 
 @dataclass
@@ -22,12 +23,18 @@ class Comparison(ComparisonFormats):
 
     a: tuple[str, str]  # (key, name)
     b: tuple[str, str]
-    metric: str
     statistics: tuple[str, ...]
     activities: dict[str, dict[str, Difference]]
     mean: dict[str, Difference]
-    resamples: int = DEFAULT_RESAMPLES
-    seed: int = 0
+    provenance: Provenance = field(default_factory=lambda: Provenance(paired=True))
+
+    @property
+    def metric(self) -> str:
+        return self.provenance.metric
+
+    def p_text(self, difference: Difference) -> str:
+        """The difference's p-value as written everywhere (``"< 0.001"`` at the floor)."""
+        return self.provenance.p_text(difference.p_value)
 
     def headline(self) -> Difference | None:
         """The difference of the mean MF-like statistic (``max_f``), the comparison's first line."""
@@ -41,27 +48,26 @@ class Report(ReportFormats):
     Attributes:
         activities: Column names, the activities any row has frames in.
         rows: In table order: models, baselines, people (seed groups hold their runs).
-        thresholds: The number T of thresholds ``k / (T + 1)``.
-        metric: The convention: ``pooled``, ``per-image`` or ``ods-ois``.
-        frames: ``shared`` (each activity's frames all rows have) or ``each``.
-        answered_only: Whether participants' unanswered trials were left out
-            (else they count as empty maps).
-        resamples: Bootstrap resamples behind the intervals (0: none).
-        seed: The bootstrap's seed.
+        provenance: How the numbers were made: the convention
+            (``pooled``, ``ois-mean``, ``mean-curve`` or ``ods-ois``), the
+            thresholds, the frames, the bootstrap, the code version...
         notes: Things a reader should know (frames left out, rows without frames).
         comparison: A paired comparison of two rows, when one was asked for.
     """
 
     activities: list[str]
     rows: list[Row]
-    thresholds: int = DEFAULT_THRESHOLDS
-    metric: str = "pooled"
-    frames: str = "shared"
-    answered_only: bool = False
-    resamples: int = DEFAULT_RESAMPLES
-    seed: int = 0
+    provenance: Provenance = field(default_factory=Provenance)
     notes: list[str] = field(default_factory=list)
     comparison: Comparison | None = None
+
+    @property
+    def metric(self) -> str:
+        return self.provenance.metric
+
+    @property
+    def thresholds(self) -> int:
+        return self.provenance.thresholds
 
     def statistics(self) -> list[str]:
         """The convention's statistics, in the order they are shown (MF-like first)."""
@@ -142,15 +148,9 @@ class Report(ReportFormats):
         return definition(self.metric)
 
     def describe(self) -> list[str]:
-        """Three lines that say what the numbers are: convention, frames, intervals."""
-        people = "answered trials only" if self.answered_only else "a trial without an answer counts as an empty map"
-        ci = (
-            f"95% CI: BCa bootstrap over frames within each activity, {self.resamples} resamples, seed {self.seed}"
-            if self.resamples
-            else "no confidence intervals (0 resamples)"
-        )
-        return [
-            f"Metric: {self.metric} - {METRIC_TITLES[self.metric]}; {self.thresholds} thresholds k/{self.thresholds + 1}.",
-            f"Frames: {self.frames} - {FRAMES[self.frames]}; people: {people}.",
-            f"{ci}.",
-        ]
+        """What the numbers are, a ``Label: sentence.`` line per fact (convention, frames, intervals, empty frames, people's maps, code)."""
+        return [f"{label}: {text}." for label, text in self.provenance.facts()]
+
+    def frames_per_activity(self) -> dict[str, int]:
+        """Frames scored in each activity: the most any top-level row has there."""
+        return {a: max((c.n_frames for r in self.rows if (c := r.cells.get(a)) is not None), default=0) for a in self.activities}

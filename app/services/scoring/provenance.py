@@ -1,0 +1,234 @@
+"""How a score report was made: the facts every format carries, the methods paragraph, the citation.
+
+A :class:`Provenance` holds the settings behind a report's numbers (the
+convention, the threshold grid, the frames, the policy for frames without
+action-object pixels and how many there were, the bootstrap, whether the
+test is paired, how people's clicks became maps, the code version). Every
+renderer writes it: text and LaTeX as ``Label: sentence`` lines
+(:meth:`Provenance.facts`), the CSV as columns repeated on every line
+(:meth:`Provenance.columns`), JSON at the top (:meth:`Provenance.as_dict`)
+and the page above the tables. :meth:`Provenance.methods` fills a methods
+paragraph with the same facts; :data:`BIBTEX` cites the seed paper (the
+facts are those of ``shared/seed/`` and ``shared/docs/egonet-reference.md``).
+
+:func:`p_text` is the one way a p-value is written: with B resamples none is
+below ``1 / (B + 1)``, and one at that floor is written ``< 0.001`` (the
+floor rounded up to one significant figure), never as a number.
+"""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Mapping, Sequence
+from dataclasses import dataclass, field
+from typing import Any
+
+from app.services.scoring.cells import FRAMES, METRIC_TITLES
+from egonet.metrics import DEFAULT_EMPTY, DEFAULT_RESAMPLES, DEFAULT_THRESHOLDS, PER_FRAME_MEANS, p_floor, threshold_values
+
+CI_METHOD = "BCa (bias-corrected and accelerated) bootstrap over frames, resampled within each activity"
+CI_LEVEL = 0.95
+
+EMPTY_TITLES = {
+    "leave-out": "left out of the per-frame means (our choice: the paper does not say)",
+    "zero": "each scores 0 whatever the map",
+    "one-if-empty": "each scores 1 at the thresholds where the map predicts nothing, else 0",
+}
+"""What each policy for frames without action-object pixels does (``egonet.metrics.EMPTY_POLICIES``)."""
+
+BIBTEX = """@inproceedings{bertasius2017egonet,
+  author    = {Gedas Bertasius and Hyun Soo Park and Stella X. Yu and Jianbo Shi},
+  title     = {First-Person Action-Object Detection with {EgoNet}},
+  booktitle = {Robotics: Science and Systems (RSS)},
+  year      = {2017}
+}
+"""
+"""The seed paper: title and authors from its source in ``shared/seed/``, venue and year from the reference doc."""
+
+
+def p_text(p: float | None, resamples: int) -> str:
+    """A p-value as every format writes it: ``"0.012"``, ``"< 0.001"`` at the floor ``1 / (B + 1)``, ``"-"`` without one.
+
+    Example:
+        >>> p_text(1 / 1001, 1000), p_text(0.0123, 1000), p_text(0.5, 100)
+        ('< 0.001', '0.012', '0.500')
+    """
+    if p is None:
+        return "-"
+    floor = p_floor(resamples)
+    if p <= floor * (1 + 1e-9):
+        exponent = math.floor(math.log10(floor))
+        digit = math.ceil(round(floor / 10**exponent, 9))  # one significant figure, rounded up: 1/1001 -> 0.001
+        if digit == 10:
+            digit, exponent = 1, exponent + 1
+        return f"< {digit * 10**exponent:.{max(0, -exponent)}f}"
+    return f"{p:.3f}" if p >= 0.001 else f"{p:.2g}"
+
+
+@dataclass(frozen=True)
+class HumanMaps:
+    """How one study's clicks became soft maps: its name, the regions and the click Gaussian's width."""
+
+    study: str
+    regions: str
+    sigma: str
+
+
+@dataclass(frozen=True)
+class Provenance:
+    """The settings behind a report's numbers (see the module).
+
+    Attributes:
+        metric: The convention (``egonet.metrics.METRICS``).
+        thresholds: The number T of thresholds ``k / (T + 1)``.
+        frames: ``shared`` or ``each``.
+        empty: The policy for frames without action-object pixels.
+        empty_frames: Per activity, the frames without action-object pixels
+            among the rows' frames.
+        answered_only: Whether people's unanswered trials were left out.
+        resamples: Bootstrap resamples B (0: no intervals).
+        seed: The bootstrap's seed.
+        paired: Whether the numbers are paired differences (a comparison).
+        human_maps: For each study with rows, how its clicks became maps.
+        code_version: ``app.version.code_version()`` when the report was made.
+    """
+
+    metric: str = "pooled"
+    thresholds: int = DEFAULT_THRESHOLDS
+    frames: str = "shared"
+    empty: str = DEFAULT_EMPTY
+    empty_frames: Mapping[str, int] = field(default_factory=dict)
+    answered_only: bool = False
+    resamples: int = DEFAULT_RESAMPLES
+    seed: int = 0
+    paired: bool = False
+    human_maps: Sequence[HumanMaps] = ()
+    code_version: str = ""
+
+    def p_text(self, p: float | None) -> str:
+        return p_text(p, self.resamples)
+
+    def floor_text(self) -> str:
+        """How a p-value at the floor ``1 / (B + 1)`` is written (``"< 0.001"``)."""
+        return p_text(p_floor(self.resamples), self.resamples)
+
+    def grid(self) -> str:
+        return f"{self.thresholds} thresholds t_k = k/{self.thresholds + 1}, k = 1..{self.thresholds}, positive where p >= t_k"
+
+    def empty_text(self) -> str:
+        """How many frames had no action-object pixels, and what the convention did with them."""
+        total = sum(self.empty_frames.values())
+        where = ", ".join(f"{a} {n}" for a, n in self.empty_frames.items() if n)
+        count = f"{total} ({where})" if total else "none"
+        if self.metric in PER_FRAME_MEANS:
+            return f"{count}; policy {self.empty}: {EMPTY_TITLES[self.empty]}"
+        return f"{count}; {self.metric} counts their false positives (policy {self.empty} applies to the per-frame means only)"
+
+    def ci_text(self) -> str:
+        if not self.resamples:
+            return "none (0 resamples)"
+        text = f"{CI_METHOD}, {self.resamples} resamples, seed {self.seed}"
+        if self.paired:
+            return (f"{text}; paired: both rows on the same resamples of the frames they share; p two-sided, "
+                    f"written {self.floor_text()} at its floor 1/(B+1)")  # fmt: skip
+        return f"{text}; not paired: each cell's interval on its own frames"
+
+    def facts(self) -> list[tuple[str, str]]:
+        """``(label, sentence)`` pairs, in the order every format writes them."""
+        people = "answered trials only" if self.answered_only else "a trial without an answer counts as an empty map"
+        out = [
+            ("Metric", f"{self.metric} - {METRIC_TITLES[self.metric]}; {self.grid()}"),
+            ("Frames", f"{self.frames} - {FRAMES[self.frames]}; people: {people}"),
+            ("95% CI", self.ci_text()),
+            ("Frames without action-object pixels", self.empty_text()),
+        ]
+        out += [("People's maps", f"{m.study}: {m.regions}; {m.sigma}") for m in self.human_maps]
+        return [*out, ("Code", self.code_version or "unknown")]
+
+    def columns(self) -> dict[str, Any]:
+        """The facts as flat CSV columns (the same values on every line)."""
+        return {
+            "thresholds": self.thresholds,
+            "empty frames policy": self.empty,
+            "empty frames": sum(self.empty_frames.values()),
+            "answered only": int(self.answered_only),
+            "resamples": self.resamples,
+            "bootstrap seed": self.seed,
+            "ci": f"BCa {CI_LEVEL:.0%}" if self.resamples else "",
+            "paired": int(self.paired),
+            "people's maps": " | ".join(f"{m.study}: {m.regions}; {m.sigma}" for m in self.human_maps),
+            "code version": self.code_version,
+        }
+
+    def as_dict(self) -> dict[str, Any]:
+        """The facts for JSON; ``frames`` and ``metric`` first."""
+        return {
+            "frames": self.frames,
+            "metric": self.metric,
+            "answered_only": self.answered_only,
+            "thresholds": self.thresholds,
+            "threshold_values": threshold_values(self.thresholds).tolist(),
+            "empty_frames": {"policy": self.empty, "count": sum(self.empty_frames.values()), "by_activity": dict(self.empty_frames),
+                             "applies": self.metric in PER_FRAME_MEANS, "means": EMPTY_TITLES[self.empty]},  # fmt: skip
+            "ci": {"level": CI_LEVEL, "method": CI_METHOD, "resamples": self.resamples, "seed": self.seed, "paired": self.paired,
+                   "p_floor": p_floor(self.resamples) if self.resamples else None},  # fmt: skip
+            "human_maps": [{"study": m.study, "regions": m.regions, "sigma": m.sigma} for m in self.human_maps],
+            "code_version": self.code_version,
+        }
+
+    def methods(self, *, frames: Mapping[str, int], rows: Mapping[str, int]) -> str:
+        """A methods paragraph in plain English with the facts filled in.
+
+        Args:
+            frames: Frames scored per activity (the largest n of its cells).
+            rows: How many rows of each kind (``model``, ``baseline``, ``human``).
+        """
+        t = self.thresholds
+        n = ", ".join(f"{a} {k}" for a, k in frames.items()) or "none"
+        parts = [
+            "We score each probability map against its frame's binary action-object mask with the maximum F-score (MF) "
+            f"and average precision (AP) of Bertasius et al. (RSS 2017) [bertasius2017egonet], thresholding the map at T = {t} "
+            f"thresholds t_k = k/{t + 1} (k = 1..{t}; a pixel is positive when its probability is at least t_k; maps are "
+            "never normalised), with F = 2PR/(P+R) and AP = sum_k (R_k - R_{k+1}) P_k.",
+            f"Convention: {METRIC_TITLES[self.metric]} ({self.metric}).",
+            f"Each activity is scored on its own ({sum(frames.values())} frames: {n}) and the table reports the unweighted "
+            "mean over activities; " + ("every row of an activity is scored on the frames all its rows have."
+                                        if self.frames == "shared" else "each row is scored on all the frames it has."),
+        ]
+        parts.append(self._empty_sentence())
+        parts.append(_rows_sentence(rows))
+        parts += [f"{m.study}: each click is a Gaussian ({m.sigma}), several clicks combine by their maximum, and each "
+                  f"region ({m.regions}) takes the mean of the Gaussian over its pixels." for m in self.human_maps]  # fmt: skip
+        if self.resamples:
+            parts.append(
+                "95% confidence intervals are bias-corrected and accelerated (BCa) bootstrap intervals over frames, "
+                f"resampled within each activity, with B = {self.resamples} resamples (seed {self.seed}); paired comparisons "
+                "resample both rows' shared frames alike, and their two-sided p-values cannot go below 1/(B+1), "
+                f"reported as p {self.floor_text()}."
+            )
+        parts.append(f"Scores were computed with {self.code_version or 'EgoNet Studio'}.")
+        return " ".join(parts) + "\n"
+
+    def _empty_sentence(self) -> str:
+        count = sum(self.empty_frames.values())
+        if self.metric not in PER_FRAME_MEANS:
+            return f"Frames without action-object pixels ({count}) count through their false positives."
+        what = EMPTY_TITLES[self.empty].replace("each scores", "scored")
+        if not count:
+            return f"No scored frame is without action-object pixels (such a frame would be {what})."
+        return f"The {count} frames without action-object pixels are {what}."
+
+
+def _rows_sentence(rows: Mapping[str, int]) -> str:
+    def count(n: int, one: str, many: str) -> str:
+        return f"{n} {one if n == 1 else many}"
+
+    said = []
+    if rows.get("model"):
+        said.append(count(rows["model"], "trained model", "trained models") + " on their held-out frames")
+    if rows.get("baseline"):
+        said.append(count(rows["baseline"], "baseline", "baselines") + " on every labelled frame "
+                    "(the action-object prior fitted without the scored activity)")  # fmt: skip
+    if rows.get("human"):
+        said.append(count(rows["human"], "participant", "participants") + " of the human study on the frames of their trials (MF only)")
+    return ("Rows: " + "; ".join(said) + ".") if said else "The report has no rows."
