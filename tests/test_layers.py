@@ -22,7 +22,7 @@ LAYERS = [
     ("web", ("app.blueprints", "app.forms", "app.security")),
     ("services", ("app.services",)),
     ("data and plumbing", ("app.models", "app.extensions", "app.errors", "app.validation",
-                           "app.limits", "app.queue", "app.throttle", "app.spreadsheet")),
+                           "app.limits", "app.queue", "app.throttle", "app.spreadsheet", "app.version")),
     ("science", ("egonet",)),
 ]
 
