@@ -30,7 +30,7 @@ def pytest_collection_modifyitems(config, items):
         return
     skip = pytest.mark.skip(reason="marked slow or browser: run with --all")
     for item in items:
-        if "slow" in item.keywords or "browser" in item.keywords:
+        if item.get_closest_marker("slow") or item.get_closest_marker("browser"):
             item.add_marker(skip)
 
 
