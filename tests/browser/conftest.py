@@ -23,6 +23,7 @@ import pytest
 from flask_migrate import upgrade
 from werkzeug.serving import make_server
 
+from app.extensions import db
 from tests.app.conftest import make_app
 
 CHROMIUM_ARGS = [
@@ -69,12 +70,21 @@ def no_csp_violations():
     assert not csp_violations, "Content Security Policy violations:\n" + "\n".join(csp_violations)
 
 
-@pytest.fixture
-def live_app(tmp_path):
-    app = make_app(f"sqlite:///{tmp_path / 'live.sqlite3'}", tmp_path)
+@pytest.fixture(scope="session")
+def migrated_sqlite(tmp_path_factory) -> Path:
+    """An empty SQLite database, migrated once a session: each live app starts on a copy."""
+    folder = tmp_path_factory.mktemp("migrated")
+    app = make_app(f"sqlite:///{folder / 'live.sqlite3'}", folder)
     with app.app_context():
         upgrade()
-    return app
+        db.engine.dispose()
+    return folder / "live.sqlite3"
+
+
+@pytest.fixture
+def live_app(tmp_path, migrated_sqlite):
+    shutil.copyfile(migrated_sqlite, tmp_path / "live.sqlite3")
+    return make_app(f"sqlite:///{tmp_path / 'live.sqlite3'}", tmp_path)
 
 
 @pytest.fixture
