@@ -24,7 +24,7 @@ from flask_migrate import upgrade
 from werkzeug.serving import make_server
 
 from app.extensions import db
-from tests.app.conftest import make_app
+from tests.app.conftest import demo_frames_rendered_once, make_app  # noqa: F401 (autouse here too)
 
 CHROMIUM_ARGS = [
     "--no-sandbox",
