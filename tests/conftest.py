@@ -4,6 +4,7 @@ Slow and browser tests carry markers and are skipped unless ``--all`` is
 given (the README's test command and ``.ci/run`` give it).
 """
 
+import functools
 import os
 
 import pytest
@@ -30,8 +31,23 @@ def pytest_collection_modifyitems(config, items):
         return
     skip = pytest.mark.skip(reason="marked slow or browser: run with --all")
     for item in items:
-        if "slow" in item.keywords or "browser" in item.keywords:
+        if item.get_closest_marker("slow") or item.get_closest_marker("browser"):
             item.add_marker(skip)
+
+
+@pytest.fixture(scope="session", autouse=True)
+def scrypt_once_per_password():
+    """Werkzeug's scrypt costs about 0.25 s of CPU a hash and a check, and the
+    tests create and sign in users by the hundred. Within a test session every
+    new hash gets the same salt and each (password, salt) is derived once: the
+    hashes stay real scrypt hashes, checked as in production, only not
+    recomputed. (Servers the tests start in other processes hash as usual.)"""
+    import werkzeug.security as security
+
+    with pytest.MonkeyPatch.context() as patch:
+        patch.setattr(security, "gen_salt", functools.cache(security.gen_salt))
+        patch.setattr(security, "_hash_internal", functools.cache(security._hash_internal))
+        yield
 
 
 @pytest.fixture

@@ -7,6 +7,7 @@ upgrade`` (in a private schema on PostgreSQL); each test gets empty tables
 and its own media folder.
 """
 
+import copy
 import os
 import re
 import uuid
@@ -81,6 +82,35 @@ def make_app(database_url: str, tmp_path, **overrides):
     app = create_app(config, instance_path=str(tmp_path / "instance"))
     app.test_client_class = CSRFClient
     return app
+
+
+_RENDERED: dict[tuple, object] = {}
+
+
+@pytest.fixture(autouse=True)
+def demo_frames_rendered_once(monkeypatch):
+    """``create_demo`` gets each synthetic frame rendered once a session, as a copy.
+
+    ``synth.render_activity`` equals ``render_frame`` over indices ``0 ..
+    count - 1``; rendering is most of a demo's cost and tests make demos by the
+    hundred. ``renderer_truth`` and the renderer's own tests (tests/unit)
+    still render for real.
+    """
+    from egonet import synth
+
+    render_activity, render_frame = synth.render_activity, synth.render_frame
+
+    def frame(activity, index, seed, width, height):
+        key = (activity, index, seed, width, height)
+        if key not in _RENDERED:
+            _RENDERED[key] = render_frame(activity, index, seed=seed, width=width, height=height)
+        return copy.deepcopy(_RENDERED[key])
+
+    def rendered_once(activity, count, *, seed=0, width=320, height=240):
+        render_activity(activity, count, seed=seed, width=width, height=height)  # refuses bad arguments as before
+        return (frame(activity, index, seed, width, height) for index in range(count))
+
+    monkeypatch.setattr(synth, "render_activity", rendered_once)
 
 
 @pytest.fixture(scope="session", params=BACKENDS)

@@ -3,8 +3,9 @@
 The server is the real WSGI app served by Werkzeug in a background thread,
 on a migrated SQLite database in a temporary folder. Chromium comes from
 Debian (``apt-get install -y chromium``); Playwright's own browser download
-cannot work offline. Without Chromium these tests skip, unless
-``EGONET_REQUIRE_BROWSER=1`` (set by .ci/run) makes that a failure.
+cannot work offline. ``find_chromium`` says where it is; without Chromium
+these tests skip, unless ``EGONET_REQUIRE_BROWSER=1`` (set by .ci/run) makes
+that a failure.
 
 Every browser context (the ``page`` fixture's and those a test opens with
 ``browser.new_context``) records Content Security Policy violations, and a
@@ -14,6 +15,7 @@ expression through ``eval`` in the page, which that policy refuses.
 """
 
 import os
+import shutil
 import threading
 from pathlib import Path
 
@@ -21,9 +23,9 @@ import pytest
 from flask_migrate import upgrade
 from werkzeug.serving import make_server
 
-from tests.app.conftest import make_app
+from app.extensions import db
+from tests.app.conftest import demo_frames_rendered_once, make_app  # noqa: F401 (autouse here too)
 
-CHROMIUM = os.environ.get("EGONET_CHROMIUM", "/usr/bin/chromium")
 CHROMIUM_ARGS = [
     "--no-sandbox",
     "--disable-gpu",
@@ -68,12 +70,21 @@ def no_csp_violations():
     assert not csp_violations, "Content Security Policy violations:\n" + "\n".join(csp_violations)
 
 
-@pytest.fixture
-def live_app(tmp_path):
-    app = make_app(f"sqlite:///{tmp_path / 'live.sqlite3'}", tmp_path)
+@pytest.fixture(scope="session")
+def migrated_sqlite(tmp_path_factory) -> Path:
+    """An empty SQLite database, migrated once a session: each live app starts on a copy."""
+    folder = tmp_path_factory.mktemp("migrated")
+    app = make_app(f"sqlite:///{folder / 'live.sqlite3'}", folder)
     with app.app_context():
         upgrade()
-    return app
+        db.engine.dispose()
+    return folder / "live.sqlite3"
+
+
+@pytest.fixture
+def live_app(tmp_path, migrated_sqlite):
+    shutil.copyfile(migrated_sqlite, tmp_path / "live.sqlite3")
+    return make_app(f"sqlite:///{tmp_path / 'live.sqlite3'}", tmp_path)
 
 
 @pytest.fixture
@@ -88,16 +99,31 @@ def live_server(live_app):
     server.server_close()
 
 
+def find_chromium(environ=os.environ) -> str:
+    """Chromium's path: ``$PLAYWRIGHT_CHROMIUM`` or ``$CHROMIUM`` (a path or a
+    command) when set, else ``chromium`` or ``chromium-browser`` on ``PATH``.
+
+    Without one it skips the test with one line naming the install command,
+    or fails it when ``EGONET_REQUIRE_BROWSER=1``.
+    """
+    named = environ.get("PLAYWRIGHT_CHROMIUM") or environ.get("CHROMIUM")
+    for command in [named] if named else ["chromium", "chromium-browser"]:
+        if found := shutil.which(command, path=environ.get("PATH", os.defpath)):
+            return found
+    where = repr(named) if named else "chromium or chromium-browser on PATH"
+    problem = f"no Chromium ({where}); install it: apt-get install -y chromium"
+    if environ.get("EGONET_REQUIRE_BROWSER") == "1":
+        pytest.fail(problem + " (EGONET_REQUIRE_BROWSER=1)", pytrace=False)
+    pytest.skip(problem)
+
+
 @pytest.fixture(scope="session")
 def browser():
-    if not Path(CHROMIUM).exists():
-        if os.environ.get("EGONET_REQUIRE_BROWSER") == "1":
-            pytest.fail(f"Chromium not found at {CHROMIUM} (apt-get install -y chromium)")
-        pytest.skip(f"Chromium not found at {CHROMIUM} (apt-get install -y chromium)")
+    chromium = find_chromium()
     from playwright.sync_api import sync_playwright
 
     with sync_playwright() as p:
-        browser = p.chromium.launch(executable_path=CHROMIUM, headless=True, args=CHROMIUM_ARGS)
+        browser = p.chromium.launch(executable_path=chromium, headless=True, args=CHROMIUM_ARGS)
         new_context = browser.new_context
 
         def new_watched_context(**options):
