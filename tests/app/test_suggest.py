@@ -273,6 +273,14 @@ def test_done_is_refused_while_proposals_are_pending(app, annotator, proposed):
     assert done.get_json()["instances"][0]["proposed_by_run_id"] is None
 
 
+def test_deleting_the_run_makes_its_pending_proposals_ordinary_objects(app, annotator, proposed):
+    frame_id, _, _ = proposed
+    with app.app_context():
+        training.delete_run(db.session.get(TrainingRun, own_annotation(frame_id).instances[0].proposed_by_run_id))
+        (instance,) = own_annotation(frame_id).instances
+        assert not instance.proposed and instance.proposal_source is None and instance.proposed_by_run_id is None
+
+
 # --------------------------------------------------------------------------- refusals
 
 

@@ -38,13 +38,16 @@ def test_depth_proposes_the_box_before_the_wall_not_the_table_it_stands_on():
 
 
 @pytest.mark.skipif(not PRIMESENSE.exists(), reason="shared data not present")
-def test_depth_proposes_the_chair_of_the_real_rgbd_frame():
-    rgb = io.read_image(PRIMESENSE / "color" / "00001.jpg")
-    depth = io.read_depth(PRIMESENSE / "depth" / "00001.png")
+def test_depth_proposes_the_chair_of_the_real_rgbd_frames():
     K = io.read_intrinsics(PRIMESENSE / "camera_primesense.json")
-    # Measured 0.83 before GrabCut (0.86 after it, bench/bench_suggest.py): seat, back and arms as one
-    # region, the wall seen through the right arm's loop in it.
-    assert best_region_iou(proposals.source_map("depth", rgb, depth, K), chair_truth()) > 0.75
+    ious = []
+    for name in ("00000", "00001", "00002"):
+        rgb = io.read_image(PRIMESENSE / "color" / f"{name}.jpg")
+        depth = io.read_depth(PRIMESENSE / "depth" / f"{name}.png")
+        ious.append(best_region_iou(proposals.source_map("depth", rgb, depth, K), chair_truth()))
+    # Measured 0.44, 0.83, 0.67 before GrabCut: seat and arms always, the back (further, higher) with
+    # them on 00001 and 00002 only, the wall seen through the right arm's loop in them.
+    assert min(ious) > 0.35 and np.mean(ious) > 0.55, ious
 
 
 def test_every_source_answers_a_map_of_the_frame():
