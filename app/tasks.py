@@ -59,12 +59,15 @@ def score_frames(run_id: int) -> int:
 
 
 @job
-def suggest_frames(run_id: int, frame_ids: list[int], user_id: int, device: str = "auto") -> int:
-    """A run proposes action-objects on frames, into the user's annotations; returns how many proposals."""
-    run, user = db.session.get(TrainingRun, run_id), db.session.get(User, user_id)
-    if run is None or user is None:
-        raise labelling.SuggestProblem(f"no training run {run_id}" if run is None else f"no user {user_id}")
-    return labelling.suggest_frames(run, frames_for_prediction(frame_ids=frame_ids), user, device=device).proposals
+def suggest_frames(run_id: int | None, frame_ids: list[int], user_id: int, device: str = "auto",
+                   source: str = "auto") -> int:
+    """A run (or another source) proposes action-objects on frames, into the user's annotations;
+    returns how many proposals."""
+    user = db.session.get(User, user_id)
+    if user is None:
+        raise labelling.SuggestProblem(f"no user {user_id}")
+    frames = frames_for_prediction(frame_ids=frame_ids)
+    return labelling.suggest_frames(frames, user, run_id=run_id, source=source, device=device).proposals
 
 
 @job

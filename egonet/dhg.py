@@ -250,7 +250,7 @@ def _check_positive(value: float, name: str, *, at_most: float = np.inf) -> floa
 # --- geometry -----------------------------------------------------------------
 
 
-def _normalised_coords(K: np.ndarray, shape: tuple[int, int]) -> tuple[np.ndarray, np.ndarray]:
+def normalised_coords(K: np.ndarray, shape: tuple[int, int]) -> tuple[np.ndarray, np.ndarray]:
     """(x, y) of every pixel, with (x, y, 1) = K^-1 (u, v, 1); each (H, W) float64."""
     h, w = shape
     kinv = np.linalg.inv(K)
@@ -516,7 +516,7 @@ def estimate_height(
     min_floor_fraction = _check_positive(min_floor_fraction, "min_floor_fraction", at_most=1.0)
 
     z, valid = _metric_depth(depth)
-    x, y = _normalised_coords(K, z.shape)
+    x, y = normalised_coords(K, z.shape)
 
     normals, points, n_windows = _plane_normals(z, valid, x, y)
     if len(normals) >= _MIN_NORMALS:

@@ -61,7 +61,11 @@ TARGET = {"frame_id": Int(min=1), "instance": Str(min_len=1, max_len=40)}
 # use_depth: null or absent = the frame's depth when it has one (see labelling.grabcut_box).
 BOX = {**TARGET, "box": List(Float(), min_len=4, max_len=4), "use_depth": Bool(nullable=True, default=None)}
 CARRY = {"replace": Bool(default=False), "version": Int(min=0, nullable=True, default=None)}
-SUGGEST = {"version": Int(min=0), "run_id": Int(min=1, nullable=True, default=None)}
+SUGGEST = {
+    "version": Int(min=0),
+    "source": Str(choices=list(labelling.SUGGEST_SOURCES), default="auto"),
+    "run_id": Int(min=1, nullable=True, default=None),
+}
 ACCEPT = {"version": Int(min=1), "key": Str(min_len=1, max_len=40)}
 REVIEW = {
     "version": Int(min=1),
@@ -140,9 +144,7 @@ def page_config(frame: Frame, *, mode: str, annotation: Annotation | None = None
             suggest=url_for("label.suggest", frame_id=frame.id),
             accept_proposal=url_for("label.accept_proposal", frame_id=frame.id),
         )
-        config["suggest_runs"] = [
-            {"id": run.id, "label": f"Run {run.id}: {run.name}"} for run in labelling.suggestion_runs()
-        ]
+        config["suggest"] = labelling.source_choices(frame)
     else:
         config["own"] = annotation.author_id == current_user.id
         config["urls"].update(
@@ -248,7 +250,8 @@ def annotation_json(annotation: Annotation | None, frame: Frame) -> dict:
                 "kind": i.kind.value if i.kind else None,
                 "label": i.label,
                 "mask_url": url_for("label.instance_mask", annotation_id=annotation.id, position=i.position),
-                # Set while the instance is a model's proposal, not accepted or edited yet.
+                # Set while the instance is a proposal, not accepted or edited yet: its source, and its run.
+                "proposal_source": i.proposal_source,
                 "proposed_by_run_id": i.proposed_by_run_id,
                 "proposed_by_checkpoint_id": i.proposed_by_checkpoint_id,
             }
@@ -314,17 +317,20 @@ def add_time(frame_id: int):
 @bp.post("/api/label/frames/<int:frame_id>/suggest")
 @roles(*LABELLERS)
 def suggest(frame_id: int):
-    """``{version, run_id?}``: a trained run proposes the frame's action-objects into the user's annotation.
+    """``{version, source?, run_id?}``: a trained run, or a source that needs none (depth, handled,
+    saliency), proposes the frame's action-objects into the user's annotation; ``source`` "auto" (the
+    default) is the latest usable run, else depth, else handled.
 
     200 with ``{annotation, suggestion}`` when it ran here; 202 with
     ``{queued: true, message}`` when the model is slow here and the worker
-    has it. 409 for a stale version, a done annotation, or no trained run.
+    has it. 409 for a stale version, a done annotation, depth asked of a
+    frame without it, or the model source without a trained run.
     """
     data = json_body(SUGGEST)
     fr = labelling.get_frame(frame_id)
-    result = labelling.suggest_from_page(fr, me(), run_id=data["run_id"], version=data["version"])
+    result = labelling.suggest_from_page(fr, me(), run_id=data["run_id"], source=data["source"], version=data["version"])
     if isinstance(result, labelling.Queued):
-        return {"queued": True, "message": result.summary(), "run_id": result.run.id}, 202
+        return {"queued": True, "message": result.summary(), "run_id": result.proposer.run.id}, 202
     return {
         "annotation": annotation_json(result.annotation, fr),
         "suggestion": result.to_dict() | {"message": result.summary()},

@@ -69,18 +69,21 @@ def import_annotations_command(path, author, status, replace, skip_missing):
 
 
 @bp.cli.command("suggest")
+@click.option("--source", type=click.Choice(["auto", "model", "depth", "handled", "saliency"]), default="auto",
+              show_default=True, help="Who proposes: auto is the latest trained run usable for the frame, else "
+              "depth, else handled; model a trained run; depth, handled and saliency need no run.")
 @click.option("--run", "run_id", type=int, help="The training run that proposes [default: the latest finished one].")
 @click.option("--frames", help="Comma-separated frame ids.")
 @click.option("--activity", "activities", multiple=True, help="The frames of this activity (repeatable).")
 @click.option("--user", "username", required=True, help="Whose in-progress annotations the proposals join (an annotator or admin).")
 @click.option("--device", type=click.Choice(["auto", "cpu", "cuda"]), default="auto", show_default=True)
 @click.option("--queue", is_flag=True, help="Queue the job for `flask egonet worker`.")
-def suggest_command(run_id, frames, activities, username, device, queue):
-    """A trained run proposes the action-objects of frames still to label
-    (all of them unless --frames/--activity say which): each becomes an
-    instance of the user's annotation, marked as proposed until accepted or
-    edited on the labelling page. Frames labelled already, or being labelled
-    by someone else, are skipped."""
+def suggest_command(source, run_id, frames, activities, username, device, queue):
+    """Propose the action-objects of frames still to label (all of them
+    unless --frames/--activity say which): each becomes an instance of the
+    user's annotation, marked with its source until accepted or edited on
+    the labelling page. Frames labelled already, or being labelled by
+    someone else, are skipped."""
     from app.services.labelling import queue_suggestions, resolve_run, suggest_frames
     from app.services.labelling.suggest import batch_frames, labelling_user
     from app.services.training import frames_for_prediction
@@ -89,21 +92,25 @@ def suggest_command(run_id, frames, activities, username, device, queue):
         frame_ids = [int(x) for x in frames.split(",") if x.strip()] if frames else []
     except ValueError:
         raise click.BadParameter("give frame ids separated by commas, e.g. 3,4,10", param_hint="--frames") from None
+    if run_id is not None and source not in ("auto", "model"):
+        raise click.BadParameter(f"a run proposes as the model source, not {source}", param_hint="--run")
     user = labelling_user(username)
-    run = resolve_run(run_id)
+    if run_id is not None or source == "model":
+        run_id = resolve_run(run_id).id  # a bad run stops here, before any frame
+    what = f"run {run_id}" if run_id is not None else source
     chosen = frames_for_prediction(activity_names=activities, frame_ids=frame_ids)
     if queue:
         todo, skipped = batch_frames(chosen, user)
-        queue_suggestions(run, todo, user, device=device)
-        click.echo(f"{len(todo)} frames queued for run {run.id}'s proposals to {user.username}"
+        queue_suggestions(todo, user, run_id=run_id, source=source, device=device)
+        click.echo(f"{len(todo)} frames queued for proposals by {what} to {user.username}"
                    f"{f' ({len(skipped)} labelled or taken skipped)' if skipped else ''}: start `flask egonet worker`")
         return
     with progress_bar("Suggesting") as (on_start, on_progress):
         on_start(len(chosen))
-        report = suggest_frames(run, chosen, user, device=device, on_progress=on_progress)
+        report = suggest_frames(chosen, user, run_id=run_id, source=source, device=device, on_progress=on_progress)
     for suggestion in report.suggestions:
         click.echo(suggestion.summary())
     for frame_id, why in report.skipped:
         click.echo(f"frame {frame_id}: skipped, {why}")
-    click.echo(f"run {run.id}: {report.proposals} proposals on {len(report.suggestions)} frames for {user.username}, "
+    click.echo(f"{what}: {report.proposals} proposals on {len(report.suggestions)} frames for {user.username}, "
                f"{len(report.skipped)} frames skipped")

@@ -86,9 +86,11 @@ class Annotation(Base):
 class Instance(Base):
     """One action-object within an annotation; the frame's mask is their union.
 
-    A model's proposal (``app.services.labelling.suggest``) carries the run
-    and checkpoint that proposed it until the annotator accepts it or edits
-    its mask; ``proposed`` says whether it is still one.
+    A proposal (``app.services.labelling.suggest``) carries its source
+    (``"model"``, ``"depth"``, ``"handled"``, ``"saliency"``) and, from a
+    trained run, the run and checkpoint, until the annotator accepts it or
+    edits its mask (``UNMARKED`` clears all three); ``proposed`` says whether
+    it is still one.
     """
 
     __tablename__ = "instance"
@@ -108,12 +110,17 @@ class Instance(Base):
         ForeignKey("training_checkpoint.id", ondelete="SET NULL")
     )
 
+    proposal_source: Mapped[str | None] = mapped_column(String(20))
+
     annotation: Mapped[Annotation] = relationship(back_populates="instances")
+
+    UNMARKED = {"proposal_source": None, "proposed_by_run_id": None, "proposed_by_checkpoint_id": None}
+    """The values that make a proposal an ordinary instance (accepted, or its mask edited)."""
 
     @property
     def proposed(self) -> bool:
-        """Whether this is a model's proposal the annotator has not accepted or edited yet."""
-        return self.proposed_by_run_id is not None
+        """Whether this is a proposal the annotator has not accepted or edited yet."""
+        return self.proposal_source is not None
 
 
 class GrabCutState(Base):

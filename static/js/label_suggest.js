@@ -1,7 +1,8 @@
-// A trained model's proposals on the labelling page. "Suggest" (the button,
-// or S) asks the chosen training run (the latest by default) to propose the
-// frame's action-objects; the server adds them beside the objects already
-// drawn, each marked as proposed by that run, and the page loads the result
+// Proposals on the labelling page. "Suggest" (the button, or S) asks the
+// chosen proposer (#suggest-source: auto, depth, handled, saliency, or a
+// training run) to propose the frame's action-objects; the server adds them
+// beside the objects already drawn, each marked with its source ("proposed
+// by depth", "proposed by run 3"), and the page loads the result
 // (Ctrl+Z takes it back, like "load theirs"). A proposal is drawn with a
 // dashed box and listed with Accept and Reject until it is accepted or
 // edited: the server keeps that mark and clears it when the object's mask
@@ -17,22 +18,23 @@ import { $, H, W, doc, meta, recordReplaced, snapshot } from "./label_state.js";
 import { draw, painters } from "./label_view.js";
 import { boundingBox } from "./raster.js";
 
-const proposals = new Map(); // instance key -> the run that proposed it, as the server last said
+const proposals = new Map(); // instance key -> who proposed it ("depth", "run 3"), as the server last said
 const boxes = new Map(); // instance key -> [x0, y0, x1, y1) of its mask, as last drawn in the list
 
-// Ask the run for proposals; the saved result replaces the page's document.
+// Ask for proposals; the saved result replaces the page's document.
 export async function suggest(refresh) {
   await autosaver.flush();
   if (autosaver.dirty) {
     showMessage("Suggest waits for your last changes to be saved; try again once they are.", "error");
     return;
   }
-  const choice = $("#suggest-run").value;
+  const choice = $("#suggest-source").selectedOptions[0];
+  const body = { source: choice.value, run_id: choice.dataset.run ? Number(choice.dataset.run) : null };
   await enqueue(async () => {
     setBusy(+1);
     $("#suggest").disabled = true;
     try {
-      const data = await postSuggest({ version: meta.version, run_id: choice ? Number(choice) : null });
+      const data = await postSuggest({ version: meta.version, ...body });
       if (data.queued) {
         showMessage(data.message, "info");
         return;
@@ -70,7 +72,10 @@ async function accept(key) {
 function onAnnotation(event) {
   const before = [...proposals].join();
   proposals.clear();
-  for (const inst of event.detail.instances || []) if (inst.proposed_by_run_id) proposals.set(inst.key, inst.proposed_by_run_id);
+  for (const inst of event.detail.instances || []) {
+    const source = inst.proposal_source;
+    if (source) proposals.set(inst.key, source === "model" ? `run ${inst.proposed_by_run_id}` : source);
+  }
   if ([...proposals].join() !== before) renderInstances(); // only then: a redrawn list would take a field's focus
 }
 
@@ -79,8 +84,8 @@ function decorate() {
   boxes.clear();
   for (const li of document.querySelectorAll("#instances .instance")) {
     const key = li.dataset.key;
-    const run = proposals.get(key);
-    if (run === undefined) continue;
+    const by = proposals.get(key);
+    if (by === undefined) continue;
     const inst = doc.instances.find((i) => i.key === key);
     const box = inst && boundingBox(inst.mask, W, H);
     if (box) boxes.set(key, box);
@@ -88,7 +93,7 @@ function decorate() {
     const row = document.createElement("div");
     row.className = "proposal";
     row.innerHTML = `
-      <span class="proposal-tag">proposed by run ${run}</span>
+      <span class="proposal-tag">proposed by ${by}</span>
       <button type="button" class="accept-proposal ok" title="Keep this object as it is">Accept</button>
       <button type="button" class="reject-proposal" title="Delete this object">Reject</button>`;
     row.querySelector(".accept-proposal").addEventListener("click", () => accept(key));
@@ -115,7 +120,7 @@ function paintProposals(ctx, view) {
     ctx.strokeStyle = "#ffd43b";
     ctx.strokeRect(a.x, a.y, b.x + 4 - a.x, b.y + 4 - a.y);
     ctx.setLineDash([]);
-    const text = `proposed by run ${proposals.get(key)}`;
+    const text = `proposed by ${proposals.get(key)}`;
     const width = ctx.measureText(text).width + 8;
     const top = Math.max(16, a.y);
     ctx.fillStyle = "rgba(20, 23, 29, 0.85)";

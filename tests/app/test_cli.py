@@ -1,4 +1,5 @@
 import numpy as np
+import pytest
 from werkzeug.security import check_password_hash
 
 from app.extensions import db
@@ -64,6 +65,8 @@ def test_demo_command_creates_reviewed_ground_truth_and_leaves_the_last_frames_t
     result = runner.invoke(args=args)
     assert result.exit_code == 0, result.output
     assert "demo: 14 frames added, 0 already present, in 7 activities; 7 of the new frames are left to label" in result.output
+    # One labelled frame per activity: too few for the quick-start run, which the demo says and skips.
+    assert "demo: no quick-start run: a single split needs an activity with at least two labelled frames" in result.output
     from app.models import Annotation, Status
     from app.services import media
     from egonet import io
@@ -92,7 +95,7 @@ def test_demo_command_creates_reviewed_ground_truth_and_leaves_the_last_frames_t
 def test_demo_command_unlabelled_fraction_0_labels_every_frame_and_bad_values_name_the_option(ctx, runner):
     from app.models import Annotation
 
-    base = ["egonet", "demo", "--frames-per-activity", "2", "--width", "64", "--height", "48"]
+    base = ["egonet", "demo", "--frames-per-activity", "2", "--width", "64", "--height", "48", "--no-train"]
     for bad in ("1.5", "-0.25", "nan"):
         result = runner.invoke(args=[*base, "--unlabelled-fraction", bad])
         assert result.exit_code == 1, (bad, result.output)
@@ -104,11 +107,32 @@ def test_demo_command_unlabelled_fraction_0_labels_every_frame_and_bad_values_na
     assert len(db.session.execute(db.select(Annotation)).all()) == 14
 
 
+@pytest.mark.slow
+def test_the_demo_leaves_a_trained_quick_start_run_that_suggest_uses(ctx, runner):
+    """About 20 s: the quick-start run trains on 14 frames."""
+    from app.models.training import RunStatus, TrainingRun
+    from app.services import labelling
+
+    args = ["egonet", "demo", "--frames-per-activity", "3", "--width", "64", "--height", "48"]
+    result = runner.invoke(args=args)
+    assert result.exit_code == 0, result.output
+    assert "demo: training 'demo quick start (egonet-lite)' for Suggest" in result.output
+    run = db.session.execute(db.select(TrainingRun)).scalar_one()
+    assert (run.name, run.status, run.model_name, run.epochs) == ("demo quick start (egonet-lite)", RunStatus.DONE, "egonet-lite", 6)
+    assert (run.config["train"]["width"], run.config["train"]["height"], run.config["train"]["lr"]) == (96, 72, 0.05)
+    assert f"run {run.id} (demo quick start (egonet-lite)): done" in result.output
+    unlabelled = db.session.execute(db.select(Frame).where(~Frame.annotations.any())).scalars().first()
+    assert labelling.source_choices(unlabelled)["hint"].startswith(f"Auto uses run {run.id} (trained on cooking, ")
+    again = runner.invoke(args=args)
+    assert f"demo: the quick-start run {run.id} is there already" in again.output
+    assert db.session.execute(db.select(db.func.count(TrainingRun.id))).scalar_one() == 1
+
+
 def test_demo_frames_match_the_renderer(ctx, runner):
     from app.services import media
     from egonet import io, synth
 
-    runner.invoke(args=["egonet", "demo", "--frames-per-activity", "1", "--width", "64", "--height", "48"])
+    runner.invoke(args=["egonet", "demo", "--frames-per-activity", "1", "--width", "64", "--height", "48", "--no-train"])
     frame = db.session.execute(db.select(Frame).filter_by(source_name="cooking-0-0000")).scalar_one()
     expected = synth.render_frame("cooking", 0, seed=0, width=64, height=48)
     np.testing.assert_array_equal(io.read_image(media.absolute_path(frame.rgb_path)), expected.rgb)

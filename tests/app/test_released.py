@@ -17,7 +17,7 @@ from app.models import Frame
 from app.models.training import FoldsMode, Prediction, RunStatus, TrainingRun
 from app.services import training
 from app.services.demo import create_demo
-from app.services.labelling import suggest
+from app.services.labelling import proposers
 from app.services.scoring import build_report
 from app.services.training import released
 from egonet.checkpoint import load_checkpoint
@@ -78,7 +78,7 @@ def test_a_release_becomes_a_run_with_one_checkpoint_that_predicts_scores_and_su
 
     # Suggest takes it as a model that never saw the frame.
     frame = frames()[0]
-    chosen, held_out, why = suggest.choose_checkpoint(run, frame)
+    chosen, held_out, why = proposers.choose_checkpoint(run, frame)
     assert chosen.id == checkpoint.id and held_out and "released" in why
 
 

@@ -1,6 +1,7 @@
-"""Model proposals ("Suggest"): a trained run proposes a frame's action-objects.
+"""Proposals ("Suggest"): a trained run, or depth, handled or saliency without one, proposes a
+frame's action-objects.
 
-Most tests give a run a stored probability map (the suggestion reuses a
+Most tests of a run give it a stored probability map (the suggestion reuses a
 checkpoint's stored prediction of a frame, as it does after training): a
 blurred, low-resolution copy of the true object, as a network's map looks.
 Those that need a model train egonet-lite on demo frames at 32x24 for one
@@ -18,8 +19,9 @@ from app.models.annotations import GrabCutState
 from app.models.training import Checkpoint, FoldsMode, Prediction, RunStatus, TrainingRun
 from app.services import labelling, media, training
 from app.services.demo import create_demo
-from app.services.labelling import suggest as suggest_service
-from egonet import io
+from app.services.importing import FrameItem, add_frames
+from app.services.labelling import proposers
+from egonet import io, synth
 from tests.app.test_labelling import H, OBJECT, W, body, make_frames, rle, square, true_mask
 
 TINY = {"model": "egonet-lite", "epochs": 1, "width": 32, "height": 24, "batch_size": 2, "device": "cpu"}
@@ -46,11 +48,11 @@ def network_like(mask: np.ndarray, *, factor: int = 8, shift: tuple[int, int] = 
 
 
 def stored_run(maps: dict[int, np.ndarray], *, threshold: float | None = 0.5, status=RunStatus.DONE, name="stored",
-               model: str = "egonet-lite") -> int:
-    """A finished run whose one checkpoint has stored maps of some frames (the file is never loaded:
-    a suggestion reuses stored maps); returns its id."""
+               model: str = "egonet-lite", activities: tuple[str, ...] = ("kitchen",)) -> int:
+    """A finished run (trained on ``activities``) whose one checkpoint has stored maps of some frames
+    (the file is never loaded: a suggestion reuses stored maps); returns its id."""
     run = TrainingRun(name=name, model_name=model, folds=FoldsMode.SINGLE, epochs=1, device="cpu", seed=0,
-                      status=status)
+                      status=status, config={"activities": list(activities)})
     db.session.add(run)
     db.session.flush()
     path = training.checkpoint_root() / f"run-{run.id}" / "single.pt"
@@ -107,9 +109,9 @@ def test_regions_drop_specks_and_maps_above_the_threshold_everywhere():
 
 
 def test_the_threshold_is_the_checkpoints_best_f_else_one_half(ctx):
-    assert suggest_service.checkpoint_threshold(Checkpoint(metrics={"threshold": 0.31})) == (0.31, "checkpoint")
+    assert proposers.checkpoint_threshold(Checkpoint(metrics={"threshold": 0.31})) == (0.31, "checkpoint")
     for metrics in ({}, {"threshold": None}, {"threshold": 1.5}, {"threshold": True}):
-        assert suggest_service.checkpoint_threshold(Checkpoint(metrics=metrics)) == (0.5, "default")
+        assert proposers.checkpoint_threshold(Checkpoint(metrics=metrics)) == (0.5, "default")
 
 
 # --------------------------------------------------------------------------- suggesting
@@ -126,11 +128,12 @@ def test_a_proposal_is_refined_by_grabcut_and_overlaps_the_truth(app, annotator)
     assert response.status_code == 200, response.get_json()
     data = response.get_json()
     s, ann = data["suggestion"], data["annotation"]
-    assert s["run_id"] == run_id and s["prediction"] == "stored" and s["threshold"] == 0.5
+    assert s["run_id"] == run_id and s["source"] == "model" and s["proposed_by"] == f"run {run_id}"
+    assert s["prediction"] == "stored" and s["threshold"] == 0.5
     assert s["threshold_source"] == "checkpoint" and s["held_out"] and s["checkpoint_choice"] == "its fold held this frame out"
     assert len(s["proposals"]) == 1 and f"run {run_id} proposed 1 object" in s["message"]
     (inst,) = ann["instances"]
-    assert inst["key"] == s["proposals"][0] and inst["proposed_by_run_id"] == run_id
+    assert inst["key"] == s["proposals"][0] and inst["proposed_by_run_id"] == run_id and inst["proposal_source"] == "model"
     assert ann["status"] == "in_progress" and ann["version"] == 1 and ann["proposed_by_run_id"] == run_id
     with app.app_context():
         proposal = saved_mask(own_annotation(frame_id).instances[0])
@@ -152,15 +155,16 @@ def test_a_tiny_trained_run_suggests_on_a_frame_it_held_out(app, make_user):
         db.session.execute(db.delete(Prediction).where(Prediction.frame_id == cooking.id))
         db.session.commit()
         s = labelling.suggest_frame(cooking, user(), version=0, device="cpu")
-        assert s.run.id == run.id and s.checkpoint.fold == "cooking" and s.held_out
-        assert s.checkpoint_choice == "its fold held the activity 'cooking' out" and s.prediction == "computed"
-        assert s.threshold == pytest.approx(s.checkpoint.metrics["threshold"]) and s.threshold_source == "checkpoint"
+        p = s.proposer
+        assert p.run.id == run.id and p.checkpoint.fold == "cooking" and p.held_out
+        assert p.why == "its fold held the activity 'cooking' out" and s.prediction == "computed"
+        assert s.threshold == pytest.approx(p.checkpoint.metrics["threshold"]) and s.threshold_source == "checkpoint"
         stored = db.session.execute(db.select(Prediction).filter_by(frame_id=cooking.id)).scalar_one()
-        assert stored.checkpoint_id == s.checkpoint.id and stored.held_out
+        assert stored.checkpoint_id == p.checkpoint.id and stored.held_out
         annotation = own_annotation(cooking.id)
         marked = [i for i in annotation.instances if i.proposed]
         assert [i.key for i in marked] == s.proposals and all(i.proposed_by_run_id == run.id for i in marked)
-        assert annotation.proposed_by_run_id == run.id and annotation.proposed_by_checkpoint_id == s.checkpoint.id
+        assert annotation.proposed_by_run_id == run.id and annotation.proposed_by_checkpoint_id == p.checkpoint.id
         assert len(s.proposals) >= 1, s.summary()  # this run and frame give one (measured); the map's noise decides where
         # Asked again, the stored map is reused, and the pending proposals are replaced, not doubled.
         again = labelling.suggest_frame(cooking, user(), run_id=run.id, version=annotation.version)
@@ -217,6 +221,7 @@ def test_accepting_clears_the_mark_and_moves_the_version(app, annotator, propose
     assert response.status_code == 200, response.get_json()
     data = response.get_json()
     assert data["version"] == version + 1 and data["instances"][0]["proposed_by_run_id"] is None
+    assert data["instances"][0]["proposal_source"] is None
     assert data["proposed_by_run_id"] is not None  # the annotation keeps where its objects came from
     again = annotator.post(url, json={"version": data["version"], "key": key})
     assert again.status_code == 409 and again.get_json()["fields"] == {"key": "not a proposal"}
@@ -268,18 +273,91 @@ def test_done_is_refused_while_proposals_are_pending(app, annotator, proposed):
     assert done.get_json()["instances"][0]["proposed_by_run_id"] is None
 
 
+def test_deleting_the_run_makes_its_pending_proposals_ordinary_objects(app, annotator, proposed):
+    frame_id, _, _ = proposed
+    with app.app_context():
+        training.delete_run(db.session.get(TrainingRun, own_annotation(frame_id).instances[0].proposed_by_run_id))
+        (instance,) = own_annotation(frame_id).instances
+        assert not instance.proposed and instance.proposal_source is None and instance.proposed_by_run_id is None
+
+
 # --------------------------------------------------------------------------- refusals
 
 
-def test_without_a_trained_run_the_page_says_train_first(app, annotator):
-    (frame_id,) = make_frames(app, n=1)
+def held_bag(app) -> tuple[int, np.ndarray]:
+    """A demo frame of a hand holding a bag, imported with its depth and intrinsics into the activity
+    "shop": its id, and the bag's mask."""
+    f = synth.render_frame("shopping", 1, seed=0, width=320, height=240)
+    with app.app_context():
+        add_frames(activity="shop", sequence="s1", items=[FrameItem("bag", 0, "bag", rgb=f.rgb, depth_m=f.depth_m, K=f.K)])
+        return db.session.execute(db.select(Frame.id).where(Frame.source_name == "bag")).scalar_one(), f.mask
+
+
+def test_without_a_run_suggest_proposes_from_depth_and_marks_the_source(app, annotator):
+    frame_id, truth = held_bag(app)
     response = annotator.post(f"/api/label/frames/{frame_id}/suggest", json={"version": 0})
+    assert response.status_code == 200, response.get_json()
+    s, ann = response.get_json()["suggestion"], response.get_json()["annotation"]
+    assert (s["source"], s["proposed_by"], s["run_id"], s["threshold_source"]) == ("depth", "depth", None, "source")
+    assert s["message"].startswith(f"frame {frame_id}: depth proposed ") and "the nearest compact surface" in s["message"]
+    assert [i["proposal_source"] for i in ann["instances"]] == ["depth"] * len(s["proposals"]) != []
+    assert ann["proposed_by_run_id"] is None and all(i["proposed_by_run_id"] is None for i in ann["instances"])
+    with app.app_context():
+        ious = [iou(saved_mask(i), truth) for i in own_annotation(frame_id).instances]
+    assert max(ious) > 0.9  # measured 0.98: the bag, refined by GrabCut with depth
+
+    best = ann["instances"][int(np.argmax(ious))]["key"]
+    accepted = annotator.post(f"/api/label/frames/{frame_id}/annotation/proposals/accept",
+                              json={"version": ann["version"], "key": best}).get_json()
+    assert [i["proposal_source"] for i in accepted["instances"] if i["key"] == best] == [None]
+
+
+def test_without_depth_or_a_run_auto_is_the_handled_object_and_the_model_asks_for_training(app, annotator):
+    (frame_id,) = make_frames(app, n=1)
+    data = annotator.post(f"/api/label/frames/{frame_id}/suggest", json={"version": 0}).get_json()
+    assert data["suggestion"]["source"] == "handled", data
+    # The baseline keeps colour regions under 5 % of the frame: this red object (12 %) is not one of them.
+    assert [i["proposal_source"] for i in data["annotation"]["instances"]] == ["handled"]
+    version = data["annotation"]["version"]
+    saliency = annotator.post(f"/api/label/frames/{frame_id}/suggest", json={"version": version, "source": "saliency"})
+    assert saliency.status_code == 200 and saliency.get_json()["suggestion"]["replaced"] == 1
+    version = saliency.get_json()["annotation"]["version"]
+
+    response = annotator.post(f"/api/label/frames/{frame_id}/suggest", json={"version": version, "source": "model"})
     assert response.status_code == 409
-    data = response.get_json()
-    assert data["message"].startswith("Train a model first:") and data["fields"] == {"run_id": "no finished training run"}
+    assert response.get_json()["message"].startswith("Train a model first:") and "depth, handled or saliency" in response.get_json()["message"]
+    assert response.get_json()["fields"] == {"run_id": "no finished training run"}
     with app.app_context():
         stored_run({frame_id: network_like(true_mask())}, status=RunStatus.RUNNING)
-    assert annotator.post(f"/api/label/frames/{frame_id}/suggest", json={"version": 0}).status_code == 409
+    running = annotator.post(f"/api/label/frames/{frame_id}/suggest", json={"version": version, "source": "model"})
+    assert running.status_code == 409 and running.get_json()["fields"] == {"run_id": "no finished training run"}
+
+
+def test_the_hint_says_which_run_auto_uses_and_how_to_train_one_for_the_activity(app, annotator):
+    frame_id, _ = held_bag(app)
+    train = "Train one for shop: the Training page, or flask egonet train --activities shop"
+    page = annotator.get(f"/label/frames/{frame_id}").get_data(as_text=True)
+    assert f'<p class="hint" id="suggest-hint">No trained run yet: Auto proposes from depth. {train}</p>' in page
+    with app.app_context():
+        frame = db.session.get(Frame, frame_id)
+        run_id = stored_run({}, activities=("cooking", "dining"))
+        choices = labelling.source_choices(frame)
+        assert choices["hint"] == f"Auto uses run {run_id} (trained on cooking, dining): not on shop. {train}"
+        assert [(c["source"], c["run_id"], c["label"]) for c in choices["choices"]] == [
+            ("auto", None, f"Auto (run {run_id})"),
+            ("depth", None, "Depth: the nearest compact surface"),
+            ("handled", None, "Handled: the colour region nearest the centre"),
+            ("saliency", None, "Saliency: spectral residual saliency"),
+            ("model", run_id, f"Run {run_id}: stored"),
+        ]
+        trained_here = stored_run({}, activities=("shop",), name="shop run")
+        assert labelling.source_choices(frame)["hint"] == f"Auto uses run {trained_here} (trained on shop)."
+    (plain,) = make_frames(app, n=1, activity="desk work")
+    with app.app_context():
+        choices = labelling.source_choices(db.session.get(Frame, plain))
+    assert choices["choices"][1] == {"source": "depth", "run_id": None, "label": "Depth: this frame has none",
+                                     "disabled": True}
+    assert choices["hint"].endswith("flask egonet train --activities 'desk work'")
 
 
 @pytest.mark.parametrize(
@@ -291,6 +369,9 @@ def test_without_a_trained_run_the_page_says_train_first(app, annotator):
         ({"version": -1}, 400, "version"),
         ({}, 400, "version"),
         ({"version": 0, "threshold": 0.2}, 400, "threshold"),
+        ({"version": 0, "source": "model-free"}, 400, "source"),
+        ({"version": 0, "source": "depth", "run_id": 1}, 400, "run_id"),
+        ({"version": 0, "source": "depth"}, 409, "source"),  # the frame has no depth
         ({"version": 3}, 409, "version"),
     ],
 )
@@ -339,7 +420,7 @@ def test_a_slow_model_is_queued_for_the_worker(app, annotator, monkeypatch):
     assert response.status_code == 202, response.get_json()
     assert response.get_json()["queued"] and "queued for the worker" in response.get_json()["message"]
     with app.app_context():
-        assert queued == [(run_id, [frame_id], user().id, "auto")]
+        assert queued == [(run_id, [frame_id], user().id, "auto", "model")]
 
 
 # --------------------------------------------------------------------------- batches: the job and the CLI
@@ -374,8 +455,8 @@ def test_cli_suggests_in_the_foreground_or_queues(app, runner, make_user, monkey
     result = runner.invoke(args=["egonet", "suggest", "--activity", "kitchen", "--user", "ann", "--queue", "--device", "cpu"])
     assert result.exit_code == 0, result.output
     with app.app_context():
-        assert queued == [(run_id, frames, user().id, "cpu")]  # the latest run by default; its own frames too
-    assert "3 frames queued" in result.output
+        assert queued == [(None, frames, user().id, "cpu", "auto")]  # each frame's proposer is chosen in the job
+    assert "3 frames queued for proposals by auto to ann" in result.output
 
     for args, message in [
         (["--user", "rev"], "rev is a reviewer"),
@@ -383,6 +464,7 @@ def test_cli_suggests_in_the_foreground_or_queues(app, runner, make_user, monkey
         (["--user", "ann", "--run", "999"], "there is no training run 999"),
         (["--user", "ann", "--frames", "1,x"], "give frame ids separated by commas"),
         (["--user", "ann", "--frames", "99999"], "no frame with id 99999"),
+        (["--user", "ann", "--run", str(run_id), "--source", "depth"], "a run proposes as the model source, not depth"),
     ]:
         result = runner.invoke(args=["egonet", "suggest", *args])
         assert result.exit_code != 0 and message in result.output, (args, result.output)
@@ -436,7 +518,7 @@ def test_a_trained_run_proposes_held_out_objects_far_better_than_a_random_box(ap
             frame = db.session.get(Frame, frame_id)
             truth = ground_truth.mask_of(ground_truth.ground_truths([frame_id])[frame_id])
             s = labelling.suggest_frame(frame, user(), version=0)
-            assert s.held_out and s.prediction == "stored"
+            assert s.proposer.held_out and s.prediction == "stored"
             union = np.zeros_like(truth)
             for instance in s.annotation.instances if s.annotation is not None else []:
                 union |= saved_mask(instance)

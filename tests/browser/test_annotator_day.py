@@ -1,10 +1,11 @@
 """An annotator's whole day on the real RGB-D frames, then a reviewer's and an
 export's, as one walk in Chromium (issue 26).
 
-ann labels the chair of rgbd-primesense 00000 (a box with depth, an object
-and a background stroke, a polygon), undoes twice, reloads, redoes,
-propagates to 00001, accepts a model's proposal of the cabinet there and
-marks it done; rev opens the review queue from the navigation bar, fixes
+ann, before any run is trained, accepts the chair that depth proposes on
+rgbd-primesense 00000 and takes the suggestion back, labels the chair
+herself (a box with depth, an object and a background stroke, a polygon),
+undoes twice, reloads, redoes, propagates to 00001, accepts a model's
+proposal of the cabinet there and marks it done; rev opens the review queue from the navigation bar, fixes
 the chair and accepts; the COCO export (with images) holds exactly the masks
 the review page showed. The run "trained" for the proposal is a stored one
 (tests/app/test_suggest.py): its checkpoint's map of 00001 is reused, no
@@ -80,16 +81,31 @@ def test_an_annotators_day_then_review_and_export(live_app, live_server, browser
     sign_in(page, live_app, live_server, username="ann", role="annotator")
     open_frame(page, live_server, f0)
 
-    # Morning: "Mark done" on the untouched frame asks; Suggest without a trained run says so in words.
+    # Morning: "Mark done" on the untouched frame asks. No run is trained yet: Suggest proposes the
+    # chair from depth, tagged with its source; accepted, then the suggestion taken back (Ctrl+Z).
     page.click("#mark-done")
     page.wait_for_selector("#confirm-empty[open]")
     shot(page, "untouched-mark-done-asks")
     page.click("#confirm-keep")
     page.wait_for_selector("#confirm-empty", state="hidden")
     assert server_annotation(live_app, f0) == {"version": 0}
+    assert page.locator("#suggest-hint").inner_text().startswith("No trained run yet: Auto proposes from depth.")
     page.click("#suggest")
-    said_in_words(page, "Suggest: Train a model first")
-    shot(page, "suggest-without-a-run")
+    page.wait_for_selector("#instances .instance.proposed")
+    settle(page)
+    assert page.locator("#instances .proposal-tag").inner_text() == "proposed by depth"
+    # Measured 0.42: the seat and the arms; the back, further and higher, scores under the threshold here
+    # (on 00001 it joins them: 0.86, bench/bench_suggest.py).
+    assert iou(mask_of(page, 0), chair_truth()) > 0.3
+    shot(page, "suggest-depth-without-a-run")
+    page.click("#instances .accept-proposal")
+    page.wait_for_selector("#instances .instance.proposed", state="detached")
+    settle(page)
+    assert server_annotation(live_app, f0)["instances"] == 1
+    page.keyboard.press("Control+z")
+    page.wait_for_function("() => window.labelPage.instances().length === 0")
+    settle(page)
+    page.wait_for_function("() => window.labelPage.undoSteps === 0")
 
     # A box with depth: the white backrest before the white wall comes in.
     drag(page, BOX)

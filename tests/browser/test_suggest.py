@@ -1,5 +1,6 @@
-"""Model proposals in real Chromium: Suggest (button and S), the proposal drawn
-and listed as such, Accept and Reject, and the words when no run is trained.
+"""Proposals in real Chromium: Suggest (button and S), the proposal drawn and
+listed with its source, Accept and Reject; without a trained run, a depth
+proposal and the hint on how to train one.
 
 The run's checkpoint has a stored map of the frame (as training leaves for
 the frames it held out): a network-like blurred copy of the object, a few
@@ -11,7 +12,7 @@ import pytest
 
 from app.extensions import db
 from app.models import Annotation, Instance
-from tests.app.test_suggest import network_like, stored_run
+from tests.app.test_suggest import held_bag, network_like, stored_run
 from tests.browser.conftest import screenshot, sign_in
 from tests.browser.test_label import H, OBJECT, W, object_frames, open_frame, settle
 
@@ -36,8 +37,11 @@ def test_suggest_then_accept_one_and_reject_another(live_app, live_server, page)
         run_id = stored_run({f: network_like(truth(), shift=(6, -6)) for f in (first, second)}, name="tiny demo run")
     sign_in(page, live_app, live_server, username="ann", role="annotator")
     open_frame(page, live_server, first)
-    assert page.locator("#suggest-run option").all_inner_texts() == ["Latest trained run", f"Run {run_id}: tiny demo run"]
-    assert "Suggest: a trained model proposes objects" in page.locator(".shortcuts").inner_text()
+    assert page.locator("#suggest-source option").all_inner_texts() == [
+        f"Auto (run {run_id})", "Depth: this frame has none", "Handled: the colour region nearest the centre",
+        "Saliency: spectral residual saliency", f"Run {run_id}: tiny demo run"]
+    assert page.locator("#suggest-hint").inner_text() == f"Auto uses run {run_id} (trained on kitchen)."
+    assert "Suggest: a trained run, or depth, proposes objects" in page.locator(".shortcuts").inner_text()
 
     page.click("#suggest")
     page.wait_for_selector("#instances .instance.proposed")
@@ -68,14 +72,24 @@ def test_suggest_then_accept_one_and_reject_another(live_app, live_server, page)
     assert instances_on_server(live_app, second) == []
 
 
-def test_without_a_trained_run_suggest_says_to_train_first(live_app, live_server, page):
-    frame_id, _ = object_frames(live_app)
+def test_without_a_trained_run_suggest_proposes_from_depth(live_app, live_server, page):
+    frame_id, bag = held_bag(live_app)
     sign_in(page, live_app, live_server, username="ann", role="annotator")
     open_frame(page, live_server, frame_id)
-    assert page.locator("#suggest-run option").all_inner_texts() == ["No trained run yet"]
+    assert page.locator("#suggest-source option").first.inner_text() == "Auto (depth)"
+    assert page.locator("#suggest-hint").inner_text() == (
+        "No trained run yet: Auto proposes from depth. "
+        "Train one for shop: the Training page, or flask egonet train --activities shop")
     page.click("#suggest")
-    message = page.locator("#message")
-    message.wait_for(state="visible")
-    assert message.inner_text().startswith("Suggest: Train a model first:")
-    assert page.evaluate("window.labelPage.instances().length") == 0
-    screenshot(page, "suggest-no-run")
+    page.wait_for_selector("#instances .instance.proposed")
+    settle(page)
+    assert page.locator("#instances .proposal-tag").inner_text() == "proposed by depth"
+    assert "depth proposed 1 object" in page.locator("#suggest-result").inner_text()
+    (proposal,) = page.evaluate("window.labelPage.instances()")
+    assert abs(proposal["area"] - bag.sum()) < 0.1 * bag.sum()  # the bag the hand holds
+    screenshot(page, "suggest-depth")
+    page.click("#instances .accept-proposal")
+    page.wait_for_selector("#instances .instance.proposed", state="detached")
+    with live_app.app_context():
+        annotation = db.session.execute(db.select(Annotation).filter_by(frame_id=frame_id)).scalar_one()
+        assert [(i.key, i.proposal_source) for i in annotation.instances] == [(proposal["key"], None)]

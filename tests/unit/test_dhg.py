@@ -137,7 +137,7 @@ def test_steep_pitch_is_not_read_as_looking_up_at_the_wall():
 
 def _normals(depth, K):
     valid = np.isfinite(depth) & (depth > 0)
-    x, y = dhg._normalised_coords(K, depth.shape)
+    x, y = dhg.normalised_coords(K, depth.shape)
     normals, _, _ = dhg._plane_normals(depth.astype(np.float64), valid, x, y)
     return normals
 

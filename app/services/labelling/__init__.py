@@ -11,7 +11,8 @@ the server-side GrabCut sessions that help draw it; import it from here.
     * ``masks``: masks as COCO RLE and PNG, checked before they are decoded;
     * ``propagation``: carrying an annotation to the next / from the previous
       frame of its sequence, and the sequence's filmstrip;
-    * ``suggest``: a trained run's proposals ("Suggest"), accepting them, batches;
+    * ``suggest``: proposals ("Suggest"), accepting them, batches;
+    * ``proposers``: who proposes: a trained run, or depth, handled, saliency (no run needed);
     * ``regions``: the regions of a probability map that Suggest proposes.
 """
 
@@ -52,18 +53,17 @@ from app.services.labelling.propagation import (
     filmstrip,
     propagate_to_next,
 )
+from app.services.labelling.proposers import SOURCES as SUGGEST_SOURCES
+from app.services.labelling.proposers import SuggestProblem, resolve_run, source_choices, suggestion_runs
 from app.services.labelling.suggest import (
     BatchReport,
     Queued,
     Suggestion,
-    SuggestProblem,
     accept_proposal,
     queue_suggestions,
-    resolve_run,
     suggest_frame,
     suggest_frames,
     suggest_from_page,
-    suggestion_runs,
 )
 from app.services.labelling.regions import proposal_regions
 from app.services.labelling.presence import HEARTBEAT_S, PRESENCE_TTL_S, leave, mark_present, others_on
@@ -93,6 +93,7 @@ __all__ = [
     "Filmstrip",
     "Queued",
     "Rle",
+    "SUGGEST_SOURCES",
     "SuggestProblem",
     "Suggestion",
     "accept_proposal",
@@ -135,6 +136,7 @@ __all__ = [
     "review_annotation",
     "review_queue",
     "save_annotation",
+    "source_choices",
     "stroke_pixels",
     "suggest_frame",
     "suggest_frames",

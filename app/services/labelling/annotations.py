@@ -22,7 +22,7 @@ acceptance. Nothing demotes a finished annotation silently. (A reviewer may
 fix a done annotation's masks before deciding: ``review.fix_annotation``.)
 Marking it done lets go of the GrabCut sessions of instances it no longer has.
 
-Proposals. An instance a model proposed (``suggest``) keeps its mark through
+Proposals. An instance Suggest proposed (``suggest``) keeps its mark through
 saves that bring its key with the same mask; a save that changes its mask
 (paint, erase, a GrabCut step) clears the mark, as does accepting it. An
 annotation with proposals still marked cannot be marked done: the annotator
@@ -106,19 +106,20 @@ def check_key(key: str, *, field: str = "instance") -> str:
 @dataclass
 class InstanceSpec:
     """One instance of a save, with its mask already stored (and, for a
-    model's proposal, the run and checkpoint that proposed it)."""
+    proposal, its source and the run and checkpoint that proposed it)."""
 
     key: str | None
     kind: InstanceKind | None
     label: str | None
     mask_path: str
     mask: np.ndarray
+    proposal_source: str | None = None
     proposed_by_run_id: int | None = None
     proposed_by_checkpoint_id: int | None = None
 
     @property
     def proposed(self) -> bool:
-        return self.proposed_by_run_id is not None
+        return self.proposal_source is not None
 
 
 def save_annotation(frame: Frame, user: User, data: dict) -> Annotation:
@@ -313,8 +314,8 @@ def _write(
         db.session.add(annotation)
         changed = True
     else:
-        old = [(i.key, i.kind, i.label, i.mask_path, i.proposed_by_run_id) for i in annotation.instances]
-        new = [(s.key, s.kind, s.label, s.mask_path, s.proposed_by_run_id) for s in specs]
+        old = [(i.key, i.kind, i.label, i.mask_path, i.proposal_source) for i in annotation.instances]
+        new = [(s.key, s.kind, s.label, s.mask_path, s.proposal_source) for s in specs]
         changed = old != new or annotation.no_action_object != no_action_object
     if proposed_by is not None:
         annotation.proposed_by_run_id, annotation.proposed_by_checkpoint_id = proposed_by
@@ -337,7 +338,8 @@ def _carry_marks(annotation: Annotation, specs: list[InstanceSpec]) -> None:
         old = marked.get(spec.key)
         if spec.proposed or old is None or old.mask_path != spec.mask_path:
             continue
-        spec.proposed_by_run_id, spec.proposed_by_checkpoint_id = old.proposed_by_run_id, old.proposed_by_checkpoint_id
+        for name in Instance.UNMARKED:
+            setattr(spec, name, getattr(old, name))
 
 
 def _commit(annotation: Annotation, frame: Frame, user: User, specs: list[InstanceSpec], *, changed: bool) -> None:
@@ -362,6 +364,7 @@ def _commit(annotation: Annotation, frame: Frame, user: User, specs: list[Instan
                         kind=spec.kind,
                         label=spec.label,
                         mask_path=spec.mask_path,
+                        proposal_source=spec.proposal_source,
                         proposed_by_run_id=spec.proposed_by_run_id,
                         proposed_by_checkpoint_id=spec.proposed_by_checkpoint_id,
                     )

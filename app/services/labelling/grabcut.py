@@ -486,7 +486,7 @@ def _operate_locked(frame: Frame, user: User, key: str, apply: Callable[[GrabCut
 
 
 def _clear_proposal(frame_id: int, user_id: int, key: str) -> None:
-    """The object was edited: it is no longer a model's untouched proposal.
+    """The object was edited: it is no longer an untouched proposal.
 
     Its own transaction, after the session's: holding the session's row and
     then waiting for instance rows (which a save replaces) could deadlock
@@ -498,8 +498,8 @@ def _clear_proposal(frame_id: int, user_id: int, key: str) -> None:
     db.session.execute(
         db.update(Instance)
         .where(Instance.annotation_id.in_(own), Instance.key == key,
-               Instance.proposed_by_run_id.is_not(None))
-        .values(proposed_by_run_id=None, proposed_by_checkpoint_id=None)
+               Instance.proposal_source.is_not(None))
+        .values(Instance.UNMARKED)
         .execution_options(synchronize_session=False)
     )
     db.session.commit()

@@ -192,7 +192,9 @@ def _shared_paths(paths: set[str], run_id: int) -> set[str]:
 
 
 def _proposal_refs(run_id: int, checkpoint_ids: list[int]):
-    """The annotation and instance columns that name this run or its checkpoints as proposer."""
+    """The annotation and instance columns that name this run or its checkpoints as proposer
+    (its pending proposals first lose their mark: they become ordinary instances)."""
+    yield Instance, "proposal_source", Instance.proposed_by_run_id == run_id
     for model in (Annotation, Instance):
         yield model, "proposed_by_run_id", model.proposed_by_run_id == run_id
         yield model, "proposed_by_checkpoint_id", model.proposed_by_checkpoint_id.in_(checkpoint_ids)
