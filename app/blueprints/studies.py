@@ -11,7 +11,7 @@ study's definition file.
 
 import json
 
-from flask import Blueprint, Response, flash, redirect, render_template, request, stream_with_context, url_for
+from flask import Blueprint, Response, current_app, flash, redirect, render_template, request, stream_with_context, url_for
 from flask_login import current_user
 from wtforms import SelectChoice
 
@@ -22,6 +22,7 @@ from app.models import Activity, Role
 from app.models.studies import ANSWERED, EntryKind, FrameKind, Participant, Study, StudyFrame, Trial
 from app.security import roles
 from app.services import ground_truth, studies
+from app.throttle import clear_entry_lock, entry_locks, locked_s
 
 bp = Blueprint("studies", __name__, url_prefix="/studies")
 
@@ -215,6 +216,8 @@ def _detail(study: Study, form: ParticipantsForm, status: int = 200):
         exports=studies.EXPORTS,
         format_code=studies.format_code,
         grace=studies.LATE_GRACE_S,
+        locks=[(row, locked_s(row)) for row in entry_locks(study.id)],
+        lock_budget=current_app.config["RATELIMIT_ENTRY_FAILURES"],
     ), status
 
 
@@ -259,6 +262,15 @@ def set_active(study_id: int, participant_id: int):
     studies.set_active(person, value == "1")
     flash(f"{person.label} {'activated' if value == '1' else 'deactivated'}.")
     return redirect(url_for("studies.detail", study_id=study.id) + "#participants")
+
+
+@bp.post("/<int:study_id>/entry-locks/<int:lock_id>/clear")
+@roles(Role.ADMIN)
+def clear_lock(study_id: int, lock_id: int):
+    """Forget the failed entries counted for one address (this study's, or the shared form's), lifting its lock."""
+    row = clear_entry_lock(_study(study_id).id, lock_id)
+    flash(f"Failed entries from {row.address} forgotten: it may enter again.")
+    return redirect(url_for("studies.detail", study_id=study_id) + "#entry-locks")
 
 
 @bp.get("/<int:study_id>/participants/<int:participant_id>")
