@@ -228,6 +228,7 @@ class DefinitionFileForm(Form):
 class ParticipantsForm(Form):
     count = IntegerField("How many", default=5, validators=[InputRequired(), NumberRange(1, 500)])
     entry = SelectField("Entry", choices=[SelectChoice("code", "access codes"), SelectChoice("link", "single-use links (and codes)")], default="code")
+    pilot = BooleanField("Pilot (marked in exports, left out of scores and the cap)")
 
 
 class CodeForm(Form):

@@ -22,7 +22,7 @@ a trial with its clock running.
 
 import re
 
-from flask import Blueprint, g, redirect, render_template, request, send_file, url_for
+from flask import Blueprint, redirect, render_template, request, send_file, url_for
 from flask_login import current_user, login_user
 from werkzeug.wrappers import Response
 
@@ -33,7 +33,7 @@ from app.models import Role
 from app.models.studies import EventKind, FrameKind, Participant, Study, Trial
 from app.security import CONTENT_SECURITY_POLICY, public, roles
 from app.services import media, studies
-from app.throttle import address, arrivals_limit, failed, failures_limit, limiter, too_many_attempts
+from app.throttle import entry_attempts
 from app.validation import Bool, Float, Int, List, Obj, Str, json_body
 
 bp = Blueprint("study", __name__, url_prefix="/s")
@@ -82,20 +82,6 @@ ENVIRONMENT = {
     "touch": Bool(default=None, nullable=True),
 }
 TIME_ZONE = re.compile(r"[A-Za-z0-9_+\-/]{1,64}")
-
-
-# Wrong codes and unknown links count together, per address; past the limit
-# the entry form and links answer 429 until the window ends. A success does
-# not forgive earlier failures: with one code of their own, a guesser could
-# otherwise reset the count at will.
-guesses = limiter.shared_limit(
-    failures_limit, scope="study-entry", key_func=address, deduct_when=failed, error_message=too_many_attempts
-)
-# Admissions through an open link, per address: each makes a participant and their trials.
-arrivals = limiter.limit(
-    arrivals_limit, key_func=address, methods=["POST"], deduct_when=lambda response: g.get("admitted", False),
-    error_message=too_many_attempts,
-)  # fmt: skip
 
 
 @bp.after_request
@@ -164,7 +150,7 @@ def _enter(participant: Participant):
 
 @bp.route("/", methods=["GET", "POST"])
 @public
-@guesses
+@entry_attempts
 def entry():
     if request.method == "GET" and current_user.is_authenticated and current_user.role is Role.PARTICIPANT:
         participant = studies.participant_of(current_user)
@@ -185,7 +171,7 @@ def entry():
 
 @bp.route("/l/<token>", methods=["GET", "POST"])
 @public
-@guesses
+@entry_attempts
 def link(token: str):
     """A single-use link: GET shows the Start button, the POST it sends signs in and uses the link."""
     participant = studies.link_participant(token)
@@ -203,8 +189,7 @@ def link(token: str):
 
 @bp.route("/o/<open_token>", methods=["GET", "POST"])
 @public
-@guesses
-@arrivals
+@entry_attempts
 def open_link(open_token: str):
     """The study's open link: GET says what the study is (or that it is full, paused or closed); its Start
     (a POST carrying the platform's parameters) admits, or resumes the participant with the same external id
@@ -236,7 +221,6 @@ def open_link(open_token: str):
         if exc.status == 400:
             raise
         return _refused(exc)
-    g.admitted = known is None
     return _sign_in(participant)
 
 

@@ -2,8 +2,9 @@
 
 List, create (from the builder's form or a definition file), edit before
 anyone entered, duplicate, delete, open, pause and close studies; add
-participants (codes in bulk or single-use links), deactivate them, follow
-their progress and checks; look at each participant's soft masks and the
+participants (codes in bulk or single-use links, or pilots), deactivate them
+or delete their data when they withdraw, follow their progress and checks,
+lift an address's entry lock; look at each participant's soft masks and the
 mean map per frame over the frame (the paper's Fig. 5), and export the
 results, the participants (codes, status, completion codes) and the
 study's definition file.
@@ -11,7 +12,7 @@ study's definition file.
 
 import json
 
-from flask import Blueprint, Response, flash, redirect, render_template, request, stream_with_context, url_for
+from flask import Blueprint, Response, current_app, flash, redirect, render_template, request, stream_with_context, url_for
 from flask_login import current_user
 from wtforms import SelectChoice
 
@@ -22,6 +23,7 @@ from app.models import Activity, Role
 from app.models.studies import ANSWERED, EntryKind, FrameKind, Participant, Study, StudyFrame, Trial
 from app.security import roles
 from app.services import ground_truth, studies
+from app.throttle import clear_entry_lock, entry_locks, locked_s
 from egonet.io import decode_json
 
 bp = Blueprint("studies", __name__, url_prefix="/studies")
@@ -216,6 +218,8 @@ def _detail(study: Study, form: ParticipantsForm, status: int = 200):
         exports=studies.EXPORTS,
         format_code=studies.format_code,
         grace=studies.LATE_GRACE_S,
+        locks=[(row, locked_s(row)) for row in entry_locks(study.id)],
+        lock_budget=current_app.config["RATELIMIT_ENTRY_FAILURES"],
     ), status
 
 
@@ -232,11 +236,14 @@ def add_participants(study_id: int):
     form = ParticipantsForm()
     if form.validate_on_submit():
         try:
-            created = studies.add_participants(study, count=form.count.data, entry=EntryKind(form.entry.data))
+            created = studies.add_participants(
+                study, count=form.count.data, entry=EntryKind(form.entry.data), pilot=form.pilot.data
+            )
         except studies.StudyProblem as exc:
             form.count.errors = [*form.count.errors, str(exc)]
         else:
-            flash(f"{len(created)} participant{'s' if len(created) != 1 else ''} added: download their codes as participants.csv.")
+            kind = "pilot" if form.pilot.data else "participant"
+            flash(f"{len(created)} {kind}{'s' if len(created) != 1 else ''} added: download their codes as participants.csv.")
             return redirect(url_for("studies.detail", study_id=study.id) + "#participants")
     return _detail(study, form, 400)
 
@@ -271,6 +278,26 @@ def release(study_id: int, participant_id: int):
     studies.release(person)
     flash(f"{person.label} can continue in a new browser: they open the study's link again.")
     return redirect(url_for("studies.detail", study_id=study.id) + "#participants")
+@bp.post("/<int:study_id>/entry-locks/<int:lock_id>/clear")
+@roles(Role.ADMIN)
+def clear_lock(study_id: int, lock_id: int):
+    """Forget the failed entries counted for one address (this study's, or the shared form's), lifting its lock."""
+    row = clear_entry_lock(_study(study_id).id, lock_id)
+    flash(f"Failed entries from {row.address} forgotten: it may enter again.")
+    return redirect(url_for("studies.detail", study_id=study_id) + "#entry-locks")
+
+
+@bp.post("/<int:study_id>/participants/<int:participant_id>/withdraw")
+@roles(Role.ADMIN)
+def withdraw(study_id: int, participant_id: int):
+    """Delete a participant's data on their request; ``confirm`` must repeat their label (``P03``)."""
+    study = _study(study_id)
+    person = _person(study, participant_id)
+    if request.form.get("confirm", "").strip().upper() != person.label:
+        raise Problem(f"type {person.label} to confirm the withdrawal", fields={"confirm": f"must be {person.label}"})
+    deleted = studies.withdraw(person, by=current_user._get_current_object())
+    flash(f"{person.label} withdrawn: {deleted} trial{'s' if deleted != 1 else ''} and their clicks, events and maps deleted.")
+    return redirect(url_for("studies.participant", study_id=study.id, participant_id=person.id))
 
 
 @bp.get("/<int:study_id>/participants/<int:participant_id>")

@@ -1,4 +1,4 @@
-"""Human studies: studies, their frames and conditions, participants, trials, clicks and events.
+"""Human studies: studies, their frames and conditions, participants, trials, clicks, events and failed entries.
 
 A study draws frames (``StudyFrame``) once, when it is created (or edited
 before anyone entered): the timed part's frames (``kind`` main), practice
@@ -15,7 +15,7 @@ import enum
 from datetime import datetime
 from typing import Any
 
-from sqlalchemy import JSON, Float, ForeignKey, String, Text, UniqueConstraint
+from sqlalchemy import JSON, Float, ForeignKey, String, Text, UniqueConstraint, false
 from sqlalchemy.orm import Mapped, mapped_column, relationship
 
 from app.models.base import Base, UTCDateTime, enum_type, utcnow
@@ -196,7 +196,11 @@ class Participant(Base):
     ``platform`` says which) and ``external`` its other parameters; the same
     id twice is the same participant. ``environment`` is what the page
     reported of the screen, window, pixel ratio and time zone.
-    ``completion_code`` is the code given at the end.
+    ``completion_code`` is the code given at the end. A ``pilot`` is staff
+    trying the study: marked in every export, left out of scores by default,
+    taking no place under the cap. A withdrawn participant's answers were
+    deleted on request (``withdrawn_at`` by ``withdrawn_by``); the row stays
+    so that counts stay honest.
     """
 
     __tablename__ = "study_participant"
@@ -227,10 +231,14 @@ class Participant(Base):
     comprehension_attempts: Mapped[int] = mapped_column(default=0)
     comprehension_passed_at: Mapped[datetime | None] = mapped_column(UTCDateTime())
     completion_code: Mapped[str | None] = mapped_column(String(64))
+    pilot: Mapped[bool] = mapped_column(default=False, server_default=false())
+    withdrawn_at: Mapped[datetime | None] = mapped_column(UTCDateTime())
+    withdrawn_by_id: Mapped[int | None] = mapped_column(ForeignKey("user.id"))
 
     study: Mapped[Study] = relationship(back_populates="participants")
     condition: Mapped[StudyCondition | None] = relationship()
-    user: Mapped[User] = relationship()
+    user: Mapped[User] = relationship(foreign_keys=[user_id])
+    withdrawn_by: Mapped[User | None] = relationship(foreign_keys=[withdrawn_by_id])
     trials: Mapped[list["Trial"]] = relationship(
         back_populates="participant", order_by="Trial.position", cascade="all, delete-orphan", passive_deletes=True
     )
@@ -323,3 +331,20 @@ class TrialEvent(Base):
     detail: Mapped[dict[str, Any]] = mapped_column(JSON, default=dict)
 
     trial: Mapped[Trial] = relationship(back_populates="events")
+
+
+class EntryFailures(Base):
+    """Failed attempts to enter a study from one address, counted in a fixed window since ``since``.
+
+    ``study_id`` is the study the attempts named (None: the shared code form
+    or an unknown link). ``app.throttle`` counts and checks these; staff see
+    and clear them on the study's page.
+    """
+
+    __tablename__ = "study_entry_failures"
+
+    id: Mapped[int] = mapped_column(primary_key=True)
+    study_id: Mapped[int | None] = mapped_column(ForeignKey("study.id", ondelete="CASCADE"), index=True)
+    address: Mapped[str] = mapped_column(String(64), index=True)
+    failures: Mapped[int] = mapped_column(default=0)
+    since: Mapped[datetime] = mapped_column(UTCDateTime(), default=utcnow)

@@ -9,7 +9,8 @@ and score them under any convention, so a later report with the same inputs
 reads the file back instead of scoring the maps again.
 
 Files are named by a hash of everything the job depends on and of
-:data:`SCORER_VERSION`. Version 1 stored per-activity totals as ``.json``;
+:data:`SCORER_VERSION`, a participant's also by their id (so that their
+withdrawal deletes them). Version 1 stored per-activity totals as ``.json``;
 those files have other names and are never read again (delete them at
 will). A file that cannot be read, or holds something else than expected,
 is scored again and rewritten.
@@ -98,7 +99,9 @@ class StatsBuilder:
 def cache_path(key: dict[str, Any]) -> Path:
     """Where the statistics of a job with this key live."""
     digest = hashlib.sha256(json.dumps({"scorer": SCORER_VERSION, **key}, sort_keys=True).encode()).hexdigest()
-    return Path(current_app.config["CACHE_ROOT"]) / "scores" / f"{digest}.npz"
+    # A participant's files carry their id, so that their withdrawal finds them (forget_participant).
+    prefix = f"participant{key['participant']}-" if "participant" in key else ""
+    return Path(current_app.config["CACHE_ROOT"]) / "scores" / f"{prefix}{digest}.npz"
 
 
 def read_cached(path: Path, thresholds: int) -> tuple[dict[str, FrameStats], list[str]] | None:
@@ -145,3 +148,11 @@ def _load(data: Any, i: int, thresholds: int) -> FrameStats:
     if ids.size and np.any(np.diff(ids) <= 0):
         raise ValueError("frame ids out of order")
     return FrameStats(ids, activities.astype(str), counts, answered.reshape(ids.shape))
+
+
+def forget_participant(participant_id: int) -> int:
+    """Delete the cached statistics of a participant's maps (they withdrew); returns how many files went."""
+    paths = list((Path(current_app.config["CACHE_ROOT"]) / "scores").glob(f"participant{participant_id}-*.npz"))
+    for path in paths:
+        path.unlink(missing_ok=True)
+    return len(paths)

@@ -13,6 +13,7 @@ One module per concern; callers use the names re-exported here
 * ``overview``: the admin's progress tables and summaries.
 * ``masks``: the superpixel cache, soft masks (and their means), overlays.
 * ``exports``: CSV, JSON and mask PNGs.
+* ``withdrawal``: deleting one participant's data on request.
 * ``common``: ``StudyProblem``, the server clock ``now()``, ``LATE_GRACE_S`` and value checks.
 """
 
@@ -90,3 +91,4 @@ from app.services.studies.session import (
     use_link,
 )
 from app.services.studies.trials import MAX_CLICKS, MAX_EVENTS, Answer, ClientEvent, SessionState, session_state, submit, trial_frame
+from app.services.studies.withdrawal import withdraw

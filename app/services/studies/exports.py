@@ -3,7 +3,8 @@
 ``EXPORTS`` names what the admin pages offer; ``export_to_folder`` writes
 them all (the ``flask egonet study-export`` command). The masks' zip is
 produced piece by piece while it is sent. Every table carries the
-participant's external id and condition; trials say whether they were
+participant's external id, condition and whether they were a pilot (the
+zip's mean masks leave pilots out); trials say whether they were
 practice or catch trials and whether a click hit the true action-object
 (its ground-truth mask, or a catch trial's answer region); participants.csv
 has one row per participant with their status, checks, completion code
@@ -38,22 +39,22 @@ from app.spreadsheet import csv_text
 from egonet.clicks import MaskMean
 
 TRIAL_COLUMNS = [
-    "study_id", "participant", "participant_id", "external_id", "condition", "trial_id", "position", "kind", "activity",
+    "study_id", "participant", "participant_id", "external_id", "condition", "pilot", "trial_id", "position", "kind", "activity",
     "frame_id", "frame_source", "frame_width", "frame_height", "outcome", "clicks", "hit", "rt_ms", "shown_at",
     "submitted_at", "server_ms", "window_width", "window_height", "display_width", "display_height", "pixel_ratio",
     "sigma_px", "events",
 ]  # fmt: skip
 CLICK_COLUMNS = [
-    "study_id", "participant", "external_id", "condition", "trial_id", "position", "kind", "frame_id", "click", "x", "y",
+    "study_id", "participant", "external_id", "condition", "pilot", "trial_id", "position", "kind", "frame_id", "click", "x", "y",
     "inside", "rt_ms", "received_at",
 ]  # fmt: skip
 EVENT_COLUMNS = [
-    "study_id", "participant", "external_id", "condition", "trial_id", "position", "frame_id", "event", "kind",
+    "study_id", "participant", "external_id", "condition", "pilot", "trial_id", "position", "frame_id", "event", "kind",
     "client_ms", "server_at", "detail",
 ]  # fmt: skip
 PARTICIPANT_COLUMNS = [
     "study_id", "participant", "participant_id", "code", "entry", "platform", "external_id", "external", "condition",
-    "status", "active", "checks_passed", "comprehension", "catch_passed", "catch_total", "completion_code",
+    "pilot", "status", "active", "checks_passed", "comprehension", "catch_passed", "catch_total", "completion_code",
     "consented_at", "started_at", "finished_at", "end_reason", "answered", "total", "user_agent", "screen_width",
     "screen_height", "window_width", "window_height", "pixel_ratio", "time_zone", "touch",
 ]  # fmt: skip
@@ -95,7 +96,8 @@ def _settle(study: Study) -> None:
 
 def _who(trial: Trial) -> dict[str, Any]:
     participant = trial.participant
-    return {"participant": participant.label, "external_id": participant.external_id, "condition": condition_name(participant)}
+    return {"participant": participant.label, "external_id": participant.external_id, "condition": condition_name(participant),
+            "pilot": participant.pilot}  # fmt: skip
 
 
 def _iso(value: datetime | None) -> str | None:
@@ -208,7 +210,7 @@ def participant_rows(study: Study) -> list[dict[str, Any]]:
         rows.append({
             "study_id": study.id, "participant": p.label, "participant_id": p.id, "code": p.code, "entry": p.entry.value,
             "platform": p.platform, "external_id": p.external_id, "external": p.external or {}, "condition": condition_name(p),
-            "status": state.status, "active": p.user.active, "checks_passed": checked.passed,
+            "pilot": p.pilot, "status": state.status, "active": p.user.active, "checks_passed": checked.passed,
             "comprehension": checked.comprehension, "catch_passed": checked.catch_passed, "catch_total": checked.catch_total,
             "completion_code": p.completion_code, "consented_at": _iso(p.consented_at), "started_at": _iso(p.started_at),
             "finished_at": _iso(p.finished_at), "end_reason": p.end_reason.value if p.end_reason else None,
@@ -273,7 +275,7 @@ def _study_json(study: Study) -> dict[str, Any]:
 
 
 def _participant_json(study: Study, p: Participant, trials: list[Trial], row: dict[str, Any], truth: _Truth) -> dict[str, Any]:
-    left_out = ("study_id", "participant", "participant_id", "external_id", "condition", "clicks", "events")
+    left_out = ("study_id", "participant", "participant_id", "external_id", "condition", "pilot", "clicks", "events")
     return {
         "id": p.id,
         "label": p.label,
@@ -284,6 +286,9 @@ def _participant_json(study: Study, p: Participant, trials: list[Trial], row: di
         "external_id": p.external_id,
         "external": p.external or {},
         "condition": condition_name(p),
+        "pilot": p.pilot,
+        "withdrawn_at": _iso(p.withdrawn_at),
+        "withdrawn_by": p.withdrawn_by.username if p.withdrawn_by else None,
         "status": row["status"],
         "active": row["active"],
         "checks": checks_of([p])[p.id].as_dict(),
@@ -314,7 +319,7 @@ def mask_files(study: Study) -> Iterator[tuple[str, bytes]]:
     """The soft masks as 16-bit PNGs: one per answered trial and the mean per frame, plus a manifest.
 
     Names: ``P01/0001-frame12.png`` (participant, trial position, frame id)
-    and ``mean/frame12.png``; ``manifest.csv`` lists them.
+    and ``mean/frame12.png`` (pilots left out); ``manifest.csv`` lists them.
     """
     manifest = []
     means: dict[int, MaskMean] = defaultdict(MaskMean)
@@ -324,18 +329,19 @@ def mask_files(study: Study) -> Iterator[tuple[str, bytes]]:
         frame = trial.frame
         mask = trial_soft_mask(trial)
         name = f"{trial.participant.label}/{trial.position:04d}-frame{frame.id}.png"
-        manifest.append([name, trial.participant.label, trial.position, trial.kind.value, frame.id, frame.sequence.activity.name,
+        manifest.append([name, trial.participant.label, trial.participant.pilot, trial.position, trial.kind.value, frame.id, frame.sequence.activity.name,
                          frame.source_name, trial.outcome.value, ""])  # fmt: skip
         yield name, mask_png(mask)
-        means[frame.id].add(mask)
+        if not trial.participant.pilot:  # the means are data: pilots stay out
+            means[frame.id].add(mask)
     for sf in study.frames:
         frame = sf.frame
         if frame.id in means:
             name = f"mean/frame{frame.id}.png"
-            manifest.append([name, "mean", "", sf.kind.value, frame.id, frame.sequence.activity.name, frame.source_name, "",
+            manifest.append([name, "mean", "", "", sf.kind.value, frame.id, frame.sequence.activity.name, frame.source_name, "",
                              means[frame.id].count])  # fmt: skip
             yield name, mask_png(means[frame.id].mean())
-    header = ["file", "participant", "position", "kind", "frame_id", "activity", "frame_source", "outcome", "participants"]
+    header = ["file", "participant", "pilot", "position", "kind", "frame_id", "activity", "frame_source", "outcome", "participants"]
     yield "manifest.csv", csv_text(manifest, header).encode()
 
 

@@ -118,19 +118,19 @@ def mean_soft_mask(study_frame: StudyFrame) -> tuple[np.ndarray | None, int]:
     return mean.mean(), mean.count
 
 
-def study_participants(study_ids: Iterable[int], *, exclude_failed_checks: bool = False) -> list[Participant]:
-    """The participants of these studies, by study and number (for the scorer).
+def study_participants(
+    study_ids: Iterable[int], *, exclude_failed_checks: bool = False, include_pilots: bool = False
+) -> list[Participant]:
+    """The participants of these studies, by study and number (for the scorer); never those who withdrew.
 
     With ``exclude_failed_checks``, those who failed a comprehension or
-    attention check (``app.services.studies.checks``) are left out.
+    attention check (``app.services.studies.checks``) are left out; pilots
+    are, unless ``include_pilots``.
     """
-    people = list(
-        db.session.execute(
-            db.select(Participant)
-            .where(Participant.study_id.in_(list(study_ids)))
-            .order_by(Participant.study_id, Participant.number)
-        ).scalars()
-    )
+    query = db.select(Participant).where(Participant.study_id.in_(list(study_ids)), Participant.withdrawn_at.is_(None))
+    if not include_pilots:
+        query = query.where(Participant.pilot.is_(False))
+    people = list(db.session.execute(query.order_by(Participant.study_id, Participant.number)).scalars())
     if not exclude_failed_checks:
         return people
     results = checks_of(people)

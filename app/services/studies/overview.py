@@ -42,7 +42,9 @@ def progress(participant: Participant) -> Progress:
     if participant.started_at is not None:
         end = participant.finished_at or min(now(), participant.deadline)
         used = max(0.0, (end - participant.started_at).total_seconds())
-    if not participant.user.active:
+    if participant.withdrawn_at is not None:
+        status = "withdrawn"
+    elif not participant.user.active:
         status = "deactivated"
     elif participant.finished_at is not None:
         status = participant.end_reason.value.replace("_", " ")

@@ -144,11 +144,12 @@ def by_external_id(study: Study, external_id: str | None) -> Participant | None:
 
 
 def _holding():
-    """The participants who hold a place: active accounts that did not decline."""
+    """The participants who hold a place: active accounts that did not decline, pilots left out."""
     return (
         db.select(Participant)
         .join(User, Participant.user)
         .where(User.active.is_(True), or_(Participant.end_reason.is_(None), Participant.end_reason != EndReason.DECLINED))
+        .where(Participant.pilot.is_(False))
     )
 
 
@@ -269,11 +270,13 @@ def _balanced(conditions: list[StudyCondition], counts: dict[int, int]) -> Study
     return min(conditions, key=lambda c: (counts.get(c.id, 0), c.position))
 
 
-def add_participants(study: Study, *, count: int, entry: EntryKind | str = EntryKind.CODE) -> list[Participant]:
+def add_participants(
+    study: Study, *, count: int, entry: EntryKind | str = EntryKind.CODE, pilot: bool = False
+) -> list[Participant]:
     """Create ``count`` participants (codes; with ``entry="link"`` also single-use links), each with their trials.
 
     Conditions are assigned balanced; staff's codes are not limited by the
-    cap or the quotas. One transaction.
+    cap or the quotas. ``pilot``: staff trying the study (see ``Participant``). One transaction.
 
     Raises:
         StudyProblem: for a bad count or entry kind, or when someone else
@@ -294,6 +297,7 @@ def add_participants(study: Study, *, count: int, entry: EntryKind | str = Entry
         if condition is not None:
             counts[condition.id] = counts.get(condition.id, 0) + 1
         participant = _new_participant(study, entry=entry, condition=condition, number=_next_number(study, created))
+        participant.pilot = bool(pilot)
         db.session.add(participant)
         created.append(participant)
     try:
@@ -412,6 +416,8 @@ def new_code() -> str:
 
 def set_active(participant: Participant, active: bool) -> Participant:
     """Deactivate a participant (their code, link and session stop working; their place is freed) or activate them again."""
+    if active and participant.withdrawn_at is not None:
+        raise StudyProblem(f"{participant.label} has withdrawn: their data is gone", status=409)
     participant.user.active = bool(active)
     participant.user.end_sessions()
     db.session.commit()
