@@ -226,7 +226,7 @@ def open_link(open_token: str):
 
 @bp.get("/o/<open_token>/example")
 @public
-@guesses
+@entry_attempts
 def open_example(open_token: str):
     """The frame an MTurk preview shows with the instructions, before anyone is admitted (no ground truth)."""
     example = studies.example_frame(studies.open_link_study(open_token))
