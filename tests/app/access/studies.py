@@ -5,7 +5,8 @@ Participant routes admit the participant role, then ``_participant`` /
 user is not): 403. The link in ``url_values`` is already used: 410 for all,
 for the page (GET) and for its Start button (POST); the open link is a
 closed study's: 410 too. The admin's study has a participant who entered:
-it can be neither edited (a redirect to the study) nor deleted (409).
+it can be neither edited (a redirect to the study) nor deleted (409). No
+entry lock has ``lock_id`` (404), and a withdrawal lacks its confirmation (400).
 """
 
 from app.extensions import db
@@ -37,6 +38,8 @@ RULES = {
     "studies.set_status": (ADMIN, 400),
     "studies.set_active": (ADMIN, 400),
     "studies.release": (ADMIN, 302),
+    "studies.clear_lock": (ADMIN, 404),
+    "studies.withdraw": (ADMIN, 400),
     "study.entry": (None, {"GET": 200, "POST": 400}),
     "study.link": (None, 410),
     "study.open_link": (None, 410),
@@ -102,4 +105,5 @@ def url_values(app, tmp_path) -> dict:
             "export_name": "trials.csv",
             "token": second.link_token,
             "open_token": closed.open_link_token,
+            "lock_id": 999_999,
         }
