@@ -1,7 +1,10 @@
 """Test-suite options shared by every folder.
 
 Slow and browser tests carry markers and are skipped unless ``--all`` is
-given (the README's test command and ``.ci/run`` give it).
+given (the README's test command and ``.ci/run`` give it). ``--all`` also
+spreads the tests over the machine's cores with pytest-xdist, a file to a
+worker at a time, unless ``-n`` says otherwise (``-n 0`` runs them in one
+process).
 """
 
 import functools
@@ -24,6 +27,15 @@ for name in ("EGONET_QUEUE_URL", "FLASK_QUEUE_URL"):
 
 def pytest_addoption(parser):
     parser.addoption("--all", action="store_true", help="also run tests marked slow or browser")
+
+
+@pytest.hookimpl(tryfirst=True)
+def pytest_cmdline_main(config):
+    """``--all`` without ``-n``: pytest-xdist on every core (its workers get ``-n`` unset too)."""
+    if config.getoption("--all") and getattr(config.option, "numprocesses", 0) is None and not hasattr(config, "workerinput"):
+        config.option.numprocesses = "auto"
+        if config.option.dist == "no":
+            config.option.dist = "loadfile"
 
 
 def pytest_collection_modifyitems(config, items):
