@@ -14,6 +14,8 @@ NAVIGATION = [
     ("Scores", "scores.index"),
     ("Users", "users.index"),
 ]
+# Blueprints whose pages belong under another area's tab (an export is made from the Label page).
+TAB_OF = {"exports": "label"}
 # The signed-in user's own page (their password), linked from their name in the top bar.
 ACCOUNT = "users.account"
 
@@ -31,6 +33,7 @@ def navigation() -> dict:
     items = []
     for label, endpoint in NAVIGATION:
         if _may_use(endpoint, role):
-            active = (request.endpoint or "").split(".")[0] == endpoint.split(".")[0] and request.endpoint != ACCOUNT
+            area = TAB_OF.get(request.blueprint, request.blueprint)
+            active = area == endpoint.split(".")[0] and request.endpoint != ACCOUNT
             items.append({"label": label, "url": url_for(endpoint), "active": active})
     return {"navigation": items, "account_url": url_for(ACCOUNT) if _may_use(ACCOUNT, role) else None}

@@ -8,8 +8,10 @@ const POLL_MS = 1000;
 export function progressText(state) {
   const frames = `${state.done} of ${state.total} frames`;
   if (state.status !== "done") return frames;
-  return `${frames}: ${state.annotations} annotations, ${state.instances} action-objects, ${formatBytes(state.size_bytes)}`;
+  return `${frames}: ${count(state.annotations, "annotation")}, ${count(state.instances, "action-object")}, ${formatBytes(state.size_bytes)}`;
 }
+
+const count = (n, noun) => `${n} ${noun}${n === 1 ? "" : "s"}`;
 
 export function formatBytes(bytes) {
   if (!bytes) return "0 Bytes";

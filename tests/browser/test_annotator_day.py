@@ -230,6 +230,7 @@ def test_an_annotators_day_then_review_and_export(live_app, live_server, browser
     with live_app.app_context():
         exchange.build_export(int(rev.url.rsplit("/", 1)[1]))
     rev.wait_for_selector("#export-job[data-status='done']")
+    assert rev.inner_text("nav a.active") == "Label"  # an export is the Label area's page
     shot(rev, "export-done")
     with rev.expect_download() as info:
         rev.click("#export-download")

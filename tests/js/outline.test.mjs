@@ -84,6 +84,10 @@ test("an export's progress line", () => {
     progressText({ status: "done", done: 10, total: 10, annotations: 12, instances: 15, size_bytes: 2_345_678 }),
     "10 of 10 frames: 12 annotations, 15 action-objects, 2.3 MB",
   );
+  assert.equal(
+    progressText({ status: "done", done: 1, total: 1, annotations: 1, instances: 1, size_bytes: 1500 }),
+    "1 of 1 frames: 1 annotation, 1 action-object, 1.5 kB",
+  );
   assert.equal(formatBytes(999), "999 Bytes");
 });
 
