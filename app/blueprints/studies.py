@@ -23,6 +23,7 @@ from app.models import Activity, Role
 from app.models.studies import ANSWERED, EntryKind, FrameKind, Participant, Study, StudyFrame, Trial
 from app.security import roles
 from app.services import ground_truth, studies
+from app.services.scoring.cache import forget_participant
 from app.throttle import clear_entry_lock, entry_locks, locked_s
 from egonet.io import decode_json
 
@@ -296,6 +297,7 @@ def withdraw(study_id: int, participant_id: int):
     if request.form.get("confirm", "").strip().upper() != person.label:
         raise Problem(f"type {person.label} to confirm the withdrawal", fields={"confirm": f"must be {person.label}"})
     deleted = studies.withdraw(person, by=current_user._get_current_object())
+    forget_participant(person.id)
     flash(f"{person.label} withdrawn: {deleted} trial{'s' if deleted != 1 else ''} and their clicks, events and maps deleted.")
     return redirect(url_for("studies.participant", study_id=study.id, participant_id=person.id))
 

@@ -2,7 +2,8 @@
 
 What goes: their trials with the clicks and events (their soft masks are
 made from the clicks, so none can be drawn again), the browser details the
-page reported, and the score cache's files holding their maps. What stays:
+page reported (the score cache's files of their maps go too: the view asks
+scoring's cache, which imports this package, to forget them). What stays:
 the row (code, platform id, condition, times, completion code), so the
 counts of who arrived stay honest and a platform id that comes back is
 recognised; it is deactivated, so its session ends and its place is freed,
@@ -35,12 +36,6 @@ def withdraw(participant: Participant, *, by: User) -> int:
     participant.user_agent, participant.environment, participant.external = None, None, {}
     participant.withdrawn_at, participant.withdrawn_by = now(), by
     db.session.commit()
-    # Imported here: the scorer's modules import this package.
-    from app.services.scoring.cache import forget_participant
-
-    files = forget_participant(participant.id)
-    current_app.logger.warning(
-        "study %d: %s withdrawn by %s: %d trials and %d cached score files deleted",
-        participant.study_id, participant.label, by.username, deleted, files,
-    )  # fmt: skip
+    current_app.logger.warning("study %d: %s withdrawn by %s: %d trials deleted",
+                               participant.study_id, participant.label, by.username, deleted)
     return deleted
