@@ -143,6 +143,7 @@ function paint() {
     if (display.brightness !== 1 || display.contrast !== 1) ctx.filter = `brightness(${display.brightness}) contrast(${display.contrast})`;
     ctx.drawImage(base, 0, 0, W, H);
     ctx.filter = "none";
+    canvas.dataset.shown = currentView; // which image is on screen now (the buttons change before the next paint)
   } else {
     ctx.fillStyle = "#252a33";
     ctx.fillRect(0, 0, W, H);

@@ -31,7 +31,7 @@ from tests.app.test_suggest import network_like, stored_run
 from tests.browser.conftest import sign_in
 from tests.browser.test_label import drag, open_frame, settle
 from tests.browser.test_label_depth import iou, mask_of
-from tests.browser.test_label_workbench import COLOURS, edge_point, pixel, server_annotation
+from tests.browser.test_label_workbench import COLOURS, edge_point, server_annotation, wait_for_colour
 from tests.browser.test_propagate import wait_for_frame
 from tests.realdata import BACKREST, PRIMESENSE, chair_truth
 from tests.realdata import CHAIR_BOX as BOX
@@ -176,9 +176,8 @@ def test_an_annotators_day_then_review_and_export(live_app, live_server, browser
     page.wait_for_selector("#instances .instance.proposed", state="detached")
     settle(page)
     assert iou(mask_of(page, 1), cabinet) > 0.7
-    page.evaluate("() => new Promise(requestAnimationFrame)")
     for k in (0, 1):
-        assert pixel(page, *edge_point(page, k)) == list(COLOURS[k]), f"object {k + 1} is not outlined in its colour"
+        wait_for_colour(page, *edge_point(page, k), COLOURS[k])  # object k + 1 outlined in its own colour
 
     # Done: read-only; a stray box and Ctrl+Z change nothing.
     page.click("#mark-done")

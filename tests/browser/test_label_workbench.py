@@ -44,18 +44,33 @@ def dark_frames(live_app, n: int = 3) -> list[int]:
         return list(db.session.execute(db.select(Frame.id).order_by(Frame.index)).scalars())
 
 
+PIXEL_JS = """([x, y]) => {
+  const c = document.querySelector("#canvas");
+  const p = window.labelPage.clientPoint(x, y);
+  const r = c.getBoundingClientRect();
+  const d = window.devicePixelRatio || 1;
+  return Array.from(c.getContext("2d").getImageData(Math.floor((p.x - r.left) * d), Math.floor((p.y - r.top) * d), 1, 1).data.slice(0, 3));
+}"""
+
+
 def pixel(page, x: float, y: float) -> list[int]:
     """The canvas's colour on screen at image point (x, y)."""
-    return page.evaluate(
-        """([x, y]) => {
-          const c = document.querySelector("#canvas");
-          const p = window.labelPage.clientPoint(x, y);
-          const r = c.getBoundingClientRect();
-          const d = window.devicePixelRatio || 1;
-          return Array.from(c.getContext("2d").getImageData(Math.floor((p.x - r.left) * d), Math.floor((p.y - r.top) * d), 1, 1).data.slice(0, 3));
-        }""",
-        [x, y],
-    )
+    return page.evaluate(PIXEL_JS, [x, y])
+
+
+def wait_for_pixel(page, x: float, y: float, test: str, value: object) -> list[int]:
+    """Wait until the canvas's colour ``px`` at image point (x, y) passes ``test`` (JavaScript, with ``value``).
+
+    The canvas redraws on the browser's next frames; a test waits for what it asserts, never for a frame.
+    """
+    page.wait_for_function(f"([x, y, value]) => {{ const px = ({PIXEL_JS})([x, y]); return {test}; }}", arg=[x, y, value])
+    return pixel(page, x, y)
+
+
+def wait_for_colour(page, x: float, y: float, colour, *, equal: bool = True) -> None:
+    """Wait until the canvas at (x, y) shows ``colour`` (or, with ``equal=False``, any other colour)."""
+    same = "px.every((c, i) => c === value[i])"
+    wait_for_pixel(page, x, y, same if equal else f"!({same})", [int(c) for c in colour])
 
 
 def edge_point(page, k: int) -> tuple[float, float]:
@@ -146,28 +161,24 @@ def test_an_annotators_walk_through_the_workbench(live_app, live_server, browser
 
     # Every object outlined in its own colour, over the DHG too; one hidden, then shown again.
     page.keyboard.press("d")
-    page.wait_for_selector("[data-view='dhg'].active")
-    page.evaluate("() => new Promise(requestAnimationFrame)")
+    page.wait_for_selector("#canvas[data-shown='dhg']")
     for k in (0, 1):
-        assert pixel(page, *edge_point(page, k)) == list(COLOURS[k]), f"object {k + 1} is not outlined in its colour"
+        wait_for_colour(page, *edge_point(page, k), COLOURS[k])  # object k + 1 outlined in its own colour
     screenshot(page, "workbench-2-outlines-over-dhg-1280")
     page.locator("#instances .instance").nth(1).locator(".visibility").click()
-    page.evaluate("() => new Promise(requestAnimationFrame)")
-    assert pixel(page, *edge_point(page, 1)) != list(COLOURS[1])
+    wait_for_colour(page, *edge_point(page, 1), COLOURS[1], equal=False)
     page.keyboard.press("2")
     page.keyboard.press("v")
-    page.evaluate("() => new Promise(requestAnimationFrame)")
-    assert pixel(page, *edge_point(page, 1)) == list(COLOURS[1])
+    wait_for_colour(page, *edge_point(page, 1), COLOURS[1])
 
     # Brightness and contrast are for the eyes only.
     page.keyboard.press("d")
-    page.wait_for_selector("[data-view='rgb'].active")
+    page.wait_for_selector("#canvas[data-shown='rgb']")
     version = page.evaluate("window.labelPage.version")
     before = sum(pixel(page, 20, 200))
     page.locator("#brightness").fill("250")
     page.keyboard.press("Escape")  # the keyboard back to the page
-    page.evaluate("() => new Promise(requestAnimationFrame)")
-    assert sum(pixel(page, 20, 200)) > 2 * before
+    assert sum(wait_for_pixel(page, 20, 200, "px[0] + px[1] + px[2] > 2 * value", before)) > 2 * before
     assert page.evaluate("window.labelPage.version") == version and page.evaluate("window.labelPage.saveState") == "saved"
     screenshot(page, "workbench-3-brighter-1280")
 
