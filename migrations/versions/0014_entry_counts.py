@@ -31,7 +31,7 @@ def upgrade():
         sa.Column("wait_until", sa.DateTime(timezone=True), nullable=True),
         sa.ForeignKeyConstraint(["study_id"], ["study.id"], name=op.f("fk_study_entry_counts_study_id_study"), ondelete="CASCADE"),
         sa.PrimaryKeyConstraint("id", name=op.f("pk_study_entry_counts")),
-        sa.UniqueConstraint("scope", "address", "window", name=op.f("uq_study_entry_counts_scopeaddresswindow")),
+        sa.UniqueConstraint("scope", "address", "window", name=op.f("uq_study_entry_counts_scope_address_window")),
     )
     with op.batch_alter_table("study_entry_counts", schema=None) as batch_op:
         batch_op.create_index(batch_op.f("ix_study_entry_counts_study_id"), ["study_id"], unique=False)
