@@ -339,3 +339,31 @@ def test_staff_cannot_make_open_link_participants_by_hand(ctx, tmp_path, entry):
     with pytest.raises(studies.StudyProblem, match="arrive by themselves"):
         studies.add_participants(db.session.get(Study, ids["study"]), count=1, entry=entry)
     assert not db.session.get(Study, ids["study"]).frames_of(FrameKind.PRACTICE)
+
+
+def test_the_open_link_s_pages_and_refusals_may_be_framed_by_mturk_only(app_with, tmp_path):
+    """Review: "This study is full" was not frameable, so an MTurk worker saw a blocked frame. Every answer of the open
+    link may be framed by MTurk's sites (and no X-Frame-Options contradicts it); every other page by nobody."""
+    app = app_with(RATELIMIT_OPEN_ADMISSIONS=1)
+    study_id, token = open_study(app, tmp_path, open_link={"cap": 2})
+    mturk = "frame-ancestors https://workersandbox.mturk.com https://www.mturk.com"
+    browser = app.test_client()
+    answers = {
+        "page": browser.get(f"/s/o/{token}"),
+        "bad id": browser.get(f"/s/o/{token}", query_string={"workerId": "W1"}),
+        "admitted": browser.post(f"/s/o/{token}"),
+        "counted": app.test_client().post(f"/s/o/{token}"),  # the one past the budget sets a wait
+        "wait": app.test_client().post(f"/s/o/{token}"),
+        "full": app.test_client().get(f"/s/o/{token}"),
+    }
+    with app.app_context():
+        studies.set_status(db.session.get(Study, study_id), "closed")
+    answers["closed"] = app.test_client().get(f"/s/o/{token}")
+    assert {k: r.status_code for k, r in answers.items()} == {
+        "page": 200, "bad id": 400, "admitted": 302, "counted": 302, "wait": 429, "full": 409, "closed": 410}
+    assert b"This study is full" in answers["full"].data
+    for name, response in answers.items():
+        policy = response.headers["Content-Security-Policy"]
+        assert mturk in policy and "frame-ancestors 'none'" not in policy and "X-Frame-Options" not in response.headers, name
+    for other in (browser.get("/s/consent"), app.test_client().get("/s/"), app.test_client().get("/login")):
+        assert "frame-ancestors 'none'" in other.headers["Content-Security-Policy"] and other.headers["X-Frame-Options"] == "DENY"
