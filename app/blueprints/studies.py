@@ -4,7 +4,7 @@ List, create (from the builder's form or a definition file), edit before
 anyone entered, duplicate, delete, open, pause and close studies; add
 participants (codes in bulk or single-use links, or pilots), deactivate them
 or delete their data when they withdraw, follow their progress and checks,
-lift an address's entry lock; look at each participant's soft masks and the
+clear an address's entry count (ending its waits); look at each participant's soft masks and the
 mean map per frame over the frame (the paper's Fig. 5), and export the
 results, the participants (codes, status, completion codes) and the
 study's definition file.

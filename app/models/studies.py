@@ -1,4 +1,4 @@
-"""Human studies: studies, their frames and conditions, participants, trials, clicks, events and failed entries.
+"""Human studies: studies, their frames and conditions, participants, trials, clicks, events and entry counts.
 
 A study draws frames (``StudyFrame``) once, when it is created (or edited
 before anyone entered): the timed part's frames (``kind`` main), practice

@@ -219,3 +219,23 @@ def test_a_known_single_use_link_is_never_counted(app_with, tmp_path, clock):
     assert [app.test_client().get(f"/s/l/{token}").status_code for _ in range(5)] == [200] * 5
     with app.app_context():
         assert all(row.count == 0 for row in db.session.execute(db.select(EntryCount)).scalars())
+
+
+@pytest.mark.parametrize("value", ["1", -1, 11, True, 1.0])
+def test_trusted_proxies_must_be_a_small_whole_number(app_with, value):
+    with pytest.raises(RuntimeError, match="TRUSTED_PROXIES must be a whole number from 0 to 10"):
+        app_with(TRUSTED_PROXIES=value)
+
+
+def test_one_trusted_proxy_gives_the_address_it_saw(app_with, make_user):
+    """The proxy's own (last) X-Forwarded-For entry is the client; what the client wrote before it is ignored."""
+    app = app_with(TRUSTED_PROXIES=1, RATELIMIT_FAILURES=2, RATELIMIT_WINDOW="1 hour")
+    make_user("admin", "admin")
+
+    def log_in(chain: str, password: str = "wrong password") -> int:
+        client = app.test_client()
+        client.environ_base["HTTP_X_FORWARDED_FOR"] = chain
+        return client.login("admin", password).status_code
+
+    assert [log_in(f"192.0.2.{i}, 203.0.113.5") for i in range(3)] == [401, 401, 429]
+    assert log_in("203.0.113.5, 198.51.100.7", PASSWORD) == 302
