@@ -120,6 +120,7 @@ def password_attempts(key: Callable[[], str]) -> Callable:
             item = parse(f"{current_app.config['RATELIMIT_FAILURES']} per {current_app.config['RATELIMIT_WINDOW']}")
             ids = ("password", key())
             if not limiter.limiter.hit(item, *ids):
+                limiter.limiter.hit(item, *ids, cost=-1)  # refused unchecked: the count stays that of checked ones
                 return too_many(max(1, math.ceil(limiter.limiter.get_window_stats(item, *ids).reset_time - time.time())))
             response = current_app.make_response(view(**kwargs))
             if response.status_code < 400:

@@ -113,7 +113,7 @@ def test_the_docs_arithmetic_is_what_the_code_does(app_with, tmp_path, clock):
     years = 31**8 / (1000 * per_year)  # one of a 1,000-participant study's codes
     text = " ".join((DOCS / "security.md").read_text().split())
     assert (free, max_wait, window, most) == (200, 30, 900, 234)
-    for phrase in (f"the first {free}", f"at most {max_wait} s", f"at most {most} guesses per address every 15 minutes",
+    for phrase in (f"the first {free}", f"at most {max_wait} s", f"at most {most} guesses per address in each 15-minute window",
                    f"about once in {round(years, -1):.0f} years", f"{config['RATELIMIT_OPEN_ADMISSIONS']} newcomers"):
         assert phrase in text, phrase
 
