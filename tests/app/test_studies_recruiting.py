@@ -341,9 +341,10 @@ def test_staff_cannot_make_open_link_participants_by_hand(ctx, tmp_path, entry):
     assert not db.session.get(Study, ids["study"]).frames_of(FrameKind.PRACTICE)
 
 
-def test_the_open_link_s_pages_and_refusals_may_be_framed_by_mturk_only(app_with, tmp_path):
+def test_the_open_link_s_pages_and_refusals_may_be_framed_by_mturk_only(app, app_with, tmp_path):
     """Review: "This study is full" was not frameable, so an MTurk worker saw a blocked frame. Every answer of the open
     link may be framed by MTurk's sites (and no X-Frame-Options contradicts it); every other page by nobody."""
+    # (``app`` too: its teardown empties the tables this test's app fills.)
     app = app_with(RATELIMIT_OPEN_ADMISSIONS=1)
     study_id, token = open_study(app, tmp_path, open_link={"cap": 2})
     mturk = "frame-ancestors https://workersandbox.mturk.com https://www.mturk.com"
