@@ -1,13 +1,10 @@
 """Who reaches what in a study: participants see only their own session and frames, never ground truth."""
 
-import pytest
-
 from app.extensions import db
 from app.models import Annotation, User
 from app.models.studies import EntryKind, Participant, Study, Trial
 from app.services import media, studies
 from tests.app.access.studies import build_study
-from tests.app.conftest import PASSWORD
 
 JSON = {"Accept": "application/json"}
 
