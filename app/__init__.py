@@ -15,6 +15,7 @@ from pathlib import Path
 import cv2
 import threadpoolctl
 from flask import Flask
+from werkzeug.middleware.proxy_fix import ProxyFix
 from werkzeug.routing import IntegerConverter
 
 from app.limits import MAX_ID, MIN_SECRET_KEY_LENGTH, SECRET_KEY_FILE
@@ -154,6 +155,13 @@ def _default_config(instance: Path) -> dict:
         # costs 2-4x the CPU so).
         COMPUTE_THREADS=1,
         PRODUCTION=False,
+        # How many reverse proxies stand in front (0: none). Behind one, every
+        # request comes from the proxy's address: with TRUSTED_PROXIES=n the
+        # client's address and scheme are read from the n-th last entry of
+        # X-Forwarded-For / X-Forwarded-Proto (Werkzeug's ProxyFix), which the
+        # proxies append. Set it only to the number there really are: with more,
+        # a client could name any address it likes (docs/deployment.md).
+        TRUSTED_PROXIES=0,
     )
 
 
@@ -175,6 +183,11 @@ def _configure(app: Flask, test_config: dict | None) -> None:
     if not app.config.get("SECRET_KEY"):
         app.config["SECRET_KEY"] = instance_secret_key(instance)
     security.require_production_safety(app)
+    proxies = app.config["TRUSTED_PROXIES"]
+    if type(proxies) is not int or not 0 <= proxies <= 10:
+        raise RuntimeError(f"TRUSTED_PROXIES must be a whole number from 0 to 10 (the proxies in front), not {proxies!r}")
+    if proxies:
+        app.wsgi_app = ProxyFix(app.wsgi_app, x_for=proxies, x_proto=proxies)
     if app.config["COMPUTE_THREADS"] is not None:
         threadpoolctl.threadpool_limits(limits=int(app.config["COMPUTE_THREADS"]), user_api="blas")
         cv2.setNumThreads(int(app.config["COMPUTE_THREADS"]))

@@ -123,12 +123,13 @@ class CaffeLayer:
     end: int = 0
 
 
-def read_caffemodel(path: str | Path, *, progress: Progress | None = None) -> dict[str, CaffeLayer]:
+def read_caffemodel(path: str | Path, *, progress: Progress | None = None, name: str | None = None) -> dict[str, CaffeLayer]:
     """Every layer of a ``.caffemodel`` by name, blobs as arrays; no Caffe needed.
 
     Args:
         path: The ``.caffemodel`` file.
         progress: Called with ``(bytes read, file size)`` after each layer.
+        name: The file's name in messages (default: ``path``), e.g. an upload's name as its user knows it.
 
     Returns:
         ``{name: CaffeLayer}`` in file order (layers without parameters
@@ -136,19 +137,21 @@ def read_caffemodel(path: str | Path, *, progress: Progress | None = None) -> di
 
     Raises:
         EgonetError: The file cannot be read, is not a ``NetParameter``, is
-            truncated, a blob's data does not fill its shape, or a layer name
-            holds weights twice; the message names the file and the layer.
+            truncated, a blob's data does not fill its shape (or the shape is
+            impossible), or a layer name holds weights twice; the message
+            names the file and the layer.
 
     Example:
         >>> layers = read_caffemodel("deeplab.caffemodel")  # doctest: +SKIP
         >>> {name: [b.shape for b in layer.blobs] for name, layer in layers.items() if layer.blobs}  # doctest: +SKIP
     """
-    return _read(Path(path), progress=progress)[0]
+    return _read(Path(path), progress=progress, name=name)[0]
 
 
-def _read(path: Path, *, progress: Progress | None = None) -> tuple[dict[str, CaffeLayer], mmap.mmap]:
+def _read(path: Path, *, progress: Progress | None = None, name: str | None = None) -> tuple[dict[str, CaffeLayer], mmap.mmap]:
     """:func:`read_caffemodel`, and the mapped file its arrays view."""
-    buffer = _map(path)
+    shown = name or path  # the file in messages
+    buffer = _map(path, shown)
     size = len(buffer)
     layers: dict[str, CaffeLayer] = {}
     pos = 0
@@ -158,19 +161,24 @@ def _read(path: Path, *, progress: Progress | None = None) -> tuple[dict[str, Ca
             if wire != _BYTES or number not in (_NET_LAYER, _NET_LAYERS_V1):
                 continue
             start, end = value
-            layer = _layer(buffer, start, end, legacy=number == _NET_LAYERS_V1, path=path)
-            _add(layers, layer, path)
+            layer = _layer(buffer, start, end, legacy=number == _NET_LAYERS_V1, path=shown)
+            _add(layers, layer, shown)
             if progress is not None:
                 progress(end, size)
     except _Truncated:
         raise EgonetError(
-            f"{path}: truncated: the file ends inside {_last_layer(layers)} at byte {size:,} (a partial download?)",
+            f"{shown}: truncated: the file ends inside {_last_layer(layers)} at byte {size:,} (a partial download?)",
             field="path",
         ) from None
     except _WireError as exc:
-        raise EgonetError(f"{path}: not a Caffe .caffemodel (protobuf NetParameter): {exc}", field="path") from None
+        raise EgonetError(f"{shown}: not a Caffe .caffemodel (protobuf NetParameter): {exc}", field="path") from None
+    except EgonetError:
+        raise
+    except (ValueError, OverflowError) as exc:  # numpy's refusal of a shape no array can have (a dimension of 2**63, say)
+        raise EgonetError(f"{shown}: {_last_layer(layers)} has a blob of an impossible shape ({exc}): the file is damaged",
+                          field="path") from None
     if not any(layer.blobs for layer in layers.values()):
-        raise EgonetError(f"{path}: no layer holds weights: not a .caffemodel (a .prototxt, or another file?)", field="path")
+        raise EgonetError(f"{shown}: no layer holds weights: not a .caffemodel (a .prototxt, or another file?)", field="path")
     return layers, buffer
 
 
@@ -178,18 +186,18 @@ class _WireError(EgonetError):
     """Bytes that are not protobuf wire data."""
 
 
-def _map(path: Path) -> mmap.mmap:
+def _map(path: Path, shown: str | Path) -> mmap.mmap:
     try:
         with path.open("rb") as fh:
             if path.stat().st_size == 0:
-                raise EgonetError(f"{path}: the file is empty", field="path")
+                raise EgonetError(f"{shown}: the file is empty", field="path")
             # Copy-on-write: arrays viewing it are writable, and writing never reaches the file.
             return mmap.mmap(fh.fileno(), 0, access=mmap.ACCESS_COPY)
     except OSError as exc:
-        raise EgonetError(f"{path}: cannot read ({exc.strerror or exc})", field="path") from None
+        raise EgonetError(f"{shown}: cannot read ({exc.strerror or exc})", field="path") from None
 
 
-def _add(layers: dict[str, CaffeLayer], layer: CaffeLayer, path: Path) -> None:
+def _add(layers: dict[str, CaffeLayer], layer: CaffeLayer, path: str | Path) -> None:
     """A train/test net may repeat a name for each phase: keep the one with weights, refuse two."""
     if layer.name in layers and layers[layer.name].blobs:
         if layer.blobs:
@@ -243,7 +251,7 @@ def _field(buffer, pos: int, end: int) -> tuple[int, int, object, int]:
     raise _WireError(f"wire type {wire} (field {number}) at byte {pos:,}")
 
 
-def _layer(buffer, start: int, end: int, *, legacy: bool, path: Path) -> CaffeLayer:
+def _layer(buffer, start: int, end: int, *, legacy: bool, path: str | Path) -> CaffeLayer:
     """A ``LayerParameter`` (or legacy ``V1LayerParameter``) between ``start`` and ``end``."""
     name_field, type_field, blobs_field = (_V1_NAME, _V1_TYPE, _V1_BLOBS) if legacy else (_LAYER_NAME, _LAYER_TYPE, _LAYER_BLOBS)
     name, kind, blob_spans = None, "", []
@@ -264,7 +272,7 @@ def _layer(buffer, start: int, end: int, *, legacy: bool, path: Path) -> CaffeLa
     return CaffeLayer(name=name, type=kind, blobs=blobs, end=end)
 
 
-def _blob(buffer, start: int, end: int, *, layer: str, index: int, path: Path) -> np.ndarray:
+def _blob(buffer, start: int, end: int, *, layer: str, index: int, path: str | Path) -> np.ndarray:
     """A ``BlobProto``: its float data (packed, unpacked or double) shaped by ``shape`` or num/channels/height/width."""
     dims: list[int] | None = None
     legacy = [0, 0, 0, 0]
@@ -310,7 +318,7 @@ def _dims(buffer, start: int, end: int) -> list[int]:
     return dims
 
 
-def _packed(buffer, start: int, end: int, dtype: np.dtype, *, layer: str, path: Path) -> np.ndarray:
+def _packed(buffer, start: int, end: int, dtype: np.dtype, *, layer: str, path: str | Path) -> np.ndarray:
     if (end - start) % dtype.itemsize:
         raise EgonetError(f"{path}: layer {layer!r} has float data of {end - start} bytes: the file is damaged", field=layer)
     return np.frombuffer(buffer, dtype=dtype, count=(end - start) // dtype.itemsize, offset=start)
@@ -507,6 +515,7 @@ def checkpoint_from_caffemodel(
     size: tuple[int, int] = DEPLOY_SIZE,
     releases: Sequence[Release] = RELEASES,
     progress: Progress | None = None,
+    name: str | None = None,
 ) -> dict:
     """A checkpoint (``egonet.checkpoint`` format) of a released model, for everything that reads checkpoints.
 
@@ -522,25 +531,27 @@ def checkpoint_from_caffemodel(
         size: ``(H, W)`` frames are run at (the release's deploy size by default).
         releases: The releases to accept.
         progress: Called with ``(bytes done, file size)``.
+        name: The file's name, recorded and in messages (default: ``path``'s).
 
     Returns:
         The checkpoint dict (plain types and tensors; ``torch.save`` it).
     """
     path = Path(path)
-    model, release, digest = _load(path, releases=releases, progress=progress)
+    model, release, digest = _load(path, releases=releases, progress=progress, name=name)
     config = TrainConfig(model=release.model, model_options=dict(model.config.options), height=size[0], width=size[1],
                          epochs=1, augment=None, device="cpu")
-    released = {"release": release.key, "title": release.title, "file": path.name, "bytes": path.stat().st_size,
+    released = {"release": release.key, "title": release.title, "file": name or path.name, "bytes": path.stat().st_size,
                 "sha256": digest}
     return checkpoint_state(model, config, fold="released", train_keys=[], test_keys=[], epoch=0, iteration=0,
                             complete=True, metrics={}, history=[], extra={"released": released})
 
 
-def _load(path: str | Path, *, releases: Sequence[Release], progress: Progress | None) -> tuple[EgoNetModel, Release, str]:
+def _load(path: str | Path, *, releases: Sequence[Release], progress: Progress | None,
+          name: str | None = None) -> tuple[EgoNetModel, Release, str]:
     """Read, identify, build and copy; returns the model, its release and the file's SHA-256."""
     path = Path(path)
-    layers, buffer = _read(path)
-    release = identify_release(layers, releases=releases, path=path)
+    layers, buffer = _read(path, name=name)
+    release = identify_release(layers, releases=releases, path=name or path)
     model = release.build()
     digest = hashlib.sha256()
     done = 0

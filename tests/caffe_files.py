@@ -157,3 +157,12 @@ def selector_layers(release: Release, *, stream: str = "rgb", channel: int = 0, 
     values["fc10_sal"][0][1, 0, 0, 0] = gain
     values["fc10_sal"][1][1] = offset
     return release_layers(release, values)
+
+
+def write_lying_blob(path: str | Path, dims: Sequence[int]) -> Path:
+    """A ``.caffemodel`` whose one blob claims the shape ``dims`` and holds no data (a lie the reader must refuse)."""
+    blob = _delimited(7, _delimited(1, b"".join(_varint(d) for d in dims)))
+    layer = _delimited(1, b"conv1_1") + _delimited(2, b"Convolution") + _delimited(7, blob)
+    path = Path(path)
+    path.write_bytes(_delimited(1, b"EgoNet") + _delimited(100, layer))
+    return path

@@ -2,7 +2,8 @@
 
 Wrong passwords are throttled per account name and client address
 (app/throttle.py): after ``RATELIMIT_FAILURES`` failures in a row the form
-answers 429 until the window ends. Signing out ends the session on the
+answers 429 until the window ends, for that account from that address only
+(its owner elsewhere still signs in). Signing out ends the session on the
 server too: the user's session token is replaced, so a copy of the cookie
 (or of the remember-me cookie) stops working.
 """
@@ -18,7 +19,7 @@ from app.forms import Form
 from app.models import User
 from app.security import public
 from app.services.users import authenticate, record_sign_in, sign_out
-from app.throttle import address, failed, failures_limit, forgive, limiter, too_many_attempts
+from app.throttle import address, password_attempts
 
 bp = Blueprint("auth", __name__)
 
@@ -55,13 +56,12 @@ def sign_in(user: User, *, remember: bool = False) -> bool:
 
 @bp.route("/login", methods=["GET", "POST"])
 @public
-@limiter.limit(failures_limit, key_func=login_key, deduct_when=failed, methods=["POST"], error_message=too_many_attempts)
+@password_attempts(login_key)
 def login():
     form = LoginForm()
     if form.validate_on_submit():
         user = authenticate(form.username.data, form.password.data)
         if user is not None:
-            forgive()
             sign_in(user, remember=form.remember.data)
             record_sign_in(user)
             return redirect(safe_next(request.args.get("next")))

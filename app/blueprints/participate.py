@@ -9,8 +9,12 @@ platform's parameters such as ``PROLIFIC_PID``), which signs them in as
 their participant user. Opening a link shows a Start button; only pressing
 it (a POST) uses a single-use link or admits through the open link, so a
 link-preview bot that fetches it does neither. Wrong codes and unknown
-links are throttled per address, like log-in, and so are admissions through
-the open link (``app.throttle``). Every other page and call needs that
+links are throttled per address (whatever study the URL names), and so are
+newcomers' admissions through each study's open link, apart from codes
+(``app.throttle``): past a generous budget the address waits a little
+longer before each try, it is never locked out. The open link's pages,
+refusals included, may be framed by MTurk only (its HIT shows them);
+every other page is never framed. Every other page and call needs that
 sign-in (``@roles(Role.PARTICIPANT)``) and goes through ``_participant`` /
 ``_owned_trial``, which load the caller's own enrolment and trial and refuse
 anything else, so one participant can never reach another's session. The
@@ -33,6 +37,7 @@ from app.models import Role
 from app.models.studies import EventKind, FrameKind, Participant, Study, Trial
 from app.security import CONTENT_SECURITY_POLICY, public, roles
 from app.services import media, studies
+from app import throttle
 from app.throttle import entry_attempts
 from app.validation import Bool, Float, Int, List, Obj, Str, json_body
 
@@ -86,8 +91,11 @@ TIME_ZONE = re.compile(r"[A-Za-z0-9_+\-/]{1,64}")
 
 @bp.after_request
 def never_stored(response: Response) -> Response:
-    """after_request: no participant page, answer or frame is kept by the browser (see above)."""
+    """after_request: no participant page, answer or frame is kept by the browser; the open link's pages,
+    whatever they answer, may be framed by MTurk (see above)."""
     response.headers["Cache-Control"] = "no-store"
+    if request.endpoint == "study.open_link":
+        _set_policy(response, "frame-ancestors", studies.mturk_submit_hosts())
     return response
 
 
@@ -189,7 +197,6 @@ def link(token: str):
 
 @bp.route("/o/<open_token>", methods=["GET", "POST"])
 @public
-@entry_attempts
 def open_link(open_token: str):
     """The study's open link: GET says what the study is (or that it is full, paused or closed); its Start
     (a POST carrying the platform's parameters) admits, or resumes the participant with the same external id
@@ -203,21 +210,26 @@ def open_link(open_token: str):
     known = studies.by_external_id(study, arrival.external_id)
     same_browser = known is not None and current_user.is_authenticated and current_user.id == known.user_id
     if request.method == "GET":
-        if known is None:
-            reason = studies.availability(study)
-        else:
-            reason = None if arrival.preview or studies.may_resume(known, arrival, same_browser=same_browser) else "elsewhere"
+        # Whether an id takes part shows only to whom may resume it: anyone else gets a newcomer's answer.
+        if known is not None and not studies.may_resume(known, arrival, same_browser=same_browser):
+            known = None
+        reason = None if known is not None else studies.availability(study)
         if reason is not None:
             return _refused(studies.refusal(reason))
-        page = render_template(
+        return render_template(
             "study/open.html", study=study, arrival=arrival, known=known, params=_platform_params(source),
             trials=_timed_trials(study), minutes=study.time_limit_s / 60, example=studies.example_frame(study),
             framed=request.headers.get("Sec-Fetch-Dest") == "iframe",
         )  # fmt: skip
-        return _with_policy(page, "frame-ancestors", studies.mturk_submit_hosts())
+    newcomer = known is None and not arrival.preview
+    wait = throttle.open_admission(study.id) if newcomer else 0
+    if wait:
+        return throttle.too_many(wait)
     try:
         participant = studies.admit(study, arrival, user_agent=request.user_agent.string, same_browser=same_browser)
     except studies.StudyProblem as exc:
+        if newcomer:
+            throttle.not_admitted(study.id)
         if exc.status == 400:
             raise
         return _refused(exc)
@@ -226,7 +238,6 @@ def open_link(open_token: str):
 
 @bp.get("/o/<open_token>/example")
 @public
-@entry_attempts
 def open_example(open_token: str):
     """The frame an MTurk preview shows with the instructions, before anyone is admitted (no ground truth)."""
     example = studies.example_frame(studies.open_link_study(open_token))
@@ -236,9 +247,8 @@ def open_example(open_token: str):
     return send_file(path, mimetype="image/jpeg" if path.suffix.lower() in (".jpg", ".jpeg") else "image/png")
 
 
-def _with_policy(page: str, directive: str, sources) -> Response:
-    """``page`` under the app's Content-Security-Policy with ``directive``'s sources replaced (to let MTurk in)."""
-    response = Response(page, mimetype="text/html")
+def _set_policy(response: Response, directive: str, sources) -> Response:
+    """``response`` under the app's Content-Security-Policy with ``directive``'s sources replaced (to let MTurk in)."""
     policy = [p for p in CONTENT_SECURITY_POLICY.split("; ") if not p.startswith(directive + " ")]
     response.headers["Content-Security-Policy"] = "; ".join([*policy, " ".join([directive, *sources])])
     return response
@@ -377,7 +387,7 @@ def done():
     mturk_url = studies.mturk_submit_url(participant) if code else None
     page = _page("study/done.html", participant, "Done", progress=studies.progress(participant), code=code,
                  redirect_url=None if mturk_url else redirect_url, mturk_url=mturk_url)  # fmt: skip
-    return _with_policy(page, "form-action", ["'self'", *([mturk_url] if mturk_url else [])])
+    return _set_policy(Response(page, mimetype="text/html"), "form-action", ["'self'", *([mturk_url] if mturk_url else [])])
 
 
 def _state_json(state: studies.SessionState) -> dict:

@@ -14,10 +14,20 @@ bookmarked and its downloads repeat it:
 * ``compare_a`` / ``compare_b``: two row keys to compare (the comparison
   downloads from ``/scores/comparison.<csv|tex|json>``);
 * ``plotted`` and ``plot``: the rows the precision-recall plots draw.
+
+Participants' rows (``studies``) are for admins only, the people who run
+studies: annotators and reviewers see the runs and the baselines, and a
+choice of studies is refused them (403). A participant's scores are
+research data about a person, which a study's ethics approval lets only its
+research team see; anonymising the rows would not do, since in a small
+study of colleagues a row's pattern (and the count of rows) can tell who
+it is.
 """
 
 from flask import Blueprint, Response, render_template, request
-
+from app.errors import Problem
+from app.models import Role
+from app.security import current_role
 from app.services import scoring
 from egonet.metrics import DEFAULT_EMPTY
 
@@ -40,11 +50,23 @@ def _ids(name: str) -> list[int]:
         raise scoring.ScoringProblem(f"{name} must be whole numbers (ids)", fields={name: "must be whole numbers"}) from None
 
 
+def _sees_people() -> bool:
+    return current_role() is Role.ADMIN
+
+
 def _choice() -> dict:
-    """The runs, studies and baselines the query string asks for (defaults: everything)."""
+    """The runs, studies and baselines the query string asks for (defaults: everything the user may see)."""
     if "chosen" not in request.args:
-        return {"run_ids": None, "study_ids": None, "baselines": True}
-    return {"run_ids": _ids("runs"), "study_ids": _ids("studies"), "baselines": "baselines" in request.args}
+        return {"run_ids": None, "study_ids": None if _sees_people() else [], "baselines": True}
+    study_ids = _ids("studies")
+    if study_ids and not _sees_people():
+        raise Problem("only admins see the scores of studies' participants", status=403)
+    return {"run_ids": _ids("runs"), "study_ids": study_ids, "baselines": "baselines" in request.args}
+
+
+def _studies() -> list:
+    """The studies the form offers: all of them to admins, none to others."""
+    return scoring.available_studies() if _sees_people() else []
 
 
 def _view() -> dict:
@@ -100,7 +122,7 @@ def index():
     shown = _plot_rows()
     keys = [scoring.ALL, *report.activities] if report.rows else []
     plots = [scoring.pr_plot(report, key, rows=shown) for key in keys]
-    runs, studies = scoring.available_runs(), scoring.available_studies()
+    runs, studies = scoring.available_runs(), _studies()
     query = _query(choice, view, runs, studies)
     return render_template(
         "scores/index.html",
@@ -110,6 +132,7 @@ def index():
         best=report.best(),
         runs=runs,
         studies=studies,
+        sees_people=_sees_people(),
         chosen_runs=set(query["runs"]),
         chosen_studies=set(query["studies"]),
         baselines=choice["baselines"],
@@ -174,7 +197,7 @@ def frames():
     """Per-frame scores: each frame of one activity with every row's own best F and AP on it (what ois-mean averages)."""
     table = _frame_table()
     choice, view = _choice(), _view()
-    query = _query(choice, view, scoring.available_runs(), scoring.available_studies())
+    query = _query(choice, view, scoring.available_runs(), _studies())
     return render_template("scores/frames.html", table=table, query=query, view=view)
 
 

@@ -4,7 +4,7 @@ List, create (from the builder's form or a definition file), edit before
 anyone entered, duplicate, delete, open, pause and close studies; add
 participants (codes in bulk or single-use links, or pilots), deactivate them
 or delete their data when they withdraw, follow their progress and checks,
-lift an address's entry lock; look at each participant's soft masks and the
+clear an address's entry count (ending its waits); look at each participant's soft masks and the
 mean map per frame over the frame (the paper's Fig. 5), and export the
 results, the participants (codes, status, completion codes) and the
 study's definition file.
@@ -221,6 +221,7 @@ def _detail(study: Study, form: ParticipantsForm, status: int = 200):
         grace=studies.LATE_GRACE_S,
         locks=[(row, locked_s(row)) for row in entry_locks(study.id)],
         lock_budget=current_app.config["RATELIMIT_ENTRY_FAILURES"],
+        open_budget=current_app.config["RATELIMIT_OPEN_ADMISSIONS"],
     ), status
 
 
@@ -282,9 +283,9 @@ def release(study_id: int, participant_id: int):
 @bp.post("/<int:study_id>/entry-locks/<int:lock_id>/clear")
 @roles(Role.ADMIN)
 def clear_lock(study_id: int, lock_id: int):
-    """Forget the failed entries counted for one address (this study's, or the shared form's), lifting its lock."""
+    """Forget the entries counted for one address (codes and links, or this study's open link), ending its waits."""
     row = clear_entry_lock(_study(study_id).id, lock_id)
-    flash(f"Failed entries from {row.address} forgotten: it may enter again.")
+    flash(f"Entries counted from {row.address} forgotten: it need not wait.")
     return redirect(url_for("studies.detail", study_id=study_id) + "#entry-locks")
 
 

@@ -19,7 +19,7 @@ from app.forms import Form
 from app.models import Role, User
 from app.security import roles
 from app.services import users
-from app.throttle import address, failed, failures_limit, forgive, limiter, too_many_attempts
+from app.throttle import address, password_attempts
 
 bp = Blueprint("users", __name__)
 
@@ -70,7 +70,7 @@ def _new_password_page(user: User, password: str, *, created: bool):
 
 
 @bp.route("/account", methods=["GET", "POST"])
-@limiter.limit(failures_limit, key_func=_account_key, deduct_when=failed, methods=["POST"], error_message=too_many_attempts)
+@password_attempts(_account_key)
 def account():
     """Change one's own password: the current one is required, and other sessions end."""
     form = PasswordForm()
@@ -87,7 +87,6 @@ def account():
                 form.new_password.errors.append(str(exc))
                 status = 400
             else:
-                forgive()
                 sign_in(user)  # this session goes on with the new token; every other one has ended
                 flash("Password changed. Other sessions have been signed out.")
                 return redirect(url_for("users.account"))

@@ -1,4 +1,4 @@
-"""Human studies: studies, their frames and conditions, participants, trials, clicks, events and failed entries.
+"""Human studies: studies, their frames and conditions, participants, trials, clicks, events and entry counts.
 
 A study draws frames (``StudyFrame``) once, when it is created (or edited
 before anyone entered): the timed part's frames (``kind`` main), practice
@@ -15,7 +15,7 @@ import enum
 from datetime import datetime
 from typing import Any
 
-from sqlalchemy import JSON, Float, ForeignKey, String, Text, UniqueConstraint, false
+from sqlalchemy import JSON, BigInteger, Float, ForeignKey, String, Text, UniqueConstraint, false
 from sqlalchemy.orm import Mapped, mapped_column, relationship
 
 from app.models.base import Base, UTCDateTime, enum_type, utcnow
@@ -333,18 +333,26 @@ class TrialEvent(Base):
     trial: Mapped[Trial] = relationship(back_populates="events")
 
 
-class EntryFailures(Base):
-    """Failed attempts to enter a study from one address, counted in a fixed window since ``since``.
+class EntryCount(Base):
+    """Study entries from one address in one fixed window of ``RATELIMIT_WINDOW`` (``window``: its number since the epoch).
 
-    ``study_id`` is the study the attempts named (None: the shared code form
-    or an unknown link). ``app.throttle`` counts and checks these; staff see
-    and clear them on the study's page.
+    ``scope`` is ``codes`` (wrong codes and unknown links, whatever study the
+    URL names) or ``open-<study id>`` (admissions through that study's open
+    link, ``study_id`` set). ``count`` attempts are counted before they are
+    checked; past the scope's free budget each one makes the address wait
+    until ``wait_until``. One row per (scope, address, window): concurrent
+    requests update the same row. ``app.throttle`` counts and checks these;
+    staff see and clear them on the study's page.
     """
 
-    __tablename__ = "study_entry_failures"
+    __tablename__ = "study_entry_counts"
+    __table_args__ = (UniqueConstraint("scope", "address", "window"),)
 
     id: Mapped[int] = mapped_column(primary_key=True)
+    scope: Mapped[str] = mapped_column(String(32))
     study_id: Mapped[int | None] = mapped_column(ForeignKey("study.id", ondelete="CASCADE"), index=True)
-    address: Mapped[str] = mapped_column(String(64), index=True)
-    failures: Mapped[int] = mapped_column(default=0)
+    address: Mapped[str] = mapped_column(String(64))
+    window: Mapped[int] = mapped_column(BigInteger)
+    count: Mapped[int] = mapped_column(default=0)
     since: Mapped[datetime] = mapped_column(UTCDateTime(), default=utcnow)
+    wait_until: Mapped[datetime | None] = mapped_column(UTCDateTime())

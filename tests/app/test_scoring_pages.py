@@ -432,3 +432,24 @@ def test_scores_pages_refuse_bad_choices(admin_client):
             assert response.status_code == 400 and set(response.get_json()["fields"]) & {"empty", "compare_a"}, url
     assert admin_client.get("/scores/table.xml").status_code == 404
     assert admin_client.get("/scores/figure.png").status_code == 404
+
+
+@pytest.mark.parametrize("role", ["annotator", "reviewer"])
+def test_only_admins_see_participants_scores(app, admin_client, client, make_user, tmp_path, role):
+    """Review: annotators and reviewers saw every participant's per-activity scores, while the README says they see no
+    studies. A participant's scores are the study's research data: its team (admins) only, in the page and every download."""
+    with app.app_context():
+        ids = build_study(tmp_path, activities=("cooking", "hotel"), frames=3, per_activity=2, participants=1)
+        answer(db.session.get(Participant, ids["participants"][0]), lambda t: studies.Answer(clicks=[(20.0, 15.0, 300.0)]))
+    assert "P01" in admin_client.get("/scores/").get_data(as_text=True)
+    make_user(role, "staff")
+    assert client.login("staff", "correct horse battery").status_code == 302
+    page = client.get("/scores/").get_data(as_text=True)
+    assert page.count('data-row="baseline:') >= 1 and 'data-row="participant:' not in page and "P01" not in page
+    assert 'name="studies"' not in page and "scores are shown to admins only." in page
+    for path in ("/scores/table.csv", "/scores/table.json", "/scores/frames?activity=cooking", "/scores/frames.csv?activity=cooking"):
+        answer_ = client.get(path)
+        assert answer_.status_code == 200 and b"participant" not in answer_.data.lower() and b"P01" not in answer_.data, path
+    chosen = f"chosen=1&baselines=1&studies={ids['study']}"
+    for path in ("/scores/", "/scores/table.csv", "/scores/figure.svg", "/scores/frames", "/scores/frames.csv"):
+        assert client.get(f"{path}?{chosen}").status_code == 403, path

@@ -1,13 +1,10 @@
 """Who reaches what in a study: participants see only their own session and frames, never ground truth."""
 
-import pytest
-
 from app.extensions import db
 from app.models import Annotation, User
-from app.models.studies import EntryFailures, EntryKind, Participant, Study, Trial
+from app.models.studies import EntryKind, Participant, Study, Trial
 from app.services import media, studies
 from tests.app.access.studies import build_study
-from tests.app.conftest import PASSWORD
 
 JSON = {"Accept": "application/json"}
 
@@ -189,58 +186,3 @@ def test_participant_pages_are_never_stored(app, client, tmp_path):
     for response in answers:
         assert response.headers["Cache-Control"] == "no-store", (response.request.path, response.status_code)
         assert "Expires" not in response.headers
-
-
-def test_a_class_behind_one_address_is_not_locked_out(app, tmp_path):
-    """A lab's participants share one address: their typos and open-link arrivals must not lock it out."""
-    with app.app_context():
-        ids = build_study(tmp_path, frames=2, per_activity=1, participants=1, open_link={})
-        study = db.session.get(Study, ids["study"])
-        study_id, code, token = study.id, study.participants[0].code, study.open_link_token
-    typos = [app.test_client().post(f"/s/?study={study_id}", data={"code": "ZZZZ-ZZZZ"}).status_code for _ in range(25)]
-    assert typos == [401] * 25
-    assert app.test_client().post(f"/s/?study={study_id}", data={"code": code}).headers["Location"].endswith("/s/consent")
-    # A class of 35 arriving through the open link, all from one address: each arrival is a success, never counted.
-    assert {app.test_client().post(f"/s/o/{token}").status_code for _ in range(35)} == {302}
-
-
-def test_wrong_codes_lock_one_study_and_address_until_staff_clear_it(app_with, make_user, tmp_path):
-    limited = app_with(RATELIMIT_ENTRY_FAILURES=3, RATELIMIT_WINDOW="1 hour")
-    people = two_studies(limited, tmp_path)
-    a, b = people["study_a"], people["study_b"]
-
-    def enter(code, study=None, address="127.0.0.1"):
-        client = limited.test_client()
-        client.environ_base["REMOTE_ADDR"] = address
-        return client.post("/s/" + (f"?study={study}" if study else ""), data={"code": code})
-
-    assert [enter("ZZZZ-ZZZZ", a).status_code for _ in range(3)] == [401, 401, 401]
-    locked = enter(people["a1"]["code"], a)  # even a right code waits
-    assert locked.status_code == 429 and b"Too many failed attempts" in locked.data
-    assert 3500 <= int(locked.headers["Retry-After"]) <= 3600
-    # Only this study from this address: study B's form and another address go on.
-    assert enter("ZZZZ-ZZZZ", b).status_code == 401 and enter(people["b1"]["code"], b).status_code == 302
-    assert enter(people["a1"]["code"], a, address="192.0.2.7").status_code == 302
-    # Unknown links and the shared form count together, apart from any study.
-    assert [limited.test_client().post(f"/s/l/guess{i}").status_code for i in range(3)] == [404, 404, 404]
-    assert enter("ZZZZ-ZZZZ").status_code == 429 and enter("ZZZZ-ZZZZ", b).status_code == 401
-
-    make_user("admin", "admin")
-    staff = limited.test_client()
-    assert staff.login("admin", PASSWORD).status_code == 302
-    page = staff.get(f"/studies/{a}").get_data(as_text=True)
-    assert page.count('data-address="127.0.0.1"') == 2 and "this study" in page and "the shared form" in page
-    assert "for 60 min" in page and f"/s/?study={a}" in page
-    with limited.app_context():
-        own, shared = (
-            db.session.execute(db.select(EntryFailures.id).filter_by(study_id=s, address="127.0.0.1")).scalar_one() for s in (a, None)
-        )
-    assert staff.post(f"/studies/{b}/entry-locks/{own}/clear").status_code == 404  # not B's lock
-    assert staff.post(f"/studies/{a}/entry-locks/{own}/clear", csrf=False).status_code == 400
-    assert limited.test_client().post(f"/studies/{a}/entry-locks/{own}/clear").status_code in (302, 401, 403)
-    assert enter(people["a1"]["code"], a).status_code == 429
-    cleared = staff.post(f"/studies/{a}/entry-locks/{own}/clear")
-    assert cleared.status_code == 302 and cleared.headers["Location"].endswith("#entry-locks")
-    assert enter(people["a1"]["code"], a).status_code == 302
-    assert staff.post(f"/studies/{b}/entry-locks/{shared}/clear").status_code == 302  # any study's page clears the shared lock
-    assert enter("ZZZZ-ZZZZ").status_code == 401

@@ -2,6 +2,7 @@
 
 import csv
 import io
+import re
 import threading
 from collections import Counter
 
@@ -30,6 +31,11 @@ def arrive(app, token: str, **params):
     page = client.get(f"/s/o/{token}", query_string=params)
     start = client.post(f"/s/o/{token}", data=params) if page.status_code == 200 else None
     return client, page, start
+
+
+def without_token(page: bytes) -> bytes:
+    """A page without its session's CSRF token (the rest compares between browsers)."""
+    return re.sub(rb'(csrf-token" content="|name="csrf_token" value=")[^"]+', rb"\1", page)
 
 
 def participants_of(app, study_id: int) -> list[tuple]:
@@ -122,11 +128,14 @@ def test_prolific_and_mturk_parameters_are_stored_and_the_same_id_resumes(app, t
             ("external", "lab-017", {}),
         ]
     # An MTurk preview shows the study but admits nobody; bad ids are refused, naming the parameter.
-    _, preview, _ = arrive(app, token, workerId="W9", assignmentId="ASSIGNMENT_ID_NOT_AVAILABLE")
+    _, preview, _ = arrive(app, token, workerId="A9", assignmentId="ASSIGNMENT_ID_NOT_AVAILABLE")
     assert b"Accept the HIT" in preview.data and b"start-open" not in preview.data
-    for bad in ({"PROLIFIC_PID": "<script>"}, {"PROLIFIC_PID": "x" * 65}, {"workerId": "a b"}, {"SESSION_ID": "é"}):
+    # The platforms' own formats: Prolific ids are 24 hexadecimal digits, MTurk worker ids an A and capitals or digits.
+    made_up = ({"PROLIFIC_PID": "x" * 24}, {"PROLIFIC_PID": "5f1e2d3c4b5a69788796a5b"}, {"workerId": "W9"}, {"workerId": "a1b2"})
+    for bad in ({"PROLIFIC_PID": "<script>"}, {"PROLIFIC_PID": "x" * 65}, {"workerId": "a b"}, {"SESSION_ID": "é"}, *made_up):
         response = app.test_client().get(f"/s/o/{token}", query_string=bad, headers={"Accept": "application/json"})
         assert response.status_code == 400 and next(iter(bad)) in response.get_json()["fields"], bad
+        assert app.test_client().post(f"/s/o/{token}", data=bad).status_code == 400
     assert len(participants_of(app, study_id)) == 3
 
 
@@ -137,12 +146,15 @@ def test_a_platform_id_alone_does_not_resume_a_session(app, admin_client, tmp_pa
     first, _, start = arrive(app, token, **worker, assignmentId="ASG1")
     assert start.status_code == 302 and first.post("/s/consent", data={"decision": "agree"}).status_code == 302
     thief, page, taken = arrive(app, token, **worker)  # the id alone, or with another assignment, in a fresh browser
-    assert page.status_code == 409 and b"continue in your first browser" in page.data
+    # Its GET answers as to a newcomer (who takes part does not show); only the Start is refused.
+    stranger = app.test_client().get(f"/s/o/{token}", query_string={"workerId": "A1STRANGER", "hitId": "3HIT"})
+    assert page.status_code == stranger.status_code == 200 and without_token(page.data).replace(b"A1WORKER", b"A1STRANGER") == without_token(stranger.data)
+    assert taken.status_code == 409 and b"continue in your first browser" in taken.data
     assert thief.post(f"/s/o/{token}", data={**worker, "assignmentId": "ASG9"}).status_code == 409
     assert thief.get("/s/api/current", headers={"Accept": "application/json"}).status_code == 401
     _, _, same_visit = arrive(app, token, **worker, assignmentId="ASG1")  # the same assignment, a new browser
     assert same_visit.headers["Location"].endswith("/s/instructions")
-    assert arrive(app, token, **worker, assignmentId="ASG2")[1].status_code == 409
+    assert arrive(app, token, **worker, assignmentId="ASG2")[2].status_code == 409
     again = first.post(f"/s/o/{token}", data={**worker, "assignmentId": "ASG2"})  # returned the HIT, took another
     assert again.headers["Location"].endswith("/s/instructions")
     with app.app_context():
@@ -150,16 +162,16 @@ def test_a_platform_id_alone_does_not_resume_a_session(app, admin_client, tmp_pa
         assert person.external == {"assignmentId": "ASG2", "hitId": "3HIT"}
 
     # Someone took a worker's id before the worker came: staff release it to the worker's browser.
-    early, _, _ = arrive(app, token, workerId="W2", assignmentId="X")
-    real, refused, _ = arrive(app, token, workerId="W2", assignmentId="Y")
+    early, _, _ = arrive(app, token, workerId="A2", assignmentId="X")
+    real, _, refused = arrive(app, token, workerId="A2", assignmentId="Y")
     assert refused.status_code == 409
     with app.app_context():
-        taken_id = studies.by_external_id(db.session.get(Study, study_id), "W2").id
+        taken_id = studies.by_external_id(db.session.get(Study, study_id), "A2").id
     assert b"Release to a new browser" in admin_client.get(f"/studies/{study_id}").data
     assert admin_client.post(f"/studies/{study_id}/participants/{taken_id}/release").status_code == 302
-    assert real.post(f"/s/o/{token}", data={"workerId": "W2", "assignmentId": "Y"}).headers["Location"].endswith("/s/consent")
+    assert real.post(f"/s/o/{token}", data={"workerId": "A2", "assignmentId": "Y"}).headers["Location"].endswith("/s/consent")
     assert early.get("/s/api/current", headers={"Accept": "application/json"}).status_code == 401  # signed out
-    assert early.post(f"/s/o/{token}", data={"workerId": "W2", "assignmentId": "X"}).status_code == 409
+    assert early.post(f"/s/o/{token}", data={"workerId": "A2", "assignmentId": "X"}).status_code == 409
     with app.app_context():
         assert db.session.get(Participant, taken_id).external == {"assignmentId": "Y"}
 
@@ -327,3 +339,32 @@ def test_staff_cannot_make_open_link_participants_by_hand(ctx, tmp_path, entry):
     with pytest.raises(studies.StudyProblem, match="arrive by themselves"):
         studies.add_participants(db.session.get(Study, ids["study"]), count=1, entry=entry)
     assert not db.session.get(Study, ids["study"]).frames_of(FrameKind.PRACTICE)
+
+
+def test_the_open_link_s_pages_and_refusals_may_be_framed_by_mturk_only(app, app_with, tmp_path):
+    """Review: "This study is full" was not frameable, so an MTurk worker saw a blocked frame. Every answer of the open
+    link may be framed by MTurk's sites (and no X-Frame-Options contradicts it); every other page by nobody."""
+    # (``app`` too: its teardown empties the tables this test's app fills.)
+    app = app_with(RATELIMIT_OPEN_ADMISSIONS=1)
+    study_id, token = open_study(app, tmp_path, open_link={"cap": 2})
+    mturk = "frame-ancestors https://workersandbox.mturk.com https://www.mturk.com"
+    browser = app.test_client()
+    answers = {
+        "page": browser.get(f"/s/o/{token}"),
+        "bad id": browser.get(f"/s/o/{token}", query_string={"workerId": "W1"}),
+        "admitted": browser.post(f"/s/o/{token}"),
+        "counted": app.test_client().post(f"/s/o/{token}"),  # the one past the budget sets a wait
+        "wait": app.test_client().post(f"/s/o/{token}"),
+        "full": app.test_client().get(f"/s/o/{token}"),
+    }
+    with app.app_context():
+        studies.set_status(db.session.get(Study, study_id), "closed")
+    answers["closed"] = app.test_client().get(f"/s/o/{token}")
+    assert {k: r.status_code for k, r in answers.items()} == {
+        "page": 200, "bad id": 400, "admitted": 302, "counted": 302, "wait": 429, "full": 409, "closed": 410}
+    assert b"This study is full" in answers["full"].data
+    for name, response in answers.items():
+        policy = response.headers["Content-Security-Policy"]
+        assert mturk in policy and "frame-ancestors 'none'" not in policy and "X-Frame-Options" not in response.headers, name
+    for other in (browser.get("/s/consent"), app.test_client().get("/s/"), app.test_client().get("/login")):
+        assert "frame-ancestors 'none'" in other.headers["Content-Security-Policy"] and other.headers["X-Frame-Options"] == "DENY"

@@ -34,7 +34,7 @@ def test_values_from_the_browser_and_the_platform_reach_every_export_quoted(app,
                           conditions=[{"name": "-c1"}, {"name": "-c2"}], open_link={}, completion={"code": "-DONE"})  # fmt: skip
         token = db.session.get(Study, ids["study"]).open_link_token
     browser = app.test_client()
-    params = {"PROLIFIC_PID": "-PID1", "SESSION_ID": "-sess"}
+    params = {"external_id": "-PID1", "SESSION_ID": "-sess"}
     assert browser.get(f"/s/o/{token}", query_string=params, headers={"User-Agent": HYPERLINK}).status_code == 200
     assert browser.post(f"/s/o/{token}", data=params, headers={"User-Agent": HYPERLINK}).status_code == 302
     browser.post("/s/consent", data={"decision": "agree"})

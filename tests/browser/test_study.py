@@ -230,7 +230,7 @@ def walk(browser, live_server, made: dict, device: str) -> str:
     context.route(PROLIFIC_DONE + "*", lambda route: route.fulfill(status=200, content_type="text/html", body="<p>Prolific</p>"))
     page = context.new_page()
     touch = device == "phone"
-    pid = f"60c0ffee{device}00000000"[:24]
+    pid = f"60c0ffee{device.encode().hex()}00000000"[:24]  # a Prolific id: 24 hexadecimal digits
     overflow = "() => document.documentElement.scrollWidth <= innerWidth"
     page.goto(f"{live_server}{made['link']}?PROLIFIC_PID={pid}&STUDY_ID=st123&SESSION_ID=se456")
     assert page.locator("a.brand").count() == 0 and page.locator("a[href='/']").count() == 0  # no staff links

@@ -104,4 +104,13 @@ def test_an_mturk_hit_from_preview_to_external_submit(live_app, live_server, bro
     with live_app.app_context():
         (person,) = db.session.get(Study, study_id).participants
         assert (person.platform, person.external_id, person.end_reason) == ("mturk", "A3WORKER", EndReason.COMPLETED)
+
+    # Review: a refusal was not frameable, so a worker saw a blocked frame. Now the frame says the study is full.
+    with live_app.app_context():
+        db.session.get(Study, study_id).cap = 1
+        db.session.commit()
+    late = {"workerId": "A4LATE", "assignmentId": "4ASSIGN", "hitId": "3HITPREVIEW", "turkSubmitTo": mturk}
+    hit.goto(f"{mturk}/hit?" + urlencode({"src": f"{link}?{urlencode(late)}"}))
+    assert "This study is full" in hit.frame_locator("#question").locator("h1").inner_text()
+    screenshot(hit, "mturk-full")
     context.close()

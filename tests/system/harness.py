@@ -66,14 +66,16 @@ def free_port() -> int:
 
 
 class Server:
-    """gunicorn serving the app; ``kill()`` is kill -9 of the whole process group."""
+    """gunicorn serving the app (``settings``: more ``FLASK_*`` variables); ``kill()`` is kill -9 of the whole process group."""
 
-    def __init__(self, database_url: str, instance: Path, *, workers: int = 2, threads: int = 4, port: int | None = None):
+    def __init__(self, database_url: str, instance: Path, *, workers: int = 2, threads: int = 4, port: int | None = None,
+                 settings: dict[str, str] | None = None):
         self.port = port or free_port()
         self.url = f"http://127.0.0.1:{self.port}"
         env = dict(os.environ)
         env.update({f"FLASK_{k}": v for k, v in app_config(database_url, instance).items()})
         env["FLASK_PRODUCTION"] = "false"  # plain HTTP on loopback: no Secure cookies
+        env.update({f"FLASK_{k}": v for k, v in (settings or {}).items()})
         self.log = open(instance / f"gunicorn-{self.port}.log", "ab")
         self.process = subprocess.Popen(
             [sys.executable, "-m", "gunicorn", "--workers", str(workers), "--threads", str(threads),

@@ -22,7 +22,7 @@ from egonet.caffe import RELEASES, checkpoint_from_caffemodel, identify_release,
 from egonet.checkpoint import load_checkpoint, model_from_checkpoint, save_checkpoint
 from egonet.network.builders import saved_options
 from egonet.predictor import NetworkPredictor
-from tests.caffe_files import FULL, TINY, TINY_RELEASES, release_layers, selector_layers, write_caffemodel
+from tests.caffe_files import FULL, TINY, TINY_RELEASES, release_layers, selector_layers, write_caffemodel, write_lying_blob
 from tests.realdata import EGONET_SAMPLES
 
 LAYOUTS = [
@@ -245,6 +245,17 @@ def test_refuses_truncated_damaged_empty_and_other_files(tmp_path):
     (tmp_path / "damaged.caffemodel").write_bytes(bytes(damaged))
     with pytest.raises(ValueError, match=r"layer 'conv' blob 0 holds 6 values, its shape \(2, 4\) needs 8"):
         read_caffemodel(tmp_path / "damaged.caffemodel")
+
+
+@pytest.mark.parametrize("dims", [[2**63, 0], [2**64 - 1, 0], [2**40, 2**40, 0]])
+def test_refuses_a_blob_of_an_impossible_shape_naming_the_file_as_given(tmp_path, dims):
+    """Review: a blob shape of 2**63 (no data) escaped as numpy's ValueError. Messages name the file as its user knows it."""
+    lie = write_lying_blob(tmp_path / "1f3a-upload.caffemodel", dims)
+    with pytest.raises(ValueError, match=r"^lie.caffemodel: its first layer has a blob of an impossible shape") as caught:
+        read_caffemodel(lie, name="lie.caffemodel")
+    assert str(tmp_path) not in str(caught.value)
+    with pytest.raises(ValueError, match=r"^lie.caffemodel: its first layer"):
+        checkpoint_from_caffemodel(lie, releases=TINY_RELEASES, name="lie.caffemodel")
 
 
 def test_identify_release_uses_dhg_layers_to_choose_the_closest(tmp_path):

@@ -20,6 +20,7 @@ condition's participants), with the catch trials put in at their positions.
 
 import hashlib
 import random
+import re
 import secrets
 from collections.abc import Mapping
 from dataclasses import dataclass, field
@@ -55,6 +56,12 @@ PLATFORMS = (
     ("mturk", "workerId", ("assignmentId", "hitId", "turkSubmitTo")),
     ("external", "external_id", ()),
 )
+# The platforms' own id formats: a Prolific id is a 24-digit hexadecimal object id, an MTurk worker id
+# (AWS's CustomerId) an A and then capital letters and digits, 64 characters at most.
+ID_FORMATS = {
+    "PROLIFIC_PID": (re.compile(r"[0-9a-fA-F]{24}"), "24 hexadecimal digits"),
+    "workerId": (re.compile(r"A[A-Z0-9]{1,63}"), "an A followed by capital letters and digits, 64 characters at most"),
+}
 MTURK_PREVIEW = "ASSIGNMENT_ID_NOT_AVAILABLE"
 """MTurk's ``assignmentId`` while a worker previews a HIT (before accepting it)."""
 # The platform's id of the participant's visit, given only to them with their id: a platform id alone is
@@ -88,7 +95,8 @@ def parse_arrival(args: Mapping[str, str]) -> Arrival:
 
     Raises:
         StudyProblem: 400 naming the parameter when one is not 1-64 letters,
-            digits, ``_``, ``.`` or ``-`` (``turkSubmitTo``: not one of ``mturk_submit_hosts()``).
+            digits, ``_``, ``.`` or ``-`` (a platform's id: not in its ``ID_FORMATS``;
+            ``turkSubmitTo``: not one of ``mturk_submit_hosts()``).
     """
     arrival = Arrival()
     for platform, id_param, others in PLATFORMS:
@@ -100,6 +108,10 @@ def parse_arrival(args: Mapping[str, str]) -> Arrival:
                 if value.rstrip("/") not in mturk_submit_hosts():
                     raise StudyProblem(f"the link's turkSubmitTo must be one of {', '.join(mturk_submit_hosts())}", field=param)
                 value = value.rstrip("/")
+            elif param in ID_FORMATS:
+                pattern, words = ID_FORMATS[param]
+                if not pattern.fullmatch(value):
+                    raise StudyProblem(f"the link's {param} must be {words}", field=param)
             elif not TOKEN_PATTERN.fullmatch(value):
                 raise StudyProblem(f"the link's {param} must be 1-64 letters, digits, '_', '.' or '-'", field=param)
             if param == id_param and arrival.external_id is None:

@@ -83,7 +83,7 @@ def register_release(
     if len(size) != 2 or not all(isinstance(s, int) and 8 <= s <= 4096 for s in size):
         raise TrainingProblem(f"size must be two sides of 8-4096 pixels, got {size!r}", field="size")
     try:
-        release = identify_release(read_caffemodel(path), releases=releases or RELEASES, path=filename)
+        release = identify_release(read_caffemodel(path, name=filename), releases=releases or RELEASES, path=filename)
     except EgonetError as exc:
         raise TrainingProblem(exc.message, field="file") from None
     name = (name or "").strip() or f"released {release.key.upper()} model ({filename})"
@@ -130,7 +130,7 @@ def convert_release(run_id: int, path: Path, *, delete: bool = False, releases=N
         info = run.config["released"]
         reporter = _Reporter(run.id, on_progress)
         state = checkpoint_from_caffemodel(path, size=(info["height"], info["width"]), releases=releases or RELEASES,
-                                           progress=reporter)
+                                           progress=reporter, name=info["file"])
         relative = Path(f"run-{run.id}") / "released.pt"
         reporter.say("writing the checkpoint", 0.95)
         save_checkpoint(checkpoint_root() / relative, state)
@@ -270,11 +270,12 @@ def finish_upload(token: str, *, name: str | None, size: tuple[int, int] | None,
     path = part.with_name(f"{token}-{meta['filename']}")
     part.rename(path)
     (part.with_suffix(".json")).unlink(missing_ok=True)
+    run = None
     try:
         run = register_release(path, name=name, size=size, created_by=user, filename=meta["filename"])
-    except TrainingProblem:
-        path.unlink(missing_ok=True)
-        raise
+    finally:
+        if run is None:  # refused, or anything unforeseen: the upload goes
+            path.unlink(missing_ok=True)
     enqueue("import_weights", run.id, str(path))
     return run
 
