@@ -19,7 +19,7 @@ bookmarked and its downloads repeat it:
 from flask import Blueprint, Response, render_template, request
 
 from app.services import scoring
-from egonet.metrics import DEFAULT_EMPTY
+from egonet.metrics import DEFAULT_EMPTY, MIN_FRAMES
 
 bp = Blueprint("scores", __name__, url_prefix="/scores")
 
@@ -120,6 +120,7 @@ def index():
         frames=scoring.FRAMES,
         empty_titles=scoring.EMPTY_TITLES,
         compare=request.args,
+        min_frames=MIN_FRAMES,
     )
 
 

@@ -24,7 +24,7 @@ from dataclasses import dataclass, field
 from typing import Any
 
 from app.services.scoring.cells import FRAMES, METRIC_TITLES
-from egonet.metrics import DEFAULT_EMPTY, DEFAULT_RESAMPLES, DEFAULT_THRESHOLDS, PER_FRAME_MEANS, p_floor, threshold_values
+from egonet.metrics import DEFAULT_EMPTY, DEFAULT_RESAMPLES, DEFAULT_THRESHOLDS, MIN_FRAMES, PER_FRAME_MEANS, p_floor, threshold_values
 
 CI_METHOD = "BCa (bias-corrected and accelerated) bootstrap over frames, resampled within each activity"
 CI_LEVEL = 0.95
@@ -127,7 +127,8 @@ class Provenance:
     def ci_text(self) -> str:
         if not self.resamples:
             return "none (0 resamples)"
-        text = f"{CI_METHOD}, {self.resamples} resamples, seed {self.seed}"
+        text = (f"{CI_METHOD}, {self.resamples} resamples, seed {self.seed}; none (n too small) where an activity "
+                f"has fewer than {MIN_FRAMES} frames")  # fmt: skip
         if self.paired:
             return (f"{text}; paired: both rows on the same resamples of the frames they share; p two-sided, "
                     f"written {self.floor_text()} at its floor 1/(B+1)")  # fmt: skip
@@ -155,6 +156,7 @@ class Provenance:
             "resamples": self.resamples,
             "bootstrap seed": self.seed,
             "ci": f"BCa {CI_LEVEL:.0%}" if self.resamples else "",
+            "min frames": MIN_FRAMES,
             "paired": int(self.paired),
             "people's maps": " | ".join(f"{m.study}: {m.regions}; {m.sigma}" for m in self.human_maps),
             "code version": self.code_version,
@@ -171,7 +173,7 @@ class Provenance:
             "empty_frames": {"policy": self.empty, "count": sum(self.empty_frames.values()), "by_activity": dict(self.empty_frames),
                              "applies": self.metric in PER_FRAME_MEANS, "means": EMPTY_TITLES[self.empty]},  # fmt: skip
             "ci": {"level": CI_LEVEL, "method": CI_METHOD, "resamples": self.resamples, "seed": self.seed, "paired": self.paired,
-                   "p_floor": p_floor(self.resamples) if self.resamples else None},  # fmt: skip
+                   "p_floor": p_floor(self.resamples) if self.resamples else None, "min_frames": MIN_FRAMES},  # fmt: skip
             "human_maps": [{"study": m.study, "regions": m.regions, "sigma": m.sigma} for m in self.human_maps],
             "code_version": self.code_version,
         }
