@@ -120,7 +120,7 @@ def test_csv_and_json_carry_n_and_intervals():
 
 PROVENANCE = scoring.Provenance(
     metric="ois-mean", empty_frames={"cooking": 2, "hotel": 0}, resamples=1000, seed=7,
-    human_maps=(scoring.HumanMaps('study 1 "pilot"', "hierarchical regions (fine_regions 1000, level 0.35)", "click Gaussians of sigma 60 px"),),
+    human_maps=(scoring.HumanMaps('study 1 "pilot"', "hierarchical superpixel regions", "a standard deviation of 60 px"),),
     code_version="egonet-studio 0.1.0 (git abc1234)",
 )  # fmt: skip
 
@@ -133,7 +133,7 @@ def test_every_format_says_how_the_table_was_made():
     assert facts["Metric"].startswith("ois-mean - OIS-mean: the mean over frames") and "99 thresholds t_k = k/100" in facts["Metric"]
     assert facts["95% CI"].startswith("BCa (bias-corrected and accelerated) bootstrap over frames") and "1000 resamples, seed 7; none (n too small) where an activity has fewer than 10 frames; not paired" in facts["95% CI"]
     assert facts["Frames without action-object pixels"] == "2 (cooking 2); policy leave-out: left out of the per-frame means (our choice: the paper does not say)"
-    assert facts["People's maps"] == 'study 1 "pilot": hierarchical regions (fine_regions 1000, level 0.35); click Gaussians of sigma 60 px'
+    assert facts["People's maps"] == 'study 1 "pilot": hierarchical superpixel regions; click Gaussians of a standard deviation of 60 px'
 
     text = report.to_table()
     assert all(f"{label}: {fact}." in text for label, fact in facts.items())
@@ -143,14 +143,14 @@ def test_every_format_says_how_the_table_was_made():
     assert {(r["metric"], r["thresholds"], r["empty frames policy"], r["empty frames"], r["resamples"], r["bootstrap seed"], r["ci"],
              r["paired"], r["code version"]) for r in rows} == {("ois-mean", "99", "leave-out", "2", "1000", "7", "BCa 95%", "0",
                                                                 "egonet-studio 0.1.0 (git abc1234)")}  # fmt: skip
-    assert rows[0]["people's maps"].startswith('study 1 "pilot": hierarchical regions')
+    assert rows[0]["people's maps"].startswith('study 1 "pilot": hierarchical superpixel regions')
     data = json.loads(report.to_json())
     assert list(data)[:2] == ["frames", "metric"] and data["code_version"] == "egonet-studio 0.1.0 (git abc1234)"
     assert data["empty_frames"] == {"policy": "leave-out", "count": 2, "by_activity": {"cooking": 2, "hotel": 0}, "applies": True,
                                     "means": scoring.EMPTY_TITLES["leave-out"]}  # fmt: skip
     assert data["ci"] == {"level": 0.95, "method": scoring.provenance.CI_METHOD, "resamples": 1000, "seed": 7, "paired": False, "p_floor": 1 / 1001,
                           "min_frames": MIN_FRAMES}
-    assert data["human_maps"][0]["sigma"] == "click Gaussians of sigma 60 px" and len(data["threshold_values"]) == 99
+    assert data["human_maps"][0]["sigma"] == "a standard deviation of 60 px" and len(data["threshold_values"]) == 99
 
 
 def hand_comparison(p_values: tuple[float, float], resamples: int) -> scoring.Comparison:
@@ -344,7 +344,7 @@ def test_report_command_writes_the_facts_or_a_methods_paragraph(ctx, runner, tmp
     assert "--metric per-image is deprecated and goes in the next release: use --metric ois-mean" in result.stderr
     lines = result.stdout.splitlines()
     assert lines[0].startswith("Metric: ois-mean - OIS-mean") and lines[3].startswith("Frames without action-object pixels: none; policy leave-out")
-    assert f'People\'s maps: study {ids["study"]} "' in result.stdout and "click Gaussians of sigma 6 px" in result.stdout
+    assert f'People\'s maps: study {ids["study"]} "' in result.stdout and "click Gaussians of a standard deviation of 6 px" in result.stdout
     assert lines[-1] == f"Code: {code_version()}." and code_version().startswith("egonet-studio ")
 
     out = tmp_path / "methods.txt"
@@ -353,11 +353,12 @@ def test_report_command_writes_the_facts_or_a_methods_paragraph(ctx, runner, tmp
     text = out.read_text()
     report = scoring.build_report(resamples=2000, seed=4)
     frames = report.frames_per_activity()
-    assert f"({sum(frames.values())} frames: cooking {frames['cooking']}, hotel {frames['hotel']})" in text
-    assert "T = 99 thresholds t_k = k/100" in text and "Convention: Pooled: max F and AP of the pixel counts" in text
+    assert f"(the shared frame mode): {sum(frames.values())} frames in all (cooking {frames['cooking']}, hotel {frames['hotel']})" in text
+    assert "T = 99 thresholds t_k = k/100" in text and "The convention is pooled: max F and AP of the pixel counts" in text
     assert "bias-corrected and accelerated (BCa) bootstrap intervals over frames" in text and "B = 2000 resamples (seed 4)" in text
-    assert "reported as p < 0.0005" in text and "Rows: 5 baselines on every labelled frame" in text and "1 participant of the human study" in text
-    assert "each click is a Gaussian (click Gaussians of sigma 6 px" in text and f"computed with {code_version()}." in text
+    assert "reported as p < 0.0005" in text and "scored on the shared frames among the labelled frames" in text
+    assert 'Human study "test study": one participant scored.' in text
+    assert "Each click becomes a Gaussian with a standard deviation of 6 px" in text and f"computed with {code_version()}." in text
     assert "@inproceedings{bertasius2017egonet," in text and "title     = {First-Person Action-Object Detection with {EgoNet}}," in text
     assert "author    = {Gedas Bertasius and Hyun Soo Park and Stella X. Yu and Jianbo Shi}" in text and "year      = {2017}" in text
 

@@ -17,6 +17,7 @@ import json
 from typing import Any
 
 from app.services.scoring.cells import ALL, MEAN, STATISTIC_LABELS, Cell, Difference, Row, definition
+from app.services.scoring import methods
 from app.services.scoring.provenance import BIBTEX
 from app.spreadsheet import csv_text
 from egonet.metrics import MIN_FRAMES
@@ -253,9 +254,8 @@ class ReportFormats(_Json):
         return out
 
     def to_methods(self) -> str:
-        """A methods paragraph with this report's facts filled in, and the seed paper's BibTeX entry."""
-        kinds = {kind: sum(1 for r in self.rows if r.kind == kind) for kind in ("model", "baseline", "human")}
-        return self.provenance.methods(frames=self.frames_per_activity(), rows=kinds) + "\n" + BIBTEX
+        """A methods paragraph made from this report's facts and frames (``methods``), and the seed paper's BibTeX entry."""
+        return methods.paragraph(self) + "\n" + BIBTEX
 
 
 class ComparisonFormats(_Json):
