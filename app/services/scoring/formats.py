@@ -255,7 +255,8 @@ class ReportFormats(_Json):
 
     def to_methods(self) -> str:
         """A methods paragraph made from this report's facts and frames (``methods``), and the seed paper's BibTeX entry."""
-        return methods.paragraph(self) + "\n" + BIBTEX
+        text = methods.paragraph(self.rows, self.provenance, activities=self.activities, frames_per_activity=self.frames_per_activity())
+        return text + "\n" + BIBTEX
 
 
 class ComparisonFormats(_Json):

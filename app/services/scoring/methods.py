@@ -13,14 +13,10 @@ stood on different frames.
 from __future__ import annotations
 
 from collections.abc import Mapping, Sequence
-from typing import TYPE_CHECKING
 
 from app.services.scoring.cells import BASELINE, HUMAN, METRIC_TITLES, MODEL, Row
 from app.services.scoring.provenance import EMPTY_TITLES, HumanMaps, Provenance
 from egonet.metrics import MIN_FRAMES, PER_FRAME_MEANS
-
-if TYPE_CHECKING:
-    from app.services.scoring.table import Report
 
 _WORDS = ("no", "one", "two", "three", "four", "five", "six", "seven", "eight", "nine")
 SPLITS = {
@@ -73,11 +69,18 @@ def _available(rows: Sequence[Row]) -> str:
     return f"{totals[0]} to {frames(totals[-1])} each"
 
 
-def paragraph(report: Report) -> str:
-    """The report's methods paragraph (one line of plain text)."""
-    p = report.provenance
-    by_kind = {kind: [r for r in report.rows if r.kind == kind] for kind in (MODEL, BASELINE, HUMAN)}
-    parts = [_metric_sentences(p), *_frame_sentences(report, by_kind), _empty_sentence(p)]
+def paragraph(rows: Sequence[Row], provenance: Provenance, *, activities: Sequence[str], frames_per_activity: Mapping[str, int]) -> str:
+    """A report's methods paragraph (one line of plain text).
+
+    Args:
+        rows: The report's top-level rows, in table order.
+        provenance: How the report was made.
+        activities: Its columns.
+        frames_per_activity: Frames scored in each activity (the most any row has there).
+    """
+    p = provenance
+    by_kind = {kind: [r for r in rows if r.kind == kind] for kind in (MODEL, BASELINE, HUMAN)}
+    parts = [_metric_sentences(p), *_frame_sentences(rows, p, by_kind, activities, frames_per_activity), _empty_sentence(p)]
     if by_kind[MODEL]:
         parts.append(_model_sentence(by_kind[MODEL], p))
     if by_kind[BASELINE]:
@@ -86,7 +89,7 @@ def paragraph(report: Report) -> str:
         rows = [r for r in by_kind[HUMAN] if r.key in study.rows]
         if rows:
             parts.append(_study_sentences(study, rows, p))
-    if not report.rows:
+    if not rows:
         parts.append("The report has no rows.")
     parts.append(_interval_sentence(p))
     parts.append(f"Scores were computed with {p.code_version or 'EgoNet Studio'}.")
@@ -105,13 +108,14 @@ def _metric_sentences(p: Provenance) -> str:
     )
 
 
-def _frame_sentences(report: Report, by_kind: Mapping[str, list[Row]]) -> list[str]:
+def _frame_sentences(
+    rows: Sequence[Row], p: Provenance, by_kind: Mapping[str, list[Row]], activities: Sequence[str], common: Mapping[str, int]
+) -> list[str]:
     """Which frames each row stood on (the frame mode), and which activities each mean covers."""
-    if not report.rows:
+    if not rows:
         return []
     out = []
-    if report.provenance.frames == "shared":
-        common = report.frames_per_activity()
+    if p.frames == "shared":
         kept = {a: n for a, n in common.items() if n}
         had = [f"the {kind_name} had {_available(rows)}" for kind, kind_name in _KIND_NAMES.items() if (rows := by_kind[kind])]
         out.append(
@@ -130,9 +134,9 @@ def _frame_sentences(report: Report, by_kind: Mapping[str, list[Row]]) -> list[s
             "Each row is scored on all the frames it has (the each frame mode), so rows stand on different frames: "
             "a column's best value is marked only among rows scored on the same frames."
         )
-        partial = [r.name for r in report.rows if r.mean is not None and not report.complete(r)]
+        partial = [r.name for r in rows if r.mean is not None and r.mean.activities < len(activities)]
         mean = ("The table reports each activity and the unweighted mean over the activities a row has frames in, of the "
-                f"{count(len(report.activities), 'activity', 'activities')} in the table")  # fmt: skip
+                f"{count(len(activities), 'activity', 'activities')} in the table")  # fmt: skip
         if partial:
             whose = "one row's mean covers" if len(partial) == 1 else count(len(partial), "row") + "' means cover"
             mean += f"; {whose} fewer (marked *)"
