@@ -9,7 +9,7 @@ from app.services import scoring, studies
 from app.services.scoring.methods import count, frames
 from egonet.metrics import MIN_FRAMES
 from tests.app.test_scoring import frames_by_activity, make_run
-from tests.app.test_studies_checks import quality_study, run_through
+from tests.app.test_studies_checks import quality_study, run_through, run_through_passing
 
 
 def activity_of() -> dict[int, str]:
@@ -35,15 +35,7 @@ def the_study(tmp_path):
     good, careless = study.participants
     run_through(good, catch_click=(5.0, 5.0))
     run_through(careless, catch_click=(60.0, 40.0))
-    third = studies.add_participants(study, count=1)[0]
-    studies.answer_consent(third, agree=True)
-    studies.start_session(third)
-    studies.submit(third, studies.session_state(third).trial, studies.Answer(clicks=[(15.0, 15.0, 300.0)]))
-    studies.start_session(third)
-    state = studies.session_state(third)
-    while state.trial is not None:
-        inside_box = state.trial.study_frame.region is not None
-        state = studies.submit(third, state.trial, studies.Answer(clicks=[(5.0 if inside_box else 15.0,) * 2 + (400.0,)]))
+    run_through_passing(studies.add_participants(study, count=1)[0])
     studies.add_participants(study, count=1, pilot=True)
     return study
 
@@ -90,7 +82,7 @@ def test_the_methods_paragraph_says_what_each_kind_of_row_was_scored_on_in_each_
     assert f"Baselines: AOP, centre prior, saliency, GBVS and handled + viewed object (hands: labelled tactile objects), scored on every labelled frame: {frames(sum(map(len, labelled.values())))} each ({breakdown(labelled)})" in each
     for run, split in ((loao, "trained with leave-one-activity-out cross-validation"), (single, "trained on a single split")):
         mine = by_activity(held_out(run.id))
-        assert re.search(rf"one training run {split}[^;]*, scored on its held-out frames: {frames(sum(map(len, mine.values())))} \({breakdown(mine)}\)[;.]", each)
+        assert re.search(rf"one training run, {split}[^;]*, scored on its held-out frames: {frames(sum(map(len, mine.values())))} \({breakdown(mine)}\)[;.]", each)
     per_person = {sum(map(len, s.values())) for s in seen.values()}
     assert f"People are scored with MF only (AP says little about near-binary maps) on the frames of their own trials: {frames(per_person.pop())} each ({breakdown(next(iter(seen.values())))})" in each
     assert 'Human study "checks": three participants scored (one pilot participant left out; two participants who failed a check kept).' in each

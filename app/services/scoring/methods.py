@@ -165,7 +165,7 @@ def _model_sentence(rows: list[Row], p: Provenance) -> str:
         mine = [r for r in rows if split(r) == how]
         n = sum(len(r.members) or 1 for r in mine)
         if n:
-            parts.append(f"{count(n, 'training run')} {meaning}, scored {_scored_on(mine, p, ('its' if n == 1 else 'their') + ' held-out frames')}")
+            parts.append(f"{count(n, 'training run')}, {meaning}, scored {_scored_on(mine, p, ('its' if n == 1 else 'their') + ' held-out frames')}")
     text = "Models: " + "; ".join(parts) + "."
     groups = sum(1 for r in rows if r.members)
     if groups:
@@ -197,7 +197,8 @@ def _study_sentences(study: HumanMaps, rows: list[Row], p: Provenance) -> str:
     unscored = [count(study.practice, "practice trial")] if study.practice else []
     if study.catch:
         unscored.append(count(study.catch, "attention-check (catch) trial"))
-    out.append(drawn + (f", with {_listed(unscored)} that are not scored." if unscored else "; no practice or catch trial."))
+    verb = "is" if study.practice + study.catch == 1 else "are"
+    out.append(drawn + (f", with {_listed(unscored)} that {verb} not scored." if unscored else "; no practice or catch trial."))
     unanswered = sum(r.unanswered or 0 for r in rows)
     if p.answered_only:
         out.append(f"Trials left unanswered are left out ({unanswered or 'none'} here).")
