@@ -168,7 +168,7 @@ def test_people_on_shared_and_own_frames_and_their_unanswered_trials(app, ctx, t
     assert [(r.name, r.kind, r.unanswered) for r in each.rows] == [("P01", "human", 0), ("P02", "human", 0)]
     check(each, first, answered[first.id])
     check(each, second, answered[second.id])
-    assert "P02 is still in session: 1 trials not answered yet are left out." in each.notes
+    assert "P02 is still in session: trials not answered yet (1) are left out." in each.notes
     # The activity where P02 has one frame less: the two are on different frames, so neither is bold there.
     short = activity[next(f for f in answered[first.id] if f not in answered[second.id])]
     best = each.best()
@@ -182,7 +182,7 @@ def test_people_on_shared_and_own_frames_and_their_unanswered_trials(app, ctx, t
     check(shared, first, answered[second.id])
     check(shared, second, answered[second.id])
     assert shared.row(f"participant:{first.id}").cells[short].frames_available == 2
-    assert any(note.startswith(f"{short}: 1 frames shared by the 2 rows") for note in shared.notes)
+    assert any(note.startswith(f"{short}: 1 frame shared by the 2 rows") for note in shared.notes)
 
     # The session's time runs out: the trial P02 never answered counts as an empty map.
     clock.t = T0 + timedelta(hours=2)
@@ -508,7 +508,7 @@ def test_model_frames_without_ground_truth_are_left_out_with_a_note(ctx):
     db.session.commit()
     report = scoring.build_report(run_ids=[run.id], study_ids=[], baselines=False)
     assert row(report, f"egonet-lite (run {run.id})").cells["hotel"].n_frames == 2
-    assert f"run {run.id}: 1 held-out frames no longer have a ground truth and were left out." in report.notes
+    assert f"run {run.id}: 1 held-out frame no longer has a ground truth and was left out." in report.notes
 
 
 def test_a_run_whose_maps_cannot_be_scored_is_a_note_not_an_error(ctx, app):

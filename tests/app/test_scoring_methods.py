@@ -6,7 +6,7 @@ from app.extensions import db
 from app.models.studies import FrameKind, StudyFrame, Trial
 from app.models.training import Prediction
 from app.services import scoring, studies
-from app.services.scoring.methods import count, frames
+from app.services.scoring.cells import count, frames_text
 from egonet.metrics import MIN_FRAMES
 from tests.app.test_scoring import frames_by_activity, make_run
 from tests.app.test_studies_checks import quality_study, run_through, run_through_passing
@@ -79,12 +79,12 @@ def test_the_methods_paragraph_says_what_each_kind_of_row_was_scored_on_in_each_
     # --frames each: every kind on its own frames, counted here.
     each = scoring.build_report(frames="each").to_methods()
     assert "(the each frame mode)" in each and "shared frame mode" not in each
-    assert f"Baselines: AOP, centre prior, saliency, GBVS and handled + viewed object (hands: labelled tactile objects), scored on every labelled frame: {frames(sum(map(len, labelled.values())))} each ({breakdown(labelled)})" in each
+    assert f"Baselines: AOP, centre prior, saliency, GBVS and handled + viewed object (hands: labelled tactile objects), scored on every labelled frame: {frames_text(sum(map(len, labelled.values())))} each ({breakdown(labelled)})" in each
     for run, split in ((loao, "trained with leave-one-activity-out cross-validation"), (single, "trained on a single split")):
         mine = by_activity(held_out(run.id))
-        assert re.search(rf"one training run, {split}[^;]*, scored on its held-out frames: {frames(sum(map(len, mine.values())))} \({breakdown(mine)}\)[;.]", each)
+        assert re.search(rf"one training run, {split}[^;]*, scored on its held-out frames: {frames_text(sum(map(len, mine.values())))} \({breakdown(mine)}\)[;.]", each)
     per_person = {sum(map(len, s.values())) for s in seen.values()}
-    assert f"People are scored with MF only (AP says little about near-binary maps) on the frames of their own trials: {frames(per_person.pop())} each ({breakdown(next(iter(seen.values())))})" in each
+    assert f"People are scored with MF only (AP says little about near-binary maps) on the frames of their own trials: {frames_text(per_person.pop())} each ({breakdown(next(iter(seen.values())))})" in each
     assert 'Human study "checks": three participants scored (one pilot participant left out; two participants who failed a check kept).' in each
     assert "Each was shown 4 frames (2 from each of two activities, drawn at random with seed 3, in shuffled order), with one practice trial and two attention-check (catch) trials that are not scored." in each
     assert "counts as an empty map (none here)" in each and "in place of the paper's MCG regions" in each
@@ -97,7 +97,7 @@ def test_the_methods_paragraph_says_what_each_kind_of_row_was_scored_on_in_each_
     shared = shared_report.to_methods()
     rows_frames_of = [labelled, by_activity(held_out(single.id)), by_activity(held_out(loao.id)), *seen.values()]
     common = {a: set.intersection(*(f[a] for f in rows_frames_of if a in f)) for a in labelled}
-    assert f"(the shared frame mode): {frames(sum(map(len, common.values())))} in all ({breakdown(common)})" in shared
+    assert f"(the shared frame mode): {frames_text(sum(map(len, common.values())))} in all ({breakdown(common)})" in shared
     assert "before that cut the models had 3 to 9 frames each, the baselines had 9 frames each and the participants had 4 frames each." in shared
     assert "every labelled frame" not in shared and "scored on the shared frames among the labelled frames" in shared
     assert "the unweighted mean over the three activities with shared frames" in shared
@@ -123,7 +123,7 @@ def test_counts_and_frames_read_as_english():
     assert [count(n, "trained model") for n in (0, 1, 2, 9, 10, 56)] == [
         "no trained models", "one trained model", "two trained models", "nine trained models", "10 trained models", "56 trained models"]  # fmt: skip
     assert count(1, "activity", "activities") == "one activity" and count(3, "activity", "activities") == "three activities"
-    assert [frames(n) for n in (0, 1, 2)] == ["0 frames", "1 frame", "2 frames"]
+    assert [frames_text(n) for n in (0, 1, 2)] == ["0 frames", "1 frame", "2 frames"]
 
 
 def test_no_identifier_or_nested_parentheses_in_the_paragraph(ctx, tmp_path):

@@ -80,6 +80,19 @@ COMMON_DEFINITION = (
 PALETTE = ("#1f77b4", "#d62728", "#2ca02c", "#ff7f0e", "#9467bd", "#8c564b", "#e377c2", "#17becf", "#bcbd22", "#7f7f7f")
 
 
+_WORDS = ("no", "one", "two", "three", "four", "five", "six", "seven", "eight", "nine")
+
+
+def count(n: int, one: str, many: str | None = None) -> str:
+    """``"one participant"``, ``"12 participants"``: a count of things in words below ten, with its noun's number."""
+    return f"{_WORDS[n] if 0 <= n < len(_WORDS) else n} {one if n == 1 else many or one + 's'}"
+
+
+def frames_text(n: int) -> str:
+    """``"1 frame"``, ``"13 frames"``: frame counts stay numerals (they are the table's n)."""
+    return f"{n} frame{'' if n == 1 else 's'}"
+
+
 def too_few(*frames: int) -> bool:
     """Whether a statistic resampled over activities with these numbers of frames is "n too small" (no interval, no p-value)."""
     return min(frames) < MIN_FRAMES

@@ -16,7 +16,7 @@ from __future__ import annotations
 import json
 from typing import Any
 
-from app.services.scoring.cells import ALL, MEAN, STATISTIC_LABELS, Cell, Difference, Row, definition
+from app.services.scoring.cells import ALL, MEAN, STATISTIC_LABELS, Cell, Difference, Row, definition, frames_text
 from app.services.scoring import methods
 from app.services.scoring.provenance import BIBTEX
 from app.spreadsheet import csv_text
@@ -347,7 +347,6 @@ def _p_equals(text: str) -> str:
 
 def verdict(d: Difference, p_text: str) -> str:
     """A difference's interval and p-value, or why it has none: ``"[+0.010, +0.200] p = 0.012 (40 frames)"``."""
-    frames = f"{d.n_frames} frame{'' if d.n_frames == 1 else 's'}"
     if d.too_few:
-        return f"({frames}): n too small for an interval or p-value (fewer than {MIN_FRAMES} frames in an activity)"
-    return f"{_signed(d.ci)} p {_p_equals(p_text)} ({frames})"
+        return f"({frames_text(d.n_frames)}): n too small for an interval or p-value (fewer than {MIN_FRAMES} frames in an activity)"
+    return f"{_signed(d.ci)} p {_p_equals(p_text)} ({frames_text(d.n_frames)})"

@@ -14,27 +14,16 @@ from __future__ import annotations
 
 from collections.abc import Mapping, Sequence
 
-from app.services.scoring.cells import BASELINE, HUMAN, METRIC_TITLES, MODEL, Row
+from app.services.scoring.cells import BASELINE, HUMAN, METRIC_TITLES, MODEL, Row, count, frames_text
 from app.services.scoring.provenance import EMPTY_TITLES, HumanMaps, Provenance
 from egonet.metrics import MIN_FRAMES, PER_FRAME_MEANS
 
-_WORDS = ("no", "one", "two", "three", "four", "five", "six", "seven", "eight", "nine")
 SPLITS = {
     "loao": "trained with leave-one-activity-out cross-validation (each activity's frames predicted by the model trained on the other activities)",
     "single": "trained on a single split, its held-out frames the last part of every activity",
     "released": "imported from the authors' release, never trained on these frames",
 }
 """What each way of splitting a model's frames means (``TrainingRun.folds``)."""
-
-
-def count(n: int, one: str, many: str | None = None) -> str:
-    """``"one participant"``, ``"12 participants"``: a count of things in words below ten, with its noun's number."""
-    return f"{_WORDS[n] if 0 <= n < len(_WORDS) else n} {one if n == 1 else many or one + 's'}"
-
-
-def frames(n: int) -> str:
-    """``"1 frame"``, ``"13 frames"``: frame counts stay numerals (they are the table's n)."""
-    return f"{n} frame{'' if n == 1 else 's'}"
 
 
 def _listed(items: Sequence[str]) -> str:
@@ -55,18 +44,18 @@ def rows_frames(rows: Sequence[Row]) -> str:
     scored = [_per_activity(r) for r in rows]
     totals = [sum(f.values()) for f in scored]
     if all(f == scored[0] for f in scored):
-        return f"{frames(totals[0])}{' each' if len(rows) > 1 else ''} ({_breakdown(scored[0])})"
+        return f"{frames_text(totals[0])}{' each' if len(rows) > 1 else ''} ({_breakdown(scored[0])})"
     if len(set(totals)) == 1:
-        return f"{frames(totals[0])} each"
-    return f"{min(totals)} to {frames(max(totals))} each"
+        return f"{frames_text(totals[0])} each"
+    return f"{min(totals)} to {frames_text(max(totals))} each"
 
 
 def _available(rows: Sequence[Row]) -> str:
     """What some rows had before the shared cut: ``"42 frames"`` or ``"50 to 56 frames each"``."""
     totals = sorted({sum(c.frames_available for c in r.cells.values()) for r in rows})
     if len(totals) == 1:
-        return frames(totals[0]) + (" each" if len(rows) > 1 else "")
-    return f"{totals[0]} to {frames(totals[-1])} each"
+        return frames_text(totals[0]) + (" each" if len(rows) > 1 else "")
+    return f"{totals[0]} to {frames_text(totals[-1])} each"
 
 
 def paragraph(rows: Sequence[Row], provenance: Provenance, *, activities: Sequence[str], frames_per_activity: Mapping[str, int]) -> str:
@@ -120,7 +109,7 @@ def _frame_sentences(
         had = [f"the {kind_name} had {_available(rows)}" for kind, kind_name in _KIND_NAMES.items() if (rows := by_kind[kind])]
         out.append(
             "Each activity is scored on its own, every row on the frames that all the rows scored in that activity have "
-            f"(the shared frame mode): {frames(sum(kept.values()))} in all ({_breakdown(kept) or 'none'}); before that cut "
+            f"(the shared frame mode): {frames_text(sum(kept.values()))} in all ({_breakdown(kept) or 'none'}); before that cut "
             f"{_listed(had)}."
         )
         dropped = [a for a, n in common.items() if not n]
@@ -192,7 +181,7 @@ def _study_sentences(study: HumanMaps, rows: list[Row], p: Provenance) -> str:
     elif study.failed_checks:
         left.append(f"{count(study.failed_checks, 'participant')} who failed a check kept")
     out[0] += f" ({'; '.join(left)})." if left else "."
-    drawn = (f"Each was shown {frames(study.frames)} ({study.per_activity} from each of {count(study.activities, 'activity', 'activities')}, "
+    drawn = (f"Each was shown {frames_text(study.frames)} ({study.per_activity} from each of {count(study.activities, 'activity', 'activities')}, "
              f"drawn at random with seed {study.seed}, in {study.order} order)")  # fmt: skip
     unscored = [count(study.practice, "practice trial")] if study.practice else []
     if study.catch:
@@ -218,11 +207,11 @@ def _empty_sentence(p: Provenance) -> str:
     if p.metric not in PER_FRAME_MEANS:
         if not n:
             return "No scored frame is without action-object pixels."
-        return f"The {frames(n)} without action-object pixels count{'s' if n == 1 else ''} through {'its' if n == 1 else 'their'} false positives."
+        return f"The {frames_text(n)} without action-object pixels count{'s' if n == 1 else ''} through {'its' if n == 1 else 'their'} false positives."
     what = EMPTY_TITLES[p.empty].replace("each scores", "scored")
     if not n:
         return f"No scored frame is without action-object pixels (such a frame would be {what})."
-    return f"The {frames(n)} without action-object pixels {'is' if n == 1 else 'are'} {what}."
+    return f"The {frames_text(n)} without action-object pixels {'is' if n == 1 else 'are'} {what}."
 
 
 def _interval_sentence(p: Provenance) -> str:

@@ -209,7 +209,7 @@ def _participant_jobs(
         if not answered and not unanswered:
             notes.append(f"{name} has no answered trials yet.")
             continue
-        job_notes = [f"{name} is still in session: {pending} trials not answered yet are left out."] if pending else []
+        job_notes = [f"{name} is still in session: trials not answered yet ({pending}) are left out."] if pending else []
         jobs.append(
             _Job(
                 rows=[_RowSpec(f"participant:{person.id}", "", name, HUMAN, f"{person.study.name}, participant {person.number}")],

@@ -33,7 +33,7 @@ import numpy as np
 
 from app.errors import Problem
 from app.services.scoring.cache import FrameStats
-from app.services.scoring.cells import ALL, HUMAN, STATISTIC_LABELS, Cell, Curve, Difference, Row, too_few
+from app.services.scoring.cells import ALL, HUMAN, STATISTIC_LABELS, Cell, Curve, Difference, Row, frames_text, too_few
 from app.services.scoring.provenance import Provenance
 from app.services.scoring.table import Comparison
 from egonet.metrics import DEFAULT_EMPTY, Estimate, FrameCounts, Resampler, curve_from_counts, f_scores, reduce_sums, weighted_sums
@@ -334,7 +334,7 @@ def build_rows(sources: Sequence[Source], *, frames: str, scorer: Scorer) -> tup
                 chosen[key][activity] = common
             if common.size < most:
                 notes.append(
-                    f"{activity}: {common.size} frames shared by the {len(having)} rows scored there (a row has up to {most})."
+                    f"{activity}: {frames_text(common.size)} shared by the {len(having)} rows scored there (a row has up to {most})."
                 )
     rows = [_row(scorer, e, chosen[e.key], available[e.key]) for e in entities]
     return rows, activities, notes
