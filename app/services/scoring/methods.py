@@ -106,7 +106,7 @@ def _frame_sentences(
     out = []
     if p.frames == "shared":
         kept = {a: n for a, n in common.items() if n}
-        had = [f"the {kind_name} had {_available(rows)}" for kind, kind_name in _KIND_NAMES.items() if (rows := by_kind[kind])]
+        had = [f"the {kind_name} had {_available(mine)}" for kind, kind_name in _KIND_NAMES.items() if (mine := by_kind[kind])]
         out.append(
             "Each activity is scored on its own, every row on the frames that all the rows scored in that activity have "
             f"(the shared frame mode): {frames_text(sum(kept.values()))} in all ({_breakdown(kept) or 'none'}); before that cut "
