@@ -1,5 +1,6 @@
 """The methods paragraph against the tables it describes: every frame count in it is counted again here, in each frame mode."""
 
+import json
 import re
 
 from app.extensions import db
@@ -91,6 +92,12 @@ def test_the_methods_paragraph_says_what_each_kind_of_row_was_scored_on_in_each_
     assert "hierarchical superpixel regions (about 1000 watershed regions merged along colour boundaries weaker than 0.35)" in each
     report = scoring.build_report(frames="each")
     assert frame_counts(each) <= table_counts(report), frame_counts(each) - table_counts(report)
+    data = json.loads(report.to_json())  # the same facts, for a program
+    assert data["model_splits"] == {f"run:{single.id}": "single", f"run:{loao.id}": "loao"}
+    (facts,) = data["human_maps"]
+    assert {k: facts[k] for k in ("frames", "per_activity", "activities", "seed", "practice", "catch", "pilots", "failed_checks", "excluded")} == {
+        "frames": 4, "per_activity": 2, "activities": 2, "seed": 3, "practice": 1, "catch": 2, "pilots": 1, "failed_checks": 2, "excluded": False}  # fmt: skip
+    assert sorted(facts["rows"]) == sorted(f"participant:{pid}" for pid in people)
 
     # Shared (the default): every row of an activity on the frames all its rows have, counted here as intersections.
     shared_report = scoring.build_report()
