@@ -29,7 +29,7 @@ from app.errors import Problem
 from app.models import Role
 from app.security import current_role
 from app.services import scoring
-from egonet.metrics import DEFAULT_EMPTY
+from egonet.metrics import DEFAULT_EMPTY, MIN_FRAMES
 
 bp = Blueprint("scores", __name__, url_prefix="/scores")
 
@@ -143,6 +143,7 @@ def index():
         frames=scoring.FRAMES,
         empty_titles=scoring.EMPTY_TITLES,
         compare=request.args,
+        min_frames=MIN_FRAMES,
     )
 
 

@@ -31,11 +31,6 @@ bp = Blueprint("studies", __name__, url_prefix="/studies")
 
 PER_PAGE = 60
 MAX_DEFINITION_BYTES = 1024 * 1024
-# The open link's query string for each platform (their placeholders, filled in by the platform).
-PLATFORM_QUERIES = {
-    "Prolific": "PROLIFIC_PID={{%PROLIFIC_PID%}}&STUDY_ID={{%STUDY_ID%}}&SESSION_ID={{%SESSION_ID%}}",
-    "MTurk (external question)": "workerId=${workerId}&assignmentId=${assignmentId}&hitId=${hitId}",
-}
 
 
 def _study(study_id: int) -> Study:
@@ -211,7 +206,7 @@ def _detail(study: Study, form: ParticipantsForm, status: int = 200):
         places=studies.places_taken(study),
         entered=studies.entered(study),
         open_link=open_link,
-        platform_links={name: f"{open_link}?{query}" for name, query in PLATFORM_QUERIES.items()} if open_link else {},
+        platform=studies.platform_urls(open_link) if open_link else None,
         practice=study.frames_of(FrameKind.PRACTICE),
         catch=study.frames_of(FrameKind.CATCH),
         main=study.frames_of(FrameKind.MAIN),

@@ -40,7 +40,8 @@ REPORT_OPTIONS = (
                       "best F of the precision-recall curve averaged over frames; ods-ois: BSDS ODS, OIS and AP "
                       "(per-image: the old name of ois-mean)."),
     click.option("--frames", type=click.Choice(["shared", "each"]), default="shared", show_default=True,
-                 help="shared: each activity on the frames every row has there; each: every row on all its frames."),
+                 help="shared: each activity on the frames every row has there; each: every row on all its frames "
+                      "(the mode a human-study table needs: each person on the frames they saw)."),
     click.option("--empty-frames", "empty", type=click.Choice(EMPTY_POLICIES), default=DEFAULT_EMPTY, show_default=True,
                  help="How ois-mean and mean-curve count a frame without action-object pixels: leave it out, score it 0, "
                       "or 1 where the map predicts nothing at a threshold (one-if-empty)."),
@@ -108,8 +109,10 @@ def report_command(methods, out_file, **options):
     the bootstrap (BCa, resamples, seed), the frames without action-object
     pixels and their policy, how people's clicks became maps, and the code
     version. With --methods it writes those facts as a methods paragraph,
-    with the frames scored per activity and the rows, then the BibTeX entry
-    of the EgoNet paper (Bertasius et al., RSS 2017).
+    with the frames each kind of row was scored on (as in the table), the
+    frame mode, the human study's protocol and the models' splits, then
+    the BibTeX entry of the EgoNet paper (Bertasius et al., RSS 2017). For
+    a human study, give --frames each: people on their own frames.
     """
     report = _build_report(options)
     text = report.to_methods() if methods else "\n".join(report.describe()) + "\n"

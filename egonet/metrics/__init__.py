@@ -42,7 +42,7 @@ Modules:
 """
 
 from egonet.metrics.accumulate import ScoreAccumulator, count_stats, score_maps
-from egonet.metrics.bootstrap import DEFAULT_RESAMPLES, MAX_RESAMPLES, Estimate, Resampler, jackknife_weights, p_floor, resample_weights
+from egonet.metrics.bootstrap import DEFAULT_RESAMPLES, MAX_RESAMPLES, MIN_FRAMES, Estimate, Resampler, jackknife_weights, p_floor, resample_weights
 from egonet.metrics.curves import Score, average_precision, curve_from_counts, f_scores, iso_f_curve, precision_recall
 from egonet.metrics.frames import (
     DEFAULT_EMPTY,
@@ -69,6 +69,7 @@ __all__ = [
     "MAX_RESAMPLES",
     "METRICS",
     "METRIC_ALIASES",
+    "MIN_FRAMES",
     "PER_FRAME_MEANS",
     "Counts",
     "Estimate",

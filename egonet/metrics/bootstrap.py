@@ -52,7 +52,7 @@ import numpy as np
 from egonet.errors import EgonetError
 
 __all__ = [
-    "DEFAULT_RESAMPLES", "MAX_JACKKNIFE", "MAX_RESAMPLES", "MAX_WEIGHTS", "Estimate", "Resampler", "jackknife_weights",
+    "DEFAULT_RESAMPLES", "MAX_JACKKNIFE", "MAX_RESAMPLES", "MAX_WEIGHTS", "MIN_FRAMES", "Estimate", "Resampler", "jackknife_weights",
     "p_floor", "resample_weights",
 ]  # fmt: skip
 
@@ -62,6 +62,20 @@ MAX_WEIGHTS = 2**25
 """At most this many bootstrap weights (resamples x frames, summed over strata) in one :class:`Resampler`: 270 MB of float64."""
 MAX_JACKKNIFE = 100
 """At most this many jackknife groups per stratum (frame i is in group i mod 100)."""
+MIN_FRAMES = 10
+"""The fewest frames of a stratum for a bootstrap interval or p-value to be reported (callers show "n too small" below).
+
+A bootstrap over n frames has only C(2n - 1, n) distinct resamples: 1 for
+one frame (every resample is the sample: an interval [v, v], and a paired
+p-value at the floor 1/(B+1) for any nonzero difference), 3 for two, 10
+for three, 126 for five, 92,378 for ten; and BCa's acceleration needs a
+jackknife, which one frame does not have. Measured (400 samples each, the
+mean of n exponential values, B = 1000): the 95 % BCa interval held the
+true mean 47 % of the time at n = 2, 67 % at 3, 82 % at 5, 88 % at 10 and
+90 % at 20. Ten is where the distinct resamples stop being the limit and
+coverage stops collapsing. A stratified statistic (the mean over
+activities) needs it in every stratum.
+"""
 
 TIE = 1e-6
 """Values closer than this count as equal (bootstrap rows may be computed in float32: ~1e-7 relative error)."""

@@ -23,7 +23,7 @@ from app.services.scoring import sources as scoring_sources
 from egonet import clicks as egonet_clicks
 from egonet import io as egonet_io
 from egonet.baselines import ActionObjectPrior, CenterPrior, GraphSaliency, HandledViewedObject, SpectralResidualSaliency
-from egonet.metrics import count_stats, score_maps
+from egonet.metrics import MIN_FRAMES, count_stats, score_maps
 from tests.app.access.studies import build_study
 
 SIZE = (48, 64)
@@ -97,11 +97,14 @@ def answer(participant: Participant, answers) -> list[int]:
 
 
 def assert_cell(cell: scoring.Cell, expected, n: int, *, ap: bool = True) -> None:
-    """A cell equals a direct ``score_maps`` (to 1e-12), has ``n`` frames, and an interval around its value."""
+    """A cell equals a direct ``score_maps`` (to 1e-12), has ``n`` frames, and an interval around its value (none below MIN_FRAMES)."""
     assert cell.n_frames == n
     assert cell.max_f == pytest.approx(expected.max_f, abs=1e-12)
-    lo, hi = cell.ci["max_f"]
-    assert lo <= cell.max_f + 1e-12 and cell.max_f - 1e-12 <= hi
+    if n < MIN_FRAMES:
+        assert cell.too_few and cell.ci["max_f"] is None
+    else:
+        lo, hi = cell.ci["max_f"]
+        assert not cell.too_few and lo <= cell.max_f + 1e-12 and cell.max_f - 1e-12 <= hi
     if ap:
         assert cell.ap == pytest.approx(expected.ap, abs=1e-12)
     else:
@@ -165,7 +168,7 @@ def test_people_on_shared_and_own_frames_and_their_unanswered_trials(app, ctx, t
     assert [(r.name, r.kind, r.unanswered) for r in each.rows] == [("P01", "human", 0), ("P02", "human", 0)]
     check(each, first, answered[first.id])
     check(each, second, answered[second.id])
-    assert "P02 is still in session: 1 trials not answered yet are left out." in each.notes
+    assert "P02 is still in session: trials not answered yet (1) are left out." in each.notes
     # The activity where P02 has one frame less: the two are on different frames, so neither is bold there.
     short = activity[next(f for f in answered[first.id] if f not in answered[second.id])]
     best = each.best()
@@ -179,7 +182,7 @@ def test_people_on_shared_and_own_frames_and_their_unanswered_trials(app, ctx, t
     check(shared, first, answered[second.id])
     check(shared, second, answered[second.id])
     assert shared.row(f"participant:{first.id}").cells[short].frames_available == 2
-    assert any(note.startswith(f"{short}: 1 frames shared by the 2 rows") for note in shared.notes)
+    assert any(note.startswith(f"{short}: 1 frame shared by the 2 rows") for note in shared.notes)
 
     # The session's time runs out: the trial P02 never answered counts as an empty map.
     clock.t = T0 + timedelta(hours=2)
@@ -269,8 +272,8 @@ def test_baselines_match_a_direct_computation_and_aop_follows_the_fold_rule(ctx)
         assert got.overall.max_f == pytest.approx(pooled.max_f, abs=1e-12) and got.overall.n_frames == 9
         assert got.mean.max_f == pytest.approx(np.mean([got.cells[a].max_f for a in frames]), abs=1e-12)
         assert got.mean.ap == pytest.approx(np.mean([got.cells[a].ap for a in frames]), abs=1e-12)
-        lo, hi = got.mean.ci["max_f"]
-        assert lo < got.mean.max_f < hi
+        # 3 frames in each activity: the mean over them is n too small too (every activity is resampled on its own).
+        assert got.mean.too_few and got.overall.too_few and got.mean.ci["max_f"] is None
 
 
 def test_with_one_activity_there_is_no_aop(ctx):
@@ -344,7 +347,7 @@ def test_the_conventions_and_thresholds_against_direct_computations(ctx):
     assert cell.values["ois"] == pytest.approx(2 * precision * recall / (precision + recall), abs=1e-12)
     pooled = score_maps(probs, masks)
     assert (cell.max_f, cell.ap) == (pooled.max_f, pooled.ap)  # ODS and AP are the pooled numbers
-    assert cell.ci["ois"] is not None
+    assert cell.too_few and cell.ci == {"max_f": None, "ois": None, "ap": None}  # 3 frames: n too small
 
     coarse = scoring.build_report(run_ids=[], study_ids=[], thresholds=9)
     assert row(coarse, "centre prior").cells["hotel"].ap == score_maps(probs, masks, thresholds=9).ap
@@ -358,7 +361,7 @@ def test_the_conventions_and_thresholds_against_direct_computations(ctx):
 
 def test_intervals_follow_resamples_and_seed(ctx):
     add_activity("cooking", seed=1)
-    add_activity("hotel", seed=2)
+    add_activity("hotel", n=MIN_FRAMES, seed=2)
     one = scoring.build_report(run_ids=[], study_ids=[])
     assert one.to_json() == scoring.build_report(run_ids=[], study_ids=[]).to_json()  # seeded: the same intervals
     other = scoring.build_report(run_ids=[], study_ids=[], seed=5)
@@ -442,8 +445,8 @@ def config_of(seed: int, *, epochs: int = 6, device: str = "cpu") -> dict:
 
 
 def test_runs_that_differ_only_in_their_seed_are_one_row_with_their_spread(ctx):
-    add_activity("cooking", seed=1)
-    add_activity("hotel", seed=2)
+    add_activity("cooking", n=MIN_FRAMES, seed=1)
+    add_activity("hotel", n=MIN_FRAMES, seed=2)
     seeds = [make_run(f"seed {s}", held_out=["cooking", "hotel"], seed=s, config=config_of(s, device="cuda" if s else "cpu")) for s in (0, 1, 2)]
     longer = make_run("longer", held_out=["cooking", "hotel"], seed=0, config=config_of(0, epochs=12))
     report = scoring.build_report(study_ids=[], baselines=False)
@@ -474,7 +477,7 @@ def test_runs_that_differ_only_in_their_seed_are_one_row_with_their_spread(ctx):
 
 def test_a_paired_comparison_rejects_a_real_difference_and_not_identical_rows(ctx):
     for seed, name in enumerate(("cooking", "hotel")):
-        add_activity(name, n=8, seed=seed)
+        add_activity(name, n=MIN_FRAMES, seed=seed)
     truth = {f.id: truth_mask(f) for fs in frames_by_activity().values() for f in fs}
     good = make_run("good", held_out=["cooking", "hotel"], seed=1, maps=lambda f, rng: np.clip(0.8 * truth[f.id] + 0.3 * rng.random(truth[f.id].shape), 0, 1))
     noisy = make_run("noisy", held_out=["cooking", "hotel"], seed=2)
@@ -484,7 +487,7 @@ def test_a_paired_comparison_rejects_a_real_difference_and_not_identical_rows(ct
     assert comparison.a == (a, f"egonet-lite (run {good.id})") and comparison.statistics == ("max_f", "ap")
     head = comparison.headline()
     assert head.value == pytest.approx(row(report, comparison.a[1]).mean.max_f - row(report, comparison.b[1]).mean.max_f, abs=1e-12)
-    assert head.p_value < 0.01 and head.ci[0] > 0 and head.n_frames == 16
+    assert head.p_value < 0.01 and head.ci[0] > 0 and head.n_frames == 2 * MIN_FRAMES
     assert all(d["max_f"].p_value < 0.05 for d in comparison.activities.values())
     same = scoring.build_report(study_ids=[], baselines=False, compare_keys=(a, a)).comparison
     assert same.headline().value == 0 and same.headline().p_value == 1.0
@@ -505,7 +508,7 @@ def test_model_frames_without_ground_truth_are_left_out_with_a_note(ctx):
     db.session.commit()
     report = scoring.build_report(run_ids=[run.id], study_ids=[], baselines=False)
     assert row(report, f"egonet-lite (run {run.id})").cells["hotel"].n_frames == 2
-    assert f"run {run.id}: 1 held-out frames no longer have a ground truth and were left out." in report.notes
+    assert f"run {run.id}: 1 held-out frame no longer has a ground truth and was left out." in report.notes
 
 
 def test_a_run_whose_maps_cannot_be_scored_is_a_note_not_an_error(ctx, app):

@@ -11,17 +11,20 @@ import pytest
 from app.extensions import db
 from app.models.studies import Participant
 from app.services import scoring, studies
+from egonet.metrics import MIN_FRAMES
 from tests.app.access.studies import build_study
-from tests.app.test_scoring import HANDLED_ROW, add_activity, answer, make_run
+from tests.app.test_scoring import HANDLED_ROW, add_activity, answer, frames_by_activity, make_run
 
 # --------------------------------------------------------------------------
 # Renderers, on a report made by hand
 
 
 def cell(mf, ap, n=10, *, key="k", ci=True, sd=None, available=None, activities=1):
+    """A cell as ``rows`` makes it: an interval from MIN_FRAMES frames, "n too small" below (none without frames)."""
     values = {"max_f": mf, "ap": ap}
-    intervals = {s: ((v - 0.05, v + 0.05) if ci and v is not None else None) for s, v in values.items()}
-    return scoring.Cell(n, values, intervals, sd, available if available is not None else n, key, activities)
+    few = 0 < n < MIN_FRAMES
+    intervals = {s: ((v - 0.05, v + 0.05) if ci and v is not None and not few else None) for s, v in values.items()}
+    return scoring.Cell(n, values, intervals, sd, available if available is not None else n, key, activities, too_few=few)
 
 
 def curve():
@@ -62,7 +65,7 @@ def test_text_table_puts_n_intervals_and_the_partial_star_on_the_right_cell():
     mean_block = lines[lines.index("mean (unweighted over activities)") :]
     p01 = next(line for line in mean_block if line.strip().startswith("P01"))
     # The star marks P01's mean MF (it covers one of two activities), not its AP and not another row.
-    assert p01.split() == ["P01", "2", "0.900*", "[0.850,", "0.950]", "-"]
+    assert p01.split() == ["P01", "2", "0.900*", "n", "too", "small", "-"]  # 2 frames: no interval
     assert sum("*" in line for line in mean_block if not line.startswith("*")) == 1
     model = next(line for line in lines[lines.index("cooking") :] if line.strip().startswith("lite_v2"))
     assert model.split() == ["lite_v2", "(run", "1)", "10", "0.400", "[0.350,", "0.450]", "0.300", "[0.250,", "0.350]", "<-", "best", "MF"]
@@ -80,7 +83,7 @@ def test_latex_is_table_2_shaped_with_intervals_and_the_best_in_bold():
     assert lines["lite\\_v2 (run 1)"].split(" & ")[1] == "\\textbf{0.400} {\\scriptsize[0.350, 0.450]} {\\scriptsize $n$=10}"
     assert lines["AOP"].split(" & ")[2] == "\\textbf{0.350} {\\scriptsize[0.300, 0.400]}"
     p01 = lines["P01"].split(" & ")
-    assert p01[1] == "0.900 {\\scriptsize[0.850, 0.950]} {\\scriptsize $n$=2}" and p01[2] == "--"  # not bold: other frames
+    assert p01[1] == "0.900 {\\scriptsize ($n$ too small)} {\\scriptsize $n$=2}" and p01[2] == "--"  # not bold: other frames
     assert p01[3] == "{\\scriptsize no shared frames}" and p01[5].startswith("0.900$^*$")
     assert tex.count("\\midrule") == 3  # one per group
 
@@ -88,13 +91,14 @@ def test_latex_is_table_2_shaped_with_intervals_and_the_best_in_bold():
 def test_csv_and_json_carry_n_and_intervals():
     report = hand_report()
     rows = list(csv.reader(io.StringIO(report.to_csv())))
-    assert rows[0][:8] == ["key", "method", "kind", "group", "metric", "frames", "unanswered", "cooking frames"]
-    assert rows[0][8:14] == ["cooking MF", "cooking MF lo", "cooking MF hi", "cooking AP", "cooking AP lo", "cooking AP hi"]
+    assert rows[0][:9] == ["key", "method", "kind", "group", "metric", "frames", "unanswered", "cooking frames", "cooking n too small"]
+    assert rows[0][9:15] == ["cooking MF", "cooking MF lo", "cooking MF hi", "cooking AP", "cooking AP lo", "cooking AP hi"]
     line = dict(zip(rows[0], rows[1]))
     assert (line["key"], line["metric"], line["frames"], line["cooking frames"], line["cooking MF"]) == ("run:1", "pooled", "shared", "10", "0.4000")
     assert (line["cooking MF lo"], line["cooking MF hi"], line["mean MF"], line["mean over activities"]) == ("0.3500", "0.4500", "0.3000", "2")
     person = dict(zip(rows[0], rows[3]))
     assert (person["unanswered"], person["hotel frames"], person["hotel MF"], person["cooking AP"]) == ("4", "0", "", "")
+    assert (person["cooking MF"], person["cooking MF lo"], person["cooking n too small"], line["cooking n too small"]) == ("0.9000", "", "1", "0")
 
     data = json.loads(report.to_json())
     assert (data["frames"], data["metric"], data["answered_only"]) == ("shared", "pooled", False)
@@ -103,19 +107,20 @@ def test_csv_and_json_carry_n_and_intervals():
     first = data["rows"][0]
     assert first["cells"]["cooking"] == {
         "max_f": 0.4, "max_f_ci": [0.35000000000000003, 0.45], "ap": 0.3, "ap_ci": [0.25, 0.35],
-        "n_frames": 10, "frames_available": 10, "no_shared_frames": False,
+        "n_frames": 10, "frames_available": 10, "no_shared_frames": False, "too_few_frames": False,
     }  # fmt: skip
     assert first["mean"]["activities"] == 2 and first["curves"]["all"]["precision"] == [1.0, 0.5] and first["seed"] == 0
     person = data["rows"][2]
     assert person["unanswered"] == 4 and person["cells"]["cooking"]["ap"] is None and person["cells"]["cooking"]["ap_ci"] is None
+    assert person["cells"]["cooking"]["max_f"] == 0.9 and person["cells"]["cooking"]["max_f_ci"] is None and person["cells"]["cooking"]["too_few_frames"]
     assert person["cells"]["hotel"] == {"max_f": None, "max_f_ci": None, "ap": None, "ap_ci": None, "n_frames": 0,
-                                         "frames_available": 3, "no_shared_frames": True}  # fmt: skip
+                                         "frames_available": 3, "no_shared_frames": True, "too_few_frames": False}  # fmt: skip
     assert "unweighted mean" in data["definition"] and "bootstrap" in data["definition"]
 
 
 PROVENANCE = scoring.Provenance(
     metric="ois-mean", empty_frames={"cooking": 2, "hotel": 0}, resamples=1000, seed=7,
-    human_maps=(scoring.HumanMaps('study 1 "pilot"', "hierarchical regions (fine_regions 1000, level 0.35)", "click Gaussians of sigma 60 px"),),
+    human_maps=(scoring.HumanMaps('study 1 "pilot"', "hierarchical superpixel regions", "a standard deviation of 60 px"),),
     code_version="egonet-studio 0.1.0 (git abc1234)",
 )  # fmt: skip
 
@@ -126,9 +131,9 @@ def test_every_format_says_how_the_table_was_made():
     facts = dict(PROVENANCE.facts())
     assert list(facts) == ["Metric", "Frames", "95% CI", "Frames without action-object pixels", "People's maps", "Code"]
     assert facts["Metric"].startswith("ois-mean - OIS-mean: the mean over frames") and "99 thresholds t_k = k/100" in facts["Metric"]
-    assert facts["95% CI"].startswith("BCa (bias-corrected and accelerated) bootstrap over frames") and "1000 resamples, seed 7; not paired" in facts["95% CI"]
+    assert facts["95% CI"].startswith("BCa (bias-corrected and accelerated) bootstrap over frames") and "1000 resamples, seed 7; none (n too small) where an activity has fewer than 10 frames; not paired" in facts["95% CI"]
     assert facts["Frames without action-object pixels"] == "2 (cooking 2); policy leave-out: left out of the per-frame means (our choice: the paper does not say)"
-    assert facts["People's maps"] == 'study 1 "pilot": hierarchical regions (fine_regions 1000, level 0.35); click Gaussians of sigma 60 px'
+    assert facts["People's maps"] == 'study 1 "pilot": hierarchical superpixel regions; click Gaussians of a standard deviation of 60 px'
 
     text = report.to_table()
     assert all(f"{label}: {fact}." in text for label, fact in facts.items())
@@ -138,13 +143,14 @@ def test_every_format_says_how_the_table_was_made():
     assert {(r["metric"], r["thresholds"], r["empty frames policy"], r["empty frames"], r["resamples"], r["bootstrap seed"], r["ci"],
              r["paired"], r["code version"]) for r in rows} == {("ois-mean", "99", "leave-out", "2", "1000", "7", "BCa 95%", "0",
                                                                 "egonet-studio 0.1.0 (git abc1234)")}  # fmt: skip
-    assert rows[0]["people's maps"].startswith('study 1 "pilot": hierarchical regions')
+    assert rows[0]["people's maps"].startswith('study 1 "pilot": hierarchical superpixel regions')
     data = json.loads(report.to_json())
     assert list(data)[:2] == ["frames", "metric"] and data["code_version"] == "egonet-studio 0.1.0 (git abc1234)"
     assert data["empty_frames"] == {"policy": "leave-out", "count": 2, "by_activity": {"cooking": 2, "hotel": 0}, "applies": True,
                                     "means": scoring.EMPTY_TITLES["leave-out"]}  # fmt: skip
-    assert data["ci"] == {"level": 0.95, "method": scoring.provenance.CI_METHOD, "resamples": 1000, "seed": 7, "paired": False, "p_floor": 1 / 1001}
-    assert data["human_maps"][0]["sigma"] == "click Gaussians of sigma 60 px" and len(data["threshold_values"]) == 99
+    assert data["ci"] == {"level": 0.95, "method": scoring.provenance.CI_METHOD, "resamples": 1000, "seed": 7, "paired": False, "p_floor": 1 / 1001,
+                          "min_frames": MIN_FRAMES}
+    assert data["human_maps"][0]["sigma"] == "a standard deviation of 60 px" and len(data["threshold_values"]) == 99
 
 
 def hand_comparison(p_values: tuple[float, float], resamples: int) -> scoring.Comparison:
@@ -251,8 +257,8 @@ def test_score_command_prints_each_format_and_view(ctx, runner, tmp_path):
 
 
 def test_score_command_compares_two_rows(ctx, runner):
-    add_activity("cooking", seed=1)
-    add_activity("hotel", seed=2)
+    add_activity("cooking", n=MIN_FRAMES, seed=1)
+    add_activity("hotel", n=MIN_FRAMES, seed=2)
     result = runner.invoke(args=["egonet", "score", "--compare", "baseline:center", "baseline:saliency", "--format", "json"])
     assert result.exit_code == 0, result.output
     data = json.loads(result.stdout)
@@ -260,25 +266,25 @@ def test_score_command_compares_two_rows(ctx, runner):
     report = scoring.build_report(run_ids=[], study_ids=[])
     mean = {r.key: r.mean.max_f for r in report.rows}
     assert data["difference"] == pytest.approx(mean["baseline:center"] - mean["baseline:saliency"], abs=1e-12)
-    assert 0 < data["p_value"] <= 1 and data["ci"][0] <= data["difference"] <= data["ci"][1] and data["n_frames"] == 6
+    assert 0 < data["p_value"] <= 1 and data["ci"][0] <= data["difference"] <= data["ci"][1] and data["n_frames"] == 2 * MIN_FRAMES
     assert set(data["activities"]) == {"cooking", "hotel"} and set(data["mean"]) == {"max_f", "ap"}
     same = json.loads(runner.invoke(args=["egonet", "score", "--compare", "baseline:aop", "baseline:aop", "--format", "json"]).stdout)
     assert same["difference"] == 0 and same["p_value"] == 1.0
     text = runner.invoke(args=["egonet", "score", "--compare", "baseline:center", "baseline:saliency", "--metric", "ois-mean"]).stdout
     assert text.startswith("centre prior [baseline:center] minus saliency [baseline:saliency]")
-    assert re.search(r"difference \(mean over activities\) [+-]\d\.\d{3} \[.*\] p (= \d\.\d{3}|< 0\.001) \(6 frames\)", text)
+    assert re.search(r"difference \(mean over activities\) [+-]\d\.\d{3} \[.*\] p (= \d\.\d{3}|< 0\.001) \(20 frames\)", text)
     assert "mean F diff" in text and "ois-mean" in text
 
 
 def test_p_values_at_the_floor_on_the_page_and_in_every_download_and_more_resamples_lower_it(ctx, runner, admin_client):
-    add_activity("cooking", seed=1)
-    add_activity("hotel", seed=2)
-    compare = ["egonet", "score", "--compare", "baseline:center", "baseline:saliency", "--metric", "ois-mean"]
-    floors = {"table": "p < 0.001 (6 frames)", "csv": ",< 0.001,", "latex": "$< 0.001$", "json": '"p_text": "< 0.001"'}
+    add_activity("cooking", n=MIN_FRAMES, seed=1)
+    add_activity("hotel", n=MIN_FRAMES, seed=2)
+    compare = ["egonet", "score", "--compare", "baseline:gbvs", "baseline:handled"]  # a large difference: p at the floor
+    floors = {"table": "p < 0.001 (20 frames)", "csv": ",< 0.001,", "latex": "$< 0.001$", "json": '"p_text": "< 0.001"'}
     for fmt, floor in floors.items():
         result = runner.invoke(args=[*compare, "--format", fmt])
         assert result.exit_code == 0 and floor in result.stdout, fmt
-    query = "compare_a=baseline:center&compare_b=baseline:saliency&metric=ois-mean"
+    query = "compare_a=baseline:gbvs&compare_b=baseline:handled"
     assert 'class="p-value">p &lt; 0.001<' in admin_client.get(f"/scores/?{query}").get_data(as_text=True)
     for fmt, floor in (("csv", ",< 0.001,"), ("tex", "$< 0.001$"), ("json", '"p_text": "< 0.001"')):
         with admin_client.get(f"/scores/comparison.{fmt}?{query}") as response:
@@ -286,6 +292,46 @@ def test_p_values_at_the_floor_on_the_page_and_in_every_download_and_more_resamp
             assert f'filename="comparison.{fmt}"' in response.headers["Content-Disposition"]
     data = json.loads(runner.invoke(args=[*compare, "--format", "json", "--resamples", "20000"]).stdout)
     assert data["p_text"] == "< 0.00005" and data["bootstrap"]["resamples"] == 20000 and data["p_value"] == pytest.approx(1 / 20001)
+
+
+def test_below_min_frames_a_cell_or_difference_says_n_too_small_in_every_format(ctx, runner):
+    """1 and MIN_FRAMES - 1 frames: the estimate, "n too small", no interval and no p-value; MIN_FRAMES frames: an interval."""
+    add_activity("cooking", n=1, seed=1)
+    add_activity("hotel", n=MIN_FRAMES - 1, seed=2)
+    add_activity("desk work", n=MIN_FRAMES, seed=3)
+    report = scoring.build_report(run_ids=[], study_ids=[])
+    centre = report.row("baseline:center")
+    counted = {a: len(fs) for a, fs in frames_by_activity().items()}  # counted here, not by the report
+    assert {a: c.n_frames for a, c in centre.cells.items()} == counted == {"cooking": 1, "hotel": 9, "desk work": 10}
+    for activity, few in (("cooking", True), ("hotel", True), ("desk work", False)):
+        got = centre.cells[activity]
+        assert got.max_f is not None and got.too_few is few and (got.ci["max_f"] is None) is few, activity
+    assert centre.mean.too_few and centre.mean.ci["max_f"] is None and centre.mean.max_f is not None  # two activities below
+
+    text = report.to_table().splitlines()
+    line = next(x for x in text[text.index("cooking") :] if x.strip().startswith("centre prior"))
+    assert line.split()[2:] == ["1", f"{centre.cells['cooking'].max_f:.3f}", "n", "too", "small", f"{centre.cells['cooking'].ap:.3f}", "n", "too", "small"]
+    rows = {r["key"]: r for r in csv.DictReader(io.StringIO(report.to_csv()))}
+    assert (rows["baseline:center"]["cooking n too small"], rows["baseline:center"]["cooking MF lo"]) == ("1", "")
+    assert rows["baseline:center"]["desk work n too small"] == "0" and rows["baseline:center"]["desk work MF lo"] != ""
+    assert rows["baseline:center"]["mean n too small"] == "1" and rows["baseline:center"]["min frames"] == str(MIN_FRAMES)
+    assert "($n$ too small)" in report.to_latex()
+    cells = next(r for r in json.loads(report.to_json())["rows"] if r["key"] == "baseline:center")["cells"]
+    assert cells["cooking"]["too_few_frames"] and cells["cooking"]["max_f_ci"] is None and not cells["desk work"]["too_few_frames"]
+
+    compare = ["egonet", "score", "--compare", "baseline:center", "baseline:saliency"]
+    text = runner.invoke(args=compare).stdout
+    assert "MF difference (mean over activities)" in text and "(20 frames): n too small for an interval or p-value (fewer than 10 frames in an activity)" in text
+    cooking = next(x for x in text.splitlines() if x.startswith("cooking"))
+    assert "n too small" in cooking and "[" not in cooking and "<" not in cooking  # was "[+x, +x] < 0.001" on one frame
+    data = json.loads(runner.invoke(args=[*compare, "--format", "json"]).stdout)
+    assert data["too_few_frames"] and data["p_value"] is None and data["ci"] is None and data["n_frames"] == 20
+    assert data["activities"]["cooking"]["max_f"]["too_few_frames"] and not data["activities"]["desk work"]["max_f"]["too_few_frames"]
+    assert data["activities"]["desk work"]["max_f"]["p_value"] is not None
+    by_activity = {(r["activity"], r["statistic"]): r for r in csv.DictReader(io.StringIO(runner.invoke(args=[*compare, "--format", "csv"]).stdout))}
+    assert (by_activity["cooking", "MF"]["n too small"], by_activity["cooking", "MF"]["lo"], by_activity["cooking", "MF"]["p"]) == ("1", "", "")
+    assert by_activity["desk work", "MF"]["n too small"] == "0" and by_activity["desk work", "MF"]["lo"] != ""
+    assert re.search(r"^cooking & 1 & [+-]\d\.\d{3} & n too small & -- ", runner.invoke(args=[*compare, "--format", "latex"]).stdout, re.M)
 
 
 def test_report_command_writes_the_facts_or_a_methods_paragraph(ctx, runner, tmp_path):
@@ -298,7 +344,7 @@ def test_report_command_writes_the_facts_or_a_methods_paragraph(ctx, runner, tmp
     assert "--metric per-image is deprecated and goes in the next release: use --metric ois-mean" in result.stderr
     lines = result.stdout.splitlines()
     assert lines[0].startswith("Metric: ois-mean - OIS-mean") and lines[3].startswith("Frames without action-object pixels: none; policy leave-out")
-    assert f'People\'s maps: study {ids["study"]} "' in result.stdout and "click Gaussians of sigma 6 px" in result.stdout
+    assert f'People\'s maps: study {ids["study"]} "' in result.stdout and "click Gaussians of a standard deviation of 6 px" in result.stdout
     assert lines[-1] == f"Code: {code_version()}." and code_version().startswith("egonet-studio ")
 
     out = tmp_path / "methods.txt"
@@ -307,11 +353,12 @@ def test_report_command_writes_the_facts_or_a_methods_paragraph(ctx, runner, tmp
     text = out.read_text()
     report = scoring.build_report(resamples=2000, seed=4)
     frames = report.frames_per_activity()
-    assert f"({sum(frames.values())} frames: cooking {frames['cooking']}, hotel {frames['hotel']})" in text
-    assert "T = 99 thresholds t_k = k/100" in text and "Convention: Pooled: max F and AP of the pixel counts" in text
+    assert f"(the shared frame mode): {sum(frames.values())} frames in all (cooking {frames['cooking']}, hotel {frames['hotel']})" in text
+    assert "T = 99 thresholds t_k = k/100" in text and "The convention is pooled: max F and AP of the pixel counts" in text
     assert "bias-corrected and accelerated (BCa) bootstrap intervals over frames" in text and "B = 2000 resamples (seed 4)" in text
-    assert "reported as p < 0.0005" in text and "Rows: 5 baselines on every labelled frame" in text and "1 participant of the human study" in text
-    assert "each click is a Gaussian (click Gaussians of sigma 6 px" in text and f"computed with {code_version()}." in text
+    assert "reported as p < 0.0005" in text and "scored on the shared frames among the labelled frames" in text
+    assert 'Human study "test study": one participant scored.' in text
+    assert "Each click becomes a Gaussian with a standard deviation of 6 px" in text and f"computed with {code_version()}." in text
     assert "@inproceedings{bertasius2017egonet," in text and "title     = {First-Person Action-Object Detection with {EgoNet}}," in text
     assert "author    = {Gedas Bertasius and Hyun Soo Park and Stella X. Yu and Jianbo Shi}" in text and "year      = {2017}" in text
 
@@ -353,7 +400,7 @@ def test_scores_page_shows_the_tables_switches_comparison_plots_and_downloads(ap
     assert '<details class="provenance" id="provenance">' in html and "<dt>Code</dt><dd>egonet-studio " in html
     assert "<dt>Frames without action-object pixels</dt><dd>none; pooled counts their false positives" in html
     assert html.count('class="pr-plot"') == 3  # all activities, cooking, hotel
-    assert "0 unanswered" in html and 'class="ci"' in html and "n 2" in html
+    assert "0 unanswered" in html and 'class="ci too-few"' in html and "n 2" in html and 'class="ci"' not in html  # 2 frames: n too small
     assert f'name="studies" value="{ids["study"]}" checked' in html and f'name="runs" value="{run_id}" checked' in html
     assert f"/scores/table.csv?chosen=1&amp;runs={run_id}&amp;studies={ids['study']}&amp;metric=pooled&amp;frames=shared&amp;empty=leave-out&amp;baselines=1" in html
 
@@ -364,7 +411,9 @@ def test_scores_page_shows_the_tables_switches_comparison_plots_and_downloads(ap
     page = admin_client.get("/scores/?compare_a=baseline:center&compare_b=baseline:saliency")
     html = page.get_data(as_text=True)
     assert 'id="comparison"' in html and "centre prior minus saliency" in html
-    assert re.search(r'class="p-value">p (= \d\.\d{3}|&lt; 0\.001)<', html)
+    # 3 frames an activity: the difference without an interval or a p-value, and the page says why.
+    assert '<strong class="too-few">n too small</strong> for an interval or p-value: 6 shared frames, fewer than 10 in an activity' in html
+    assert 'class="p-value"' not in html and "Fewer than 10 shared frames in cooking, hotel" in html
     assert '<option value="baseline:center" selected>' in html
 
     page = admin_client.get("/scores/?chosen=1")  # nothing ticked: no rows

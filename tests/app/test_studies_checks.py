@@ -57,6 +57,18 @@ def run_through(participant: Participant, *, catch_click) -> None:
         state = studies.submit(participant, state.trial, studies.Answer(clicks=[(*point, 500.0)]))
 
 
+def run_through_passing(participant: Participant) -> None:
+    """Practice, then every trial at (15, 15), catch trials with a box inside it at (5, 5): every check passed."""
+    studies.answer_consent(participant, agree=True)
+    studies.start_session(participant)
+    studies.submit(participant, studies.session_state(participant).trial, studies.Answer(clicks=[(15.0, 15.0, 300.0)]))
+    studies.start_session(participant)
+    state = studies.session_state(participant)
+    while state.trial is not None:
+        inside_box = state.trial.study_frame.region is not None
+        state = studies.submit(participant, state.trial, studies.Answer(clicks=[(5.0 if inside_box else 15.0, 5.0 if inside_box else 15.0, 400.0)]))
+
+
 def test_catch_trials_are_judged_exported_and_excluded_by_the_scorer(ctx, tmp_path):
     study = quality_study(tmp_path)
     good, careless = study.participants
@@ -75,14 +87,7 @@ def test_catch_trials_are_judged_exported_and_excluded_by_the_scorer(ctx, tmp_pa
 
     # A participant who clicks every catch trial right passes.
     third = studies.add_participants(study, count=1)[0]
-    studies.answer_consent(third, agree=True)
-    studies.start_session(third)
-    studies.submit(third, studies.session_state(third).trial, studies.Answer(clicks=[(15.0, 15.0, 300.0)]))
-    studies.start_session(third)
-    state = studies.session_state(third)
-    while state.trial is not None:
-        inside_box = state.trial.study_frame.region is not None
-        state = studies.submit(third, state.trial, studies.Answer(clicks=[(5.0 if inside_box else 15.0, 5.0 if inside_box else 15.0, 400.0)]))
+    run_through_passing(third)
     assert studies.checks_of([third])[third.id].passed is True
     assert third.completion_code == "C0MPLETE" and good.completion_code == "FAILED1"
 

@@ -1,10 +1,13 @@
 """Recruiting online: the open link with its cap and quotas, platforms' ids, conditions, bulk codes, status."""
 
 import csv
+import html
 import io
 import re
 import threading
 from collections import Counter
+from urllib.parse import urlencode, urlsplit
+from xml.etree import ElementTree
 
 import pytest
 
@@ -368,3 +371,47 @@ def test_the_open_link_s_pages_and_refusals_may_be_framed_by_mturk_only(app, app
         assert mturk in policy and "frame-ancestors 'none'" not in policy and "X-Frame-Options" not in response.headers, name
     for other in (browser.get("/s/consent"), app.test_client().get("/s/"), app.test_client().get("/login")):
         assert "frame-ancestors 'none'" in other.headers["Content-Security-Policy"] and other.headers["X-Frame-Options"] == "DENY"
+
+
+def mturk_calls(url: str, params: dict) -> str:
+    """The URL MTurk opens for an ExternalURL: the URL as given with MTurk's own parameters appended (it fills no placeholders)."""
+    return url + ("&" if "?" in url else "?") + urlencode(params)
+
+
+def test_the_study_page_gives_mturk_the_bare_open_link_and_an_external_question_that_works(app, admin_client, tmp_path):
+    """The URL and XML copied from the Recruiting card, called as MTurk calls them: preview, then accepted."""
+    study_id, token = open_study(app, tmp_path, completion={"code": "MT0002"})
+    page = admin_client.get(f"/studies/{study_id}").get_data(as_text=True)
+
+    def field(name: str) -> str:
+        return html.unescape(re.search(rf'value="([^"]+)" id="{name}"', page).group(1))
+
+    open_link = field("open-link")
+    assert open_link.endswith(f"/s/o/{token}") and field("mturk-url") == open_link
+    xml = html.unescape(re.search(r'<textarea[^>]*id="mturk-question">(.*?)</textarea>', page, re.S).group(1))
+    question = ElementTree.fromstring(xml)
+    ns = "{http://mechanicalturk.amazonaws.com/AWSMechanicalTurkDataSchemas/2006-07-14/ExternalQuestion.xsd}"
+    assert question.tag == f"{ns}ExternalQuestion" and int(question.find(f"{ns}FrameHeight").text) > 0
+    external_url = question.find(f"{ns}ExternalURL").text
+    assert external_url == open_link
+    # An open link with a query string is escaped in the XML (a raw & would not parse).
+    assert "&amp;" in studies.platform_urls("https://a.example/s/o/T?x=1&y=2")["mturk_question"]
+    assert field("prolific-url") == f"{open_link}?PROLIFIC_PID={{{{%PROLIFIC_PID%}}}}&STUDY_ID={{{{%STUDY_ID%}}}}&SESSION_ID={{{{%SESSION_ID%}}}}"
+
+    path = urlsplit(external_url).path
+    preview = {"assignmentId": "ASSIGNMENT_ID_NOT_AVAILABLE", "hitId": "3HIT", "turkSubmitTo": "https://workersandbox.mturk.com"}
+    worker = app.test_client()
+    shown = worker.get(mturk_calls(path, preview), headers={"Sec-Fetch-Dest": "iframe"})
+    assert shown.status_code == 200 and b'id="preview-instructions"' in shown.data
+    assert participants_of(app, study_id) == []
+    accepted = {"assignmentId": "3ASG", "hitId": "3HIT", "turkSubmitTo": "https://workersandbox.mturk.com", "workerId": "A2WORKER"}
+    framed = worker.get(mturk_calls(path, accepted), headers={"Sec-Fetch-Dest": "iframe"})
+    assert framed.status_code == 200 and b'id="open-tab"' in framed.data
+    assert worker.post(path, data=accepted).headers["Location"].endswith("/s/consent")
+    with app.app_context():
+        (person,) = db.session.get(Study, study_id).participants
+        assert (person.platform, person.external_id) == ("mturk", "A2WORKER")
+        assert studies.mturk_submit_url(person) == "https://workersandbox.mturk.com/mturk/externalSubmit"
+    # What the page used to offer: MTurk appends to "?workerId=${workerId}&..." and every visit is refused.
+    old = mturk_calls(path + "?workerId=${workerId}&assignmentId=${assignmentId}&hitId=${hitId}", preview)
+    assert app.test_client().get(old, headers={"Accept": "application/json"}).status_code == 400

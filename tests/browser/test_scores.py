@@ -80,7 +80,8 @@ def test_scores_page_switches_seeds_comparison_plots_and_per_frame_scores(live_a
                              "handled + viewed object (hands: labelled tactile objects)", "P01 0 unanswered", "P02 2 unanswered"]
     group_row = page.locator(f'#score-table-max_f tr[data-row="{group}"]')
     cooking = group_row.locator("td").first
-    assert re.fullmatch(r"0\.\d{3}±0\.\d{3}\n0\.\d{3}–0\.\d{3}\nn 2", cooking.inner_text().strip()), cooking.inner_text()
+    # 2 frames: the value and its spread over the seeds, but no interval.
+    assert re.fullmatch(r"0\.\d{3}±0\.\d{3}\nn too small\nn 2", cooking.inner_text().strip()), cooking.inner_text()
     assert page.locator("#score-table-max_f td.best").count() >= 3
     # Where the study has no frame, only the machines are there: 3 frames each.
     assert "n 3" in group_row.locator("td").nth(1).inner_text()
@@ -110,7 +111,8 @@ def test_scores_page_switches_seeds_comparison_plots_and_per_frame_scores(live_a
     page.click("#compare-form button[type=submit]")
     page.wait_for_load_state("networkidle")
     headline = page.locator("#comparison .headline").inner_text()
-    assert headline.startswith("egonet-lite (3 seeds) minus AOP: mean F difference (mean over activities)") and re.search(r"p (= \d\.\d{3}|< 0\.001)", headline)
+    assert headline.startswith("egonet-lite (3 seeds) minus AOP: mean F difference (mean over activities)")
+    assert "n too small for an interval or p-value" in headline and "p =" not in headline and "p <" not in headline  # 3 frames an activity
     assert "Fewer than 10 shared frames in cooking" in page.locator("#comparison").inner_text()
     assert page.locator("#comparison .compare-table tbody tr").count() == 8  # seven activities and the mean
     page.locator("#comparison").scroll_into_view_if_needed()

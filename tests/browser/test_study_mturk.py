@@ -1,13 +1,15 @@
 """An MTurk ExternalQuestion HIT in real Chromium: preview, accept, the session in its own tab, the POST to externalSubmit.
 
-A local server stands in for MTurk: it frames the study as MTurk's HIT page
-does and records what its ``/mturk/externalSubmit`` receives. The study lets
-that server in only through the test's ``MTURK_SUBMIT_HOSTS``.
+A local server stands in for MTurk: it frames the ExternalURL copied from the
+study page's ExternalQuestion as MTurk's HIT page does (the URL as given, with
+MTurk's own parameters appended) and records what its ``/mturk/externalSubmit``
+receives. The study lets that server in only through the test's ``MTURK_SUBMIT_HOSTS``.
 """
 
 import threading
 from http.server import BaseHTTPRequestHandler, ThreadingHTTPServer
 from urllib.parse import parse_qs, urlencode
+from xml.etree import ElementTree
 
 import pytest
 
@@ -17,7 +19,8 @@ from app.models.studies import EndReason, Study
 from app.services import studies
 from app.services.studies.recruiting import MTURK_SUBMIT_HOSTS
 from app.services.demo import create_demo
-from tests.browser.conftest import screenshot
+from tests.app.test_studies_recruiting import mturk_calls
+from tests.browser.conftest import screenshot, sign_in
 from tests.browser.test_study import click_frame, wait_for_trial
 
 pytestmark = pytest.mark.browser
@@ -67,13 +70,24 @@ def test_an_mturk_hit_from_preview_to_external_submit(live_app, live_server, bro
         names = {a.name: a.id for a in db.session.execute(db.select(Activity)).scalars()}
         study = studies.create_study(name="hit", activity_ids=[names["cooking"], names["hotel"]], frames_per_activity=1,
                                      seed=2, multiple_clicks=False, open_link={}, completion={"code": "MTURK42"})  # fmt: skip
-        study_id, link = study.id, f"{live_server}/s/o/{study.open_link_token}"
+        study_id = study.id
+    # The researcher copies the ExternalQuestion from the study page's Recruiting card.
+    staff = browser.new_context()
+    admin = staff.new_page()
+    sign_in(admin, live_app, live_server)
+    admin.goto(f"{live_server}/studies/{study_id}")
+    question = ElementTree.fromstring(admin.input_value("#mturk-question"))
+    ns = "{http://mechanicalturk.amazonaws.com/AWSMechanicalTurkDataSchemas/2006-07-14/ExternalQuestion.xsd}"
+    link = question.find(f"{ns}ExternalURL").text
+    assert link == admin.input_value("#open-link") and int(question.find(f"{ns}FrameHeight").text) > 0
+    admin.locator("#recruiting").screenshot(path=str(screenshot(admin, "mturk-recruiting").with_name("mturk-recruiting-card.png")))
+    staff.close()
     context = browser.new_context(viewport={"width": 1280, "height": 900})
     hit = context.new_page()
 
     # Preview: MTurk frames the question with ASSIGNMENT_ID_NOT_AVAILABLE. Instructions and an example, nobody admitted.
     preview = {"assignmentId": "ASSIGNMENT_ID_NOT_AVAILABLE", "hitId": "3HITPREVIEW", "turkSubmitTo": mturk}
-    hit.goto(f"{mturk}/hit?" + urlencode({"src": f"{link}?{urlencode(preview)}"}))
+    hit.goto(f"{mturk}/hit?" + urlencode({"src": mturk_calls(link, preview)}))
     question = hit.frame_locator("#question")
     assert "Accept the HIT" in question.locator("#open-start").inner_text()
     assert question.locator("#preview-instructions p").count() >= 1 and question.locator("#start-open").count() == 0
@@ -83,8 +97,8 @@ def test_an_mturk_hit_from_preview_to_external_submit(live_app, live_server, bro
         assert db.session.get(Study, study_id).participants == []
 
     # Accepted: MTurk frames it again with the worker's ids; the study opens in its own tab.
-    accepted = {"workerId": "A3WORKER", "assignmentId": "3ASSIGN", "hitId": "3HITPREVIEW", "turkSubmitTo": mturk}
-    hit.goto(f"{mturk}/hit?" + urlencode({"src": f"{link}?{urlencode(accepted)}"}))
+    accepted = {"assignmentId": "3ASSIGN", "hitId": "3HITPREVIEW", "turkSubmitTo": mturk, "workerId": "A3WORKER"}
+    hit.goto(f"{mturk}/hit?" + urlencode({"src": mturk_calls(link, accepted)}))
     with context.expect_page() as opened:
         hit.frame_locator("#question").locator("#open-tab").click()
     tab = opened.value

@@ -5,7 +5,7 @@ Rows, in this order:
 * **models**: each completed training run (``app.services.training``),
   scored on its held-out predictions only (the activity left out in each
   leave-one-activity-out fold, or the test split of a single split);
-* **baselines** (``egonet.baselines``), scored on every labelled frame:
+* **baselines** (``egonet.baselines``), on every labelled frame:
   the Action-Object Prior "AOP", fitted inside each leave-one-activity-out
   fold (the frames of activity A are scored with the mean ground-truth mask
   of the labelled frames of every *other* activity), the "centre prior" and
@@ -18,7 +18,8 @@ Rows, in this order:
 Columns are the activities and their mean. Every cell holds the chosen
 convention's statistics (``egonet.metrics.frames``: ``pooled``, the
 default, ``ois-mean``, ``mean-curve`` or ``ods-ois``), their 95 % bootstrap
-intervals and the number of frames scored. Frames without action-object
+intervals (none below ``egonet.metrics.MIN_FRAMES`` frames in an activity:
+"n too small") and the number of frames scored. Frames without action-object
 pixels are counted and, in the per-frame means, treated as the ``empty``
 policy says (left out by default). Every report carries its
 :class:`Provenance` (how its numbers were made, down to the code version). By default (``frames="shared"``) every row of
@@ -49,8 +50,9 @@ The package, one module per concern:
 * ``rows``: frames per row (shared or each), seed groups, intervals, paired comparisons;
 * ``cells``: the table's labels, cells, curves, rows and paired differences;
 * ``table``: :class:`Report` and a :class:`Comparison`;
-* ``provenance``: :class:`Provenance`, the facts every format carries, the
-  methods paragraph and the seed paper's BibTeX; :func:`p_text`;
+* ``provenance``: :class:`Provenance`, the facts every format carries, and
+  the seed paper's BibTeX; :func:`p_text`;
+* ``methods``: the methods paragraph, from the provenance and the table's own frames per kind of row;
 * ``formats``: their renderers (text, CSV, LaTeX, JSON, methods), mixins of the two;
 * ``plots``: :func:`pr_plot` (the page's SVG) and :func:`pr_figure` (SVG/PDF files);
 * ``perframe``: :func:`frame_table`, each frame's own scores in one activity.

@@ -9,6 +9,8 @@ from __future__ import annotations
 from collections.abc import Mapping
 from dataclasses import dataclass, field
 
+from egonet.metrics import MIN_FRAMES
+
 ALL = "all"
 """The key of a row's result pooled over all its frames."""
 MEAN = "mean"
@@ -70,11 +72,30 @@ COMMON_DEFINITION = (
     "is >= t_k (maps are never normalised). Models are scored on held-out frames only; AOP is the mean "
     "ground-truth mask of the other activities' labelled frames (leave-one-activity-out); people on the frames "
     "of their trials, MF only. The mean column is the unweighted mean of the per-activity values. 95% intervals: "
-    "BCa bootstrap over frames, resampled within each activity."
+    f"BCa bootstrap over frames, resampled within each activity; none where an activity has fewer than {MIN_FRAMES} "
+    "frames (n too small)."
 )
 
 # Line colours of the precision-recall plots, one per row in table order.
 PALETTE = ("#1f77b4", "#d62728", "#2ca02c", "#ff7f0e", "#9467bd", "#8c564b", "#e377c2", "#17becf", "#bcbd22", "#7f7f7f")
+
+
+_WORDS = ("no", "one", "two", "three", "four", "five", "six", "seven", "eight", "nine")
+
+
+def count(n: int, one: str, many: str | None = None) -> str:
+    """``"one participant"``, ``"12 participants"``: a count of things in words below ten, with its noun's number."""
+    return f"{_WORDS[n] if 0 <= n < len(_WORDS) else n} {one if n == 1 else many or one + 's'}"
+
+
+def frames_text(n: int) -> str:
+    """``"1 frame"``, ``"13 frames"``: frame counts stay numerals (they are the table's n)."""
+    return f"{n} frame{'' if n == 1 else 's'}"
+
+
+def too_few(*frames: int) -> bool:
+    """Whether a statistic resampled over activities with these numbers of frames is "n too small" (no interval, no p-value)."""
+    return min(frames) < MIN_FRAMES
 
 
 def definition(metric: str) -> str:
@@ -97,6 +118,8 @@ class Cell:
         frames_key: A fingerprint of the frames scored; cells with the same
             key were scored on the same frames.
         activities: For the mean, how many activities it averages.
+        too_few: "n too small": an activity it resamples has fewer than
+            ``egonet.metrics.MIN_FRAMES`` frames, so it has no interval.
     """
 
     n_frames: int
@@ -106,6 +129,7 @@ class Cell:
     frames_available: int = 0
     frames_key: str = ""
     activities: int = 1
+    too_few: bool = False
 
     @property
     def max_f(self) -> float | None:
@@ -165,9 +189,13 @@ class Row:
 
 @dataclass(frozen=True)
 class Difference:
-    """A paired difference (row A minus row B) of one statistic on the frames both rows have."""
+    """A paired difference (row A minus row B) of one statistic on the frames both rows have.
+
+    ``too_few``: "n too small", as a :class:`Cell`'s: no interval and no p-value.
+    """
 
     value: float
     ci: tuple[float, float] | None
     p_value: float | None
     n_frames: int
+    too_few: bool = False

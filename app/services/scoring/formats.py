@@ -5,7 +5,9 @@ The renderers are mixins of ``table``'s :class:`Report` and :class:`Comparison`
 table's parts. Every format carries the numbers' provenance
 (``provenance.Provenance``: convention, thresholds, frames, frames without
 action-object pixels, bootstrap, people's maps, code version), and every
-cell its number of frames and its 95 % interval; p-values go through
+cell its number of frames and its 95 % interval, or "n too small" (fewer
+than ``egonet.metrics.MIN_FRAMES`` frames in an activity: no interval and
+no p-value; JSON's ``too_few_frames``); p-values go through
 ``provenance.p_text`` (``< 0.001`` at the bootstrap's floor).
 """
 
@@ -14,17 +16,30 @@ from __future__ import annotations
 import json
 from typing import Any
 
-from app.services.scoring.cells import ALL, MEAN, STATISTIC_LABELS, Cell, Difference, Row, definition
+from app.services.scoring.cells import ALL, MEAN, STATISTIC_LABELS, Cell, Difference, Row, definition, frames_text
+from app.services.scoring import methods
 from app.services.scoring.provenance import BIBTEX
 from app.spreadsheet import csv_text
+from egonet.metrics import MIN_FRAMES
 
 
 def _fmt(value: float | None, digits: int = 3) -> str:
     return "-" if value is None else f"{value:.{digits}f}"
 
 
+TOO_FEW = "n too small"
+"""Written where an interval and a p-value would be, below ``egonet.metrics.MIN_FRAMES`` frames."""
+
+
 def _interval(ci: tuple[float, float] | None, digits: int = 3) -> str:
     return "" if ci is None else f"[{ci[0]:.{digits}f}, {ci[1]:.{digits}f}]"
+
+
+def _cell_interval(cell: Cell, statistic: str) -> str:
+    """A cell's interval, "n too small" in its place, or nothing (no value, or no resamples)."""
+    if cell.values.get(statistic) is None:
+        return ""
+    return TOO_FEW if cell.too_few else _interval(cell.ci.get(statistic))
 
 
 def _num(value: float | None) -> str:
@@ -33,6 +48,10 @@ def _num(value: float | None) -> str:
 
 def _signed(ci: tuple[float, float] | None) -> str:
     return "" if ci is None else f"[{ci[0]:+.3f}, {ci[1]:+.3f}]"
+
+
+def _difference_interval(d: Difference) -> str:
+    return TOO_FEW if d.too_few else _signed(d.ci)
 
 
 def _blank(value: int | None) -> str | int:
@@ -66,12 +85,14 @@ def _cell_dict(cell: Cell, statistics: list[str]) -> dict[str, Any]:
         out[f"{s}_ci"] = None if ci is None else [ci[0], ci[1]]
         if cell.sd is not None:
             out[f"{s}_sd"] = cell.sd.get(s)
-    out |= {"n_frames": cell.n_frames, "frames_available": cell.frames_available, "no_shared_frames": cell.no_shared_frames}
+    out |= {"n_frames": cell.n_frames, "frames_available": cell.frames_available, "no_shared_frames": cell.no_shared_frames,
+            "too_few_frames": cell.too_few}  # fmt: skip
     return out
 
 
 def _difference_dict(d: Difference, p_text: str) -> dict[str, Any]:
-    return {"difference": d.value, "ci": None if d.ci is None else list(d.ci), "p_value": d.p_value, "p_text": p_text, "n_frames": d.n_frames}
+    return {"difference": d.value, "ci": None if d.ci is None else list(d.ci), "p_value": d.p_value, "p_text": p_text,
+            "n_frames": d.n_frames, "too_few_frames": d.too_few}  # fmt: skip
 
 
 class _Json:
@@ -108,7 +129,7 @@ class ReportFormats(_Json):
                 for s in statistics:
                     # The partial-mean star sits on the MF-like value of the mean line only.
                     star = "*" if column == MEAN and s == statistics[0] and not self.complete(row) else ""
-                    text += f"  {_text_value(cell, s, star):>14}  {_interval(cell.ci.get(s)):<16}"
+                    text += f"  {_text_value(cell, s, star):>14}  {_cell_interval(cell, s):<16}"
                 marks = [self.label(s) for s in statistics if row.key in best.get((column, s), {})]
                 lines.append((text + (f"  <- best {', '.join(marks)}" if marks else "")).rstrip())
             lines.append("")
@@ -127,7 +148,7 @@ class ReportFormats(_Json):
         facts = self.provenance.columns()
         header = ["key", "method", "kind", "group", "metric", "frames", "unanswered"]
         for column in self.columns():
-            header.append(f"{column} frames")
+            header += [f"{column} frames", f"{column} n too small"]
             for s in statistics:
                 label = self.label(s)
                 header += [f"{column} {label}", f"{column} {label} lo", f"{column} {label} hi"] + ([f"{column} {label} sd"] if grouped else [])
@@ -136,7 +157,7 @@ class ReportFormats(_Json):
             line: list[Any] = [row.key, row.name, row.kind, row.group or "", self.metric, self.provenance.frames, _blank(row.unanswered)]
             for column in self.columns():
                 cell = self.cell(row, column)
-                line.append("" if cell is None else cell.n_frames)
+                line += ["", ""] if cell is None else [cell.n_frames, int(cell.too_few)]
                 for s in statistics:
                     ci = cell.ci.get(s) if cell else None
                     line += [_num(cell and cell.values.get(s)), _num(ci and ci[0]), _num(ci and ci[1])]
@@ -163,7 +184,9 @@ class ReportFormats(_Json):
         if sd is not None:
             text += f"$\\pm${sd:.3f}"
         ci = cell.ci.get(statistic)
-        if ci is not None:
+        if cell.too_few:
+            text += " {\\scriptsize ($n$ too small)}"
+        elif ci is not None:
             text += f" {{\\scriptsize[{ci[0]:.3f}, {ci[1]:.3f}]}}"
         if not uniform_n and statistic == self.statistics()[0]:
             text += f" {{\\scriptsize $n$={cell.n_frames}}}"
@@ -231,9 +254,9 @@ class ReportFormats(_Json):
         return out
 
     def to_methods(self) -> str:
-        """A methods paragraph with this report's facts filled in, and the seed paper's BibTeX entry."""
-        kinds = {kind: sum(1 for r in self.rows if r.kind == kind) for kind in ("model", "baseline", "human")}
-        return self.provenance.methods(frames=self.frames_per_activity(), rows=kinds) + "\n" + BIBTEX
+        """A methods paragraph made from this report's facts and frames (``methods``), and the seed paper's BibTeX entry."""
+        text = methods.paragraph(self.rows, self.provenance, activities=self.activities, frames_per_activity=self.frames_per_activity())
+        return text + "\n" + BIBTEX
 
 
 class ComparisonFormats(_Json):
@@ -270,7 +293,7 @@ class ComparisonFormats(_Json):
         head = self.headline()
         lines = [
             f"{self.a[1]} [{self.a[0]}] minus {self.b[1]} [{self.b[0]}], on the frames both have ({self.metric} convention).",
-            f"{labels['max_f']} difference (mean over activities) {head.value:+.3f} {_signed(head.ci)} p {_p_equals(self.p_text(head))} ({head.n_frames} frames).",
+            f"{labels['max_f']} difference (mean over activities) {head.value:+.3f} {self.verdict(head)}.",
             *(f"{label}: {text}." for label, text in self.provenance.facts()),
             "",
         ]
@@ -282,17 +305,17 @@ class ComparisonFormats(_Json):
             text = f"{name:<20}{next(iter(ds.values())).n_frames:>6}"
             for s in self.statistics:
                 d = ds[s]
-                text += f"  {d.value:>+12.3f}  {_signed(d.ci):<18}{self.p_text(d):>8}"
+                text += f"  {d.value:>+12.3f}  {_difference_interval(d):<18}{self.p_text(d):>8}"
             lines.append(text.rstrip())
         return "\n".join(lines) + "\n"
 
     def to_csv(self) -> str:
         """One line per activity, the mean last, and statistic: n, the difference, its interval, p; then the provenance."""
         facts = self.provenance.columns()
-        header = ["a", "b", "metric", "activity", "frames", "statistic", "difference", "lo", "hi", "p", *facts]
+        header = ["a", "b", "metric", "activity", "frames", "n too small", "statistic", "difference", "lo", "hi", "p", *facts]
         lines = [
-            [self.a[0], self.b[0], self.metric, name, d.n_frames, STATISTIC_LABELS[self.metric][s], _num(d.value),
-             _num(d.ci and d.ci[0]), _num(d.ci and d.ci[1]), self.p_text(d), *facts.values()]
+            [self.a[0], self.b[0], self.metric, name, d.n_frames, int(d.too_few), STATISTIC_LABELS[self.metric][s], _num(d.value),
+             _num(d.ci and d.ci[0]), _num(d.ci and d.ci[1]), "" if d.p_value is None else self.p_text(d), *facts.values()]
             for name, ds in self._lines() for s, d in ds.items()
         ]  # fmt: skip
         return csv_text(lines, header=header)
@@ -310,7 +333,8 @@ class ComparisonFormats(_Json):
         ]
         for name, ds in self._lines():
             # "< 0.001" in math mode: a bare < is another glyph in LaTeX's default font encoding.
-            cells = [f"{ds[s].value:+.3f} & {_signed(ds[s].ci)} & ${self.p_text(ds[s])}$" for s in self.statistics]
+            cells = [f"{d.value:+.3f} & {tex(_difference_interval(d))} & " + ("--" if d.p_value is None else f"${self.p_text(d)}$")
+                     for d in (ds[s] for s in self.statistics)]  # fmt: skip
             lines.append(" & ".join([tex(name), str(next(iter(ds.values())).n_frames), *cells]) + " \\\\")
         lines += ["\\bottomrule", "\\end{tabular}"]
         return "\n".join(lines) + "\n"
@@ -319,3 +343,10 @@ class ComparisonFormats(_Json):
 def _p_equals(text: str) -> str:
     """``"= 0.012"`` or ``"< 0.001"``: a p-value after its letter."""
     return text if text.startswith("<") else f"= {text}"
+
+
+def verdict(d: Difference, p_text: str) -> str:
+    """A difference's interval and p-value, or why it has none: ``"[+0.010, +0.200] p = 0.012 (40 frames)"``."""
+    if d.too_few:
+        return f"({frames_text(d.n_frames)}): n too small for an interval or p-value (fewer than {MIN_FRAMES} frames in an activity)"
+    return f"{_signed(d.ci)} p {_p_equals(p_text)} ({frames_text(d.n_frames)})"

@@ -14,7 +14,7 @@ import io
 from collections.abc import Collection
 from dataclasses import dataclass
 
-from app.services.scoring.cells import ALL, HUMAN, Row
+from app.services.scoring.cells import ALL, HUMAN, Row, frames_text
 from app.services.scoring.table import Report
 from egonet.metrics import iso_f_curve, threshold_values
 
@@ -109,7 +109,7 @@ def pr_plot(report: Report, key: str, *, rows: Collection[str] | None = None, wi
                 points=" ".join(f"{x},{y}" for x, y in pts),
                 best_x=bx,
                 best_y=by,
-                best_label=f"{row.name}: pooled F {pooled_f:.3f} at t = {t[curve.best]:.2f} ({_cell(row, key).n_frames} frames)",
+                best_label=f"{row.name}: pooled F {pooled_f:.3f} at t = {t[curve.best]:.2f} ({frames_text(_cell(row, key).n_frames)})",
                 shown=toggle in shown,
             )
         )

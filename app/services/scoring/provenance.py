@@ -7,9 +7,9 @@ test is paired, how people's clicks became maps, the code version). Every
 renderer writes it: text and LaTeX as ``Label: sentence`` lines
 (:meth:`Provenance.facts`), the CSV as columns repeated on every line
 (:meth:`Provenance.columns`), JSON at the top (:meth:`Provenance.as_dict`)
-and the page above the tables. :meth:`Provenance.methods` fills a methods
-paragraph with the same facts; :data:`BIBTEX` cites the seed paper (the
-facts are those of ``shared/seed/`` and ``shared/docs/egonet-reference.md``).
+and the page above the tables; ``methods`` writes the same facts, with the
+table's frames, as a methods paragraph; :data:`BIBTEX` cites the seed paper
+(the facts are those of ``shared/seed/`` and ``shared/docs/egonet-reference.md``).
 
 :func:`p_text` is the one way a p-value is written: with B resamples none is
 below ``1 / (B + 1)``, and one at that floor is written ``< 0.001`` (the
@@ -20,11 +20,11 @@ from __future__ import annotations
 
 import math
 from collections.abc import Mapping, Sequence
-from dataclasses import dataclass, field
+from dataclasses import asdict, dataclass, field
 from typing import Any
 
 from app.services.scoring.cells import FRAMES, METRIC_TITLES
-from egonet.metrics import DEFAULT_EMPTY, DEFAULT_RESAMPLES, DEFAULT_THRESHOLDS, PER_FRAME_MEANS, p_floor, threshold_values
+from egonet.metrics import DEFAULT_EMPTY, DEFAULT_RESAMPLES, DEFAULT_THRESHOLDS, MIN_FRAMES, PER_FRAME_MEANS, p_floor, threshold_values
 
 CI_METHOD = "BCa (bias-corrected and accelerated) bootstrap over frames, resampled within each activity"
 CI_LEVEL = 0.95
@@ -67,11 +67,38 @@ def p_text(p: float | None, resamples: int) -> str:
 
 @dataclass(frozen=True)
 class HumanMaps:
-    """How one study's clicks became soft maps: its name, the regions and the click Gaussian's width."""
+    """How one study ran and how its clicks became soft maps (the facts its rows were made from).
+
+    Attributes:
+        study: ``study 3 "name"``.
+        regions: The superpixel regions, in words.
+        sigma: The click Gaussian's width, in words.
+        rows: The keys of its rows in the table.
+        frames: Timed (scored) frames each participant was shown, and
+            ``per_activity`` of them from each of ``activities`` activities.
+        seed: The seed of the frames' random draw.
+        order: ``shuffled`` or ``counterbalanced``.
+        practice: Practice trials before the timed part (never scored).
+        catch: Attention-check (catch) trials among them (never scored).
+        pilots: Pilot participants, left out of the scores.
+        failed_checks: Participants who failed a comprehension or attention check.
+        excluded: Whether those were left out of the scores.
+    """
 
     study: str
     regions: str
     sigma: str
+    rows: tuple[str, ...] = ()
+    frames: int = 0
+    per_activity: int = 0
+    activities: int = 0
+    seed: int | None = None
+    order: str = "shuffled"
+    practice: int = 0
+    catch: int = 0
+    pilots: int = 0
+    failed_checks: int = 0
+    excluded: bool = False
 
 
 @dataclass(frozen=True)
@@ -89,7 +116,9 @@ class Provenance:
         resamples: Bootstrap resamples B (0: no intervals).
         seed: The bootstrap's seed.
         paired: Whether the numbers are paired differences (a comparison).
-        human_maps: For each study with rows, how its clicks became maps.
+        human_maps: For each study with rows, how it ran and how its clicks became maps.
+        model_splits: For each model row (a run, and a group's runs), how
+            it was split: ``loao``, ``single`` or ``released``.
         code_version: ``app.version.code_version()`` when the report was made.
     """
 
@@ -103,6 +132,7 @@ class Provenance:
     seed: int = 0
     paired: bool = False
     human_maps: Sequence[HumanMaps] = ()
+    model_splits: Mapping[str, str] = field(default_factory=dict)
     code_version: str = ""
 
     def p_text(self, p: float | None) -> str:
@@ -127,7 +157,8 @@ class Provenance:
     def ci_text(self) -> str:
         if not self.resamples:
             return "none (0 resamples)"
-        text = f"{CI_METHOD}, {self.resamples} resamples, seed {self.seed}"
+        text = (f"{CI_METHOD}, {self.resamples} resamples, seed {self.seed}; none (n too small) where an activity "
+                f"has fewer than {MIN_FRAMES} frames")  # fmt: skip
         if self.paired:
             return (f"{text}; paired: both rows on the same resamples of the frames they share; p two-sided, "
                     f"written {self.floor_text()} at its floor 1/(B+1)")  # fmt: skip
@@ -142,7 +173,7 @@ class Provenance:
             ("95% CI", self.ci_text()),
             ("Frames without action-object pixels", self.empty_text()),
         ]
-        out += [("People's maps", f"{m.study}: {m.regions}; {m.sigma}") for m in self.human_maps]
+        out += [("People's maps", f"{m.study}: {m.regions}; click Gaussians of {m.sigma}") for m in self.human_maps]
         return [*out, ("Code", self.code_version or "unknown")]
 
     def columns(self) -> dict[str, Any]:
@@ -155,8 +186,9 @@ class Provenance:
             "resamples": self.resamples,
             "bootstrap seed": self.seed,
             "ci": f"BCa {CI_LEVEL:.0%}" if self.resamples else "",
+            "min frames": MIN_FRAMES,
             "paired": int(self.paired),
-            "people's maps": " | ".join(f"{m.study}: {m.regions}; {m.sigma}" for m in self.human_maps),
+            "people's maps": " | ".join(f"{m.study}: {m.regions}; click Gaussians of {m.sigma}" for m in self.human_maps),
             "code version": self.code_version,
         }
 
@@ -171,64 +203,8 @@ class Provenance:
             "empty_frames": {"policy": self.empty, "count": sum(self.empty_frames.values()), "by_activity": dict(self.empty_frames),
                              "applies": self.metric in PER_FRAME_MEANS, "means": EMPTY_TITLES[self.empty]},  # fmt: skip
             "ci": {"level": CI_LEVEL, "method": CI_METHOD, "resamples": self.resamples, "seed": self.seed, "paired": self.paired,
-                   "p_floor": p_floor(self.resamples) if self.resamples else None},  # fmt: skip
-            "human_maps": [{"study": m.study, "regions": m.regions, "sigma": m.sigma} for m in self.human_maps],
+                   "p_floor": p_floor(self.resamples) if self.resamples else None, "min_frames": MIN_FRAMES},  # fmt: skip
+            "human_maps": [asdict(m) | {"rows": list(m.rows)} for m in self.human_maps],
+            "model_splits": dict(self.model_splits),
             "code_version": self.code_version,
         }
-
-    def methods(self, *, frames: Mapping[str, int], rows: Mapping[str, int]) -> str:
-        """A methods paragraph in plain English with the facts filled in.
-
-        Args:
-            frames: Frames scored per activity (the largest n of its cells).
-            rows: How many rows of each kind (``model``, ``baseline``, ``human``).
-        """
-        t = self.thresholds
-        n = ", ".join(f"{a} {k}" for a, k in frames.items()) or "none"
-        parts = [
-            "We score each probability map against its frame's binary action-object mask with the maximum F-score (MF) "
-            f"and average precision (AP) of Bertasius et al. (RSS 2017) [bertasius2017egonet], thresholding the map at T = {t} "
-            f"thresholds t_k = k/{t + 1} (k = 1..{t}; a pixel is positive when its probability is at least t_k; maps are "
-            "never normalised), with F = 2PR/(P+R) and AP = sum_k (R_k - R_{k+1}) P_k.",
-            f"Convention: {METRIC_TITLES[self.metric]} ({self.metric}).",
-            f"Each activity is scored on its own ({sum(frames.values())} frames: {n}) and the table reports the unweighted "
-            "mean over activities; " + ("every row of an activity is scored on the frames all its rows have."
-                                        if self.frames == "shared" else "each row is scored on all the frames it has."),
-        ]
-        parts.append(self._empty_sentence())
-        parts.append(_rows_sentence(rows))
-        parts += [f"{m.study}: each click is a Gaussian ({m.sigma}), several clicks combine by their maximum, and each "
-                  f"region ({m.regions}) takes the mean of the Gaussian over its pixels." for m in self.human_maps]  # fmt: skip
-        if self.resamples:
-            parts.append(
-                "95% confidence intervals are bias-corrected and accelerated (BCa) bootstrap intervals over frames, "
-                f"resampled within each activity, with B = {self.resamples} resamples (seed {self.seed}); paired comparisons "
-                "resample both rows' shared frames alike, and their two-sided p-values cannot go below 1/(B+1), "
-                f"reported as p {self.floor_text()}."
-            )
-        parts.append(f"Scores were computed with {self.code_version or 'EgoNet Studio'}.")
-        return " ".join(parts) + "\n"
-
-    def _empty_sentence(self) -> str:
-        count = sum(self.empty_frames.values())
-        if self.metric not in PER_FRAME_MEANS:
-            return f"Frames without action-object pixels ({count}) count through their false positives."
-        what = EMPTY_TITLES[self.empty].replace("each scores", "scored")
-        if not count:
-            return f"No scored frame is without action-object pixels (such a frame would be {what})."
-        return f"The {count} frames without action-object pixels are {what}."
-
-
-def _rows_sentence(rows: Mapping[str, int]) -> str:
-    def count(n: int, one: str, many: str) -> str:
-        return f"{n} {one if n == 1 else many}"
-
-    said = []
-    if rows.get("model"):
-        said.append(count(rows["model"], "trained model", "trained models") + " on their held-out frames")
-    if rows.get("baseline"):
-        said.append(count(rows["baseline"], "baseline", "baselines") + " on every labelled frame "
-                    "(the action-object prior fitted without the scored activity)")  # fmt: skip
-    if rows.get("human"):
-        said.append(count(rows["human"], "participant", "participants") + " of the human study on the frames of their trials (MF only)")
-    return ("Rows: " + "; ".join(said) + ".") if said else "The report has no rows."

@@ -209,7 +209,7 @@ def _participant_jobs(
         if not answered and not unanswered:
             notes.append(f"{name} has no answered trials yet.")
             continue
-        job_notes = [f"{name} is still in session: {pending} trials not answered yet are left out."] if pending else []
+        job_notes = [f"{name} is still in session: trials not answered yet ({pending}) are left out."] if pending else []
         jobs.append(
             _Job(
                 rows=[_RowSpec(f"participant:{person.id}", "", name, HUMAN, f"{person.study.name}, participant {person.number}")],
@@ -389,7 +389,8 @@ def build_report(
     )
     provenance = Provenance(
         metric=metric, thresholds=thresholds, frames=frames, empty=empty, empty_frames=frames_without_truth(found),
-        answered_only=answered_only, resamples=resamples, seed=seed, human_maps=_human_maps(found), code_version=code_version(),
+        answered_only=answered_only, resamples=resamples, seed=seed, code_version=code_version(),
+        human_maps=_human_maps(found, exclude_failed_checks=exclude_failed_checks), model_splits=_model_splits(found),
     )
     return _scored(found, notes + loaded, provenance, compare_keys=compare_keys)
 
@@ -405,24 +406,56 @@ def _scored(found: list[Source], notes: list[str], provenance: Provenance, *, co
     return Report(activities=activities, rows=rows, provenance=provenance, notes=frame_notes + notes, comparison=comparison)
 
 
-def _human_maps(found: list[Source]) -> tuple[HumanMaps, ...]:
-    """How each study with a human row made its participants' maps: regions and click width."""
-    people = [int(s.key.split(":", 1)[1]) for s in found if s.kind == HUMAN]
+def _model_splits(found: list[Source]) -> dict[str, str]:
+    """How each model row's run was split (``loao``, ``single``, ``released``), by row key."""
+    runs = {f"run:{i}": str(folds) for i, folds in db.session.execute(
+        db.select(TrainingRun.id, TrainingRun.folds).where(TrainingRun.id.in_([int(s.key.split(":", 1)[1]) for s in found if s.kind == MODEL]))
+    )}  # fmt: skip
+    return {s.key: runs[s.key] for s in found if s.key in runs}
+
+
+def _human_maps(found: list[Source], *, exclude_failed_checks: bool) -> tuple[HumanMaps, ...]:
+    """How each study with a human row ran (frames, draw, practice and catch trials, who was left out) and made its maps."""
+    people = dict(db.session.execute(
+        db.select(Participant.id, Participant.study_id).where(Participant.id.in_([int(s.key.split(":", 1)[1]) for s in found if s.kind == HUMAN]))
+    ).all())  # fmt: skip
     if not people:
         return ()
-    chosen = db.session.execute(
-        db.select(Study).where(Study.id.in_(db.select(Participant.study_id).where(Participant.id.in_(people)))).order_by(Study.id)
-    ).scalars()
-    return tuple(HumanMaps(f'study {s.id} "{s.name}"', _regions(s.superpixels or {}), _sigma(s)) for s in chosen)
+    chosen = db.session.execute(db.select(Study).where(Study.id.in_(set(people.values()))).order_by(Study.id)).scalars()
+    out = []
+    for study in chosen:
+        everyone = studies_service.study_participants([study.id])
+        pilots = db.session.scalar(
+            db.select(func.count()).where(Participant.study_id == study.id, Participant.pilot.is_(True), Participant.withdrawn_at.is_(None))
+        )
+        main = len(study.frames_of(FrameKind.MAIN))
+        out.append(HumanMaps(
+            study=f'study {study.id} "{study.name}"', regions=_regions(study.superpixels or {}), sigma=_sigma(study),
+            rows=tuple(f"participant:{pid}" for pid, sid in people.items() if sid == study.id),
+            frames=main, per_activity=study.frames_per_activity, activities=main // max(study.frames_per_activity, 1),
+            seed=study.seed, order=str(study.activity_order), practice=len(study.frames_of(FrameKind.PRACTICE)),
+            catch=len(study.frames_of(FrameKind.CATCH)), pilots=pilots or 0,
+            failed_checks=sum(1 for c in studies_service.checks_of(everyone).values() if c.passed is False),
+            excluded=exclude_failed_checks,
+        ))  # fmt: skip
+    return tuple(out)
+
+
+REGION_WORDS = {
+    "hierarchical": "hierarchical superpixel regions (about {fine_regions} watershed regions merged along colour boundaries weaker than {level})",
+    "slic": "SLIC superpixels (about {n_segments} regions, compactness {compactness})",
+    "felzenszwalb": "Felzenszwalb-Huttenlocher graph regions (scale {scale}, at least {min_size} pixels each)",
+}
+"""Each region method and its options, in words (``egonet.clicks.METHOD_OPTIONS``)."""
 
 
 def _regions(settings: dict[str, Any]) -> str:
     method = settings.get("method", SUPERPIXEL_DEFAULTS.method)
-    options = ", ".join(f"{k} {settings.get(k, getattr(SUPERPIXEL_DEFAULTS, k))}" for k in METHOD_OPTIONS.get(method, ()))
-    return f"{method} regions ({options}), mean of the Gaussian over each region"
+    return REGION_WORDS[method].format(**{k: settings.get(k, getattr(SUPERPIXEL_DEFAULTS, k)) for k in METHOD_OPTIONS[method]})
 
 
 def _sigma(study: Study) -> str:
     if study.sigma_scaled:
-        return f"click Gaussians of sigma {DEFAULT_SIGMA:g} px at {studies_service.REFERENCE_WIDTH} px wide, scaled to each frame's width ({study.sigma_px:g} px on the widest)"
-    return f"click Gaussians of sigma {study.sigma_px:g} px at the frames' native resolution"
+        return (f"a standard deviation of {DEFAULT_SIGMA:g} px at {studies_service.REFERENCE_WIDTH} px wide, scaled to each "
+                f"frame's width ({study.sigma_px:g} px on the widest)")  # fmt: skip
+    return f"a standard deviation of {study.sigma_px:g} px at the frames' native resolution"

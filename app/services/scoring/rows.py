@@ -33,7 +33,7 @@ import numpy as np
 
 from app.errors import Problem
 from app.services.scoring.cache import FrameStats
-from app.services.scoring.cells import ALL, HUMAN, STATISTIC_LABELS, Cell, Curve, Difference, Row
+from app.services.scoring.cells import ALL, HUMAN, STATISTIC_LABELS, Cell, Curve, Difference, Row, frames_text, too_few
 from app.services.scoring.provenance import Provenance
 from app.services.scoring.table import Comparison
 from egonet.metrics import DEFAULT_EMPTY, Estimate, FrameCounts, Resampler, curve_from_counts, f_scores, reduce_sums, weighted_sums
@@ -226,8 +226,9 @@ def _cell(
     available: int,
     key: str,
     activities: int = 1,
+    few: bool = False,
 ) -> Cell:
-    """A cell from its members' values (one member, or a group's runs); None: no frames scored."""
+    """A cell from its members' values (one member, or a group's runs); None: no frames scored. ``few``: n too small, no interval."""
     if not members:
         empty = {s: None for s in scorer.statistics}
         return Cell(n_frames=0, values=empty, ci=empty, frames_available=available, frames_key=key, activities=activities)
@@ -239,11 +240,12 @@ def _cell(
     return Cell(
         n_frames=n_frames,
         values={s: values[s].value if s in shown else None for s in scorer.statistics},
-        ci={s: values[s].interval() if s in shown else None for s in scorer.statistics},
+        ci={s: values[s].interval() if s in shown and not few else None for s in scorer.statistics},
         sd=sd,
         frames_available=available,
         frames_key=key,
         activities=activities,
+        too_few=few,
     )
 
 
@@ -272,13 +274,15 @@ def _row(scorer: Scorer, entity: _Entity, chosen: dict[str, np.ndarray], availab
             n_frames=int(ids.size),
             available=int(available[activity].size),
             key=_fingerprint([activity, ids]),
+            few=bool(ids.size) and too_few(int(ids.size)),
         )
     scored = [a for a, ids in chosen.items() if ids.size]
     mean = overall = None
     if scored:
         n = sum(int(chosen[a].size) for a in scored)
         key = _fingerprint([(a, cells[a].frames_key) for a in scored])
-        common = {"hide": hide, "n_frames": n, "available": sum(int(f.size) for f in available.values()), "key": key}
+        common = {"hide": hide, "n_frames": n, "available": sum(int(f.size) for f in available.values()), "key": key,
+                  "few": too_few(*(int(chosen[a].size) for a in scored))}  # fmt: skip
         mean = _cell(scorer, [_stratified([m[a] for a in scored]) for m in per_member], activities=len(scored), **common)
         overall = _cell(scorer, [m[ALL] for m in per_member], activities=len(scored), **common)
     single = entity.members[0]
@@ -330,7 +334,7 @@ def build_rows(sources: Sequence[Source], *, frames: str, scorer: Scorer) -> tup
                 chosen[key][activity] = common
             if common.size < most:
                 notes.append(
-                    f"{activity}: {common.size} frames shared by the {len(having)} rows scored there (a row has up to {most})."
+                    f"{activity}: {frames_text(common.size)} shared by the {len(having)} rows scored there (a row has up to {most})."
                 )
     rows = [_row(scorer, e, chosen[e.key], available[e.key]) for e in entities]
     return rows, activities, notes
@@ -365,15 +369,17 @@ def compare(sources: Sequence[Source], key_a: str, key_b: str, *, scorer: Scorer
         va, vb = (_mean([v[act] for v in scorer.values(e, {act: ids})]) for e in (a, b))
         differences[act] = {s: va[s] - vb[s] for s in statistics}
 
-    def summary(d: Estimate, n: int) -> Difference:
-        return Difference(d.value, d.interval(), d.p_value(), n)
+    def summary(d: Estimate, *sizes: int) -> Difference:
+        if too_few(*sizes):
+            return Difference(d.value, None, None, sum(sizes), too_few=True)
+        return Difference(d.value, d.interval(), d.p_value(), sum(sizes))
 
-    n_all = sum(int(ids.size) for ids in shared.values())
+    sizes = [int(ids.size) for ids in shared.values()]
     return Comparison(
         a=(a.key, a.name),
         b=(b.key, b.name),
         statistics=tuple(statistics),
         activities={act: {s: summary(d[s], int(shared[act].size)) for s in statistics} for act, d in differences.items()},
-        mean={s: summary(Estimate.stratified_mean([d[s] for d in differences.values()]), n_all) for s in statistics},
+        mean={s: summary(Estimate.stratified_mean([d[s] for d in differences.values()]), *sizes) for s in statistics},
         provenance=replace(provenance, paired=True),
     )

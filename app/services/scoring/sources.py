@@ -116,6 +116,12 @@ def _accumulate(
     return stats, missing
 
 
+def gone(n: int, what: str = "") -> str:
+    """The note for frames whose ground truth went away: ``"1 frame no longer has a ground truth and was left out."``."""
+    one = n == 1
+    return f"{n} {what}frame{'' if one else 's'} no longer ha{'s' if one else 've'} a ground truth and {'was' if one else 'were'} left out."
+
+
 def run_row_name(run: TrainingRun) -> str:
     """A run's row: its model, or "released model" for the authors' weights (scored on every frame it predicted)."""
     if run.folds == "released":
@@ -126,7 +132,7 @@ def run_row_name(run: TrainingRun) -> str:
 def run_stats(run: TrainingRun, truth: Truth, thresholds: int, on_progress: Callable[[int], None]) -> Scored:
     """Score a run's held-out predictions (frames without a ground truth any more become a note)."""
     stats, missing = _accumulate(training.held_out_predictions(run), truth, thresholds, on_progress)
-    notes = [f"run {run.id}: {missing} held-out frames no longer have a ground truth and were left out."] if missing else []
+    notes = [f"run {run.id}: {gone(missing, 'held-out ')}"] if missing else []
     return {"": stats.build()}, notes
 
 
@@ -177,7 +183,7 @@ def participant_stats(
         stats.add(frame.id, truth.activity[frame.id], count_stats(empty, mask, thresholds=thresholds), answered=False)
         on_progress(1)
     label = f"{participant.label} of study {participant.study_id}"
-    notes = [f"{label}: {missing} frames no longer have a ground truth and were left out."] if missing else []
+    notes = [f"{label}: {gone(missing)}"] if missing else []
     return {"": stats.build()}, notes
 
 

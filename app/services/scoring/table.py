@@ -13,7 +13,7 @@ from collections import defaultdict
 from dataclasses import dataclass, field
 
 from app.services.scoring.cells import BASELINE, HUMAN, KIND_TITLES, MEAN, MODEL, PALETTE, STATISTIC_LABELS, Cell, Difference, Row, definition
-from app.services.scoring.formats import ComparisonFormats, ReportFormats
+from app.services.scoring.formats import ComparisonFormats, ReportFormats, verdict
 from app.services.scoring.provenance import Provenance
 
 
@@ -35,6 +35,10 @@ class Comparison(ComparisonFormats):
     def p_text(self, difference: Difference) -> str:
         """The difference's p-value as written everywhere (``"< 0.001"`` at the floor)."""
         return self.provenance.p_text(difference.p_value)
+
+    def verdict(self, difference: Difference) -> str:
+        """Its interval, p-value and frames as one phrase, or "n too small" and why."""
+        return verdict(difference, self.p_text(difference))
 
     def headline(self) -> Difference | None:
         """The difference of the mean MF-like statistic (``max_f``), the comparison's first line."""

@@ -71,6 +71,7 @@ from app.services.studies.recruiting import (
     order_seed,
     parse_arrival,
     places_taken,
+    platform_urls,
     refusal,
     release,
     set_active,

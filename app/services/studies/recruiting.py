@@ -24,6 +24,7 @@ import re
 import secrets
 from collections.abc import Mapping
 from dataclasses import dataclass, field
+from xml.sax.saxutils import escape as xml_escape
 
 from flask import current_app
 from sqlalchemy import func, or_, update
@@ -72,6 +73,10 @@ RELEASED = "released_at"
 # Where MTurk may send an ExternalQuestion's answers (its ``turkSubmitTo``); a deployment's
 # ``MTURK_SUBMIT_HOSTS`` replaces the list (tests add a local stand-in that way, never by default).
 MTURK_SUBMIT_HOSTS = ("https://workersandbox.mturk.com", "https://www.mturk.com")
+MTURK_FRAME_HEIGHT = 800
+"""The ExternalQuestion's FrameHeight in pixels: room for the open link's page (instructions, an example photo, the button)."""
+PROLIFIC_QUERY = "PROLIFIC_PID={{%PROLIFIC_PID%}}&STUDY_ID={{%STUDY_ID%}}&SESSION_ID={{%SESSION_ID%}}"
+"""What Prolific's study URL adds to the open link: Prolific fills these placeholders (MTurk fills none)."""
 
 FULL = "This study is full: thank you for your interest."
 PAUSED = "This study is paused and takes no new participants at the moment. Please try again later."
@@ -132,6 +137,26 @@ def mturk_submit_url(participant: Participant) -> str | None:
     if participant.platform != "mturk" or host not in mturk_submit_hosts() or not assignment:
         return None
     return host + "/mturk/externalSubmit"
+
+
+def platform_urls(open_link: str) -> dict[str, str]:
+    """What each platform is given: Prolific's study URL, MTurk's ExternalURL and its ExternalQuestion XML.
+
+    MTurk fills no placeholders in an ExternalURL: it appends its own
+    ``assignmentId``, ``hitId``, ``turkSubmitTo`` and ``workerId`` (none in a
+    preview) to the URL as given, so its URL is the bare open link.
+
+    Example:
+        >>> platform_urls("https://a.example/s/o/T")["mturk_url"]
+        'https://a.example/s/o/T'
+    """
+    question = (
+        '<ExternalQuestion xmlns="http://mechanicalturk.amazonaws.com/AWSMechanicalTurkDataSchemas/2006-07-14/ExternalQuestion.xsd">\n'
+        f"  <ExternalURL>{xml_escape(open_link)}</ExternalURL>\n"
+        f"  <FrameHeight>{MTURK_FRAME_HEIGHT}</FrameHeight>\n"
+        "</ExternalQuestion>\n"
+    )
+    return {"prolific_url": f"{open_link}?{PROLIFIC_QUERY}", "mturk_url": open_link, "mturk_question": question}
 
 
 def example_frame(study: Study) -> StudyFrame | None:
