@@ -388,6 +388,7 @@ def _state_json(state: studies.SessionState) -> dict:
         "total": state.total,
         "time_left_s": state.time_left_s,
         "trial_time_left_s": state.trial_time_left_s,
+        "shown_ms": state.shown_ms,
         "feedback": state.feedback,
         "redirect": None if state.step in ("trials", "practice") else url_for(STEP_ENDPOINTS[state.step]),
         "trial": None,

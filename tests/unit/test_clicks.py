@@ -5,7 +5,7 @@ import math
 import numpy as np
 import pytest
 
-from egonet.clicks import SUPERPIXEL_DEFAULTS, boundary_strength, click_gaussian, project_to_regions, soft_mask, superpixels
+from egonet.clicks import SUPERPIXEL_DEFAULTS, boundary_strength, click_gaussian, project_to_regions, regions, soft_mask, superpixels
 
 
 def stripes(h=8, w=8, n=4):
@@ -208,10 +208,13 @@ def test_boundary_strength_is_relative_and_peaks_on_edges():
     assert SUPERPIXEL_DEFAULTS.method == "hierarchical"
 
 
-def test_a_flat_frame_is_one_or_few_regions():
+def test_a_flat_frame_is_one_or_few_regions_without_the_cap_and_none_over_it_with_it():
     flat = np.full((30, 40, 3), 128, np.uint8)
-    labels = superpixels(flat, fine_regions=100)
+    labels = superpixels(flat, fine_regions=100, max_region_share=1.0)
     assert labels.shape == (30, 40) and labels.min() == 0 and labels.max() < 5
+    capped = regions(flat, fine_regions=100)  # nothing to merge along: it falls to the watershed regions
+    assert np.bincount(capped.labels.ravel()).max() <= SUPERPIXEL_DEFAULTS.max_region_share * 30 * 40
+    assert capped.capped.tolist() == list(range(capped.labels.max() + 1))  # every region stands where the cap split one
 
 
 def test_superpixels_validation():
