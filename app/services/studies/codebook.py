@@ -5,10 +5,10 @@ take their headers from here) and of their descriptions. ``markdown()`` is
 written into the export as ``CODEBOOK.md`` and is the section "Codebook" of
 ``docs/studies.md``; a test keeps the two identical and checks every
 exported header against it. After changing a description, rewrite the
-docs' section with ``python -m app.services.studies.codebook docs/studies.md``.
+docs' section with ``python -c "from app.services.studies.codebook import
+rewrite_docs; rewrite_docs('docs/studies.md')"``.
 """
 
-import sys
 from dataclasses import dataclass
 from pathlib import Path
 
@@ -225,12 +225,9 @@ def docs_section(text: str) -> str:
     return text[text.index(BEGIN) + len(BEGIN) : text.index(END)].strip("\n") + "\n"
 
 
-def rewrite_docs(path: Path) -> None:
+def rewrite_docs(path: str | Path) -> None:
     """Put ``markdown()`` between the markers of the docs page at ``path``."""
+    path = Path(path)
     text = path.read_text()
     head, tail = text[: text.index(BEGIN) + len(BEGIN)], text[text.index(END) :]
-    path.write_text(f"{head}\n{markdown()}{tail}")
-
-
-if __name__ == "__main__":
-    rewrite_docs(Path(sys.argv[1]))
+    path.write_text(f"{head}\n{markdown()}\n{tail}")

@@ -22,12 +22,12 @@ from pathlib import Path
 from typing import Any
 
 import numpy as np
-from sqlalchemy import case, func
+from sqlalchemy import func
 from sqlalchemy.orm import selectinload
 
 from app.extensions import db
 from app.models import Frame, Sequence
-from app.models.studies import ANSWERED, Click, FrameKind, Participant, Study, StudyFrame, Trial
+from app.models.studies import ANSWERED, FrameKind, Participant, Study, StudyFrame, Trial
 from app.services import ground_truth, media
 from app.services.studies import codebook
 from app.services.studies.building import format_code, sigma_for
@@ -326,8 +326,7 @@ def mask_files(study: Study) -> Iterator[tuple[str, bytes]]:
         frame = trial.frame
         mask = trial_soft_mask(trial)
         hit = hit_cap(trial)
-        if trial.clicks:
-            labelled[frame.id] = frame
+        labelled[frame.id] = frame
         name = f"{trial.participant.label}/{trial.position:04d}-frame{frame.id}.png"
         manifest.append([name, trial.participant.label, trial.participant.pilot, trial.position, trial.kind.value, frame.id,
                          frame.sequence.activity.name, frame.source_name, trial.outcome.value, "", sigma_for(study, frame), hit])  # fmt: skip
@@ -413,17 +412,15 @@ def export_to_folder(study: Study, out: Path, *, on_start=None, on_progress=None
     """
     out = Path(out)
     _settle(study)
-    answered = db.select(Trial).join(Participant).where(Participant.study_id == study.id, Trial.outcome.in_(ANSWERED)).subquery()
-    trials, frames, labelled = db.session.execute(
-        db.select(
-            func.count(),
-            func.count(func.distinct(answered.c.study_frame_id)),
-            func.count(func.distinct(case((answered.c.id.in_(db.select(Click.trial_id)), answered.c.study_frame_id)))),
-        ).select_from(answered)
+    trials, frames = db.session.execute(
+        db.select(func.count(), func.count(func.distinct(Trial.study_frame_id)))
+        .select_from(Trial)
+        .join(Participant)
+        .where(Participant.study_id == study.id, Trial.outcome.in_(ANSWERED))
     ).one()
     if on_start is not None:
-        # tables, JSON documents and the codebook; masks, means, labels; regions.json, manifest, clicks, codebook in masks/
-        on_start(7 + trials + frames + labelled + 4)
+        # tables, JSON documents and the codebook; masks, a mean and labels per frame; regions.json, manifest, clicks, codebook
+        on_start(7 + trials + 2 * frames + 4)
     written = []
 
     def write(path: Path, data: bytes) -> None:

@@ -16,6 +16,7 @@ import io as _io
 import json
 import zipfile
 from collections.abc import Iterable, Iterator
+from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
@@ -133,6 +134,29 @@ def click_pixels(points: Iterable[tuple[float, float]], shape: tuple[int, int]) 
     pixel (r, c) spans [c - 0.5, c + 0.5) x [r - 0.5, r + 0.5) (the frame's last edge belongs to its last pixel)."""
     h, w = shape
     return [(min(int(np.floor(y + 0.5)), h - 1), min(int(np.floor(x + 0.5)), w - 1)) for x, y in points]
+
+
+@dataclass(frozen=True)
+class CapSummary:
+    """How the region cap touched a study: its share (None: no cap), answered trials, and those that hit it."""
+
+    share: float | None
+    trials: int
+    hit: int
+
+
+def cap_summary(study: Study) -> CapSummary:
+    """The study's region cap and how many answered trials (pilots included, as in the manifest) hit it."""
+    share = study.superpixels.get("max_region_share") if study.superpixels.get("method") == "hierarchical" else None
+    trials = list(
+        db.session.execute(
+            db.select(Trial)
+            .join(Participant)
+            .where(Participant.study_id == study.id, Trial.outcome.in_(ANSWERED))
+            .options(selectinload(Trial.clicks), selectinload(Trial.study_frame).selectinload(StudyFrame.frame))
+        ).scalars()
+    )
+    return CapSummary(share if share is not None and share < 1 else None, len(trials), sum(hit_cap(t) for t in trials))
 
 
 def hit_cap(trial: Trial) -> bool:

@@ -101,12 +101,13 @@ def activity_table(study: Study) -> tuple[list[dict[str, Any]], int]:
 
 
 def answered_counts(study_frames: Iterable[StudyFrame]) -> dict[int, int]:
-    """How many participants answered each of these study frames (by study frame id)."""
+    """How many participants answered each of these study frames (by study frame id), pilots left out (as from the means)."""
     ids = [sf.id for sf in study_frames]
     return dict(
         db.session.execute(
             db.select(Trial.study_frame_id, func.count())
-            .where(Trial.study_frame_id.in_(ids), Trial.outcome.in_(ANSWERED))
+            .join(Participant)
+            .where(Trial.study_frame_id.in_(ids), Trial.outcome.in_(ANSWERED), Participant.pilot.is_(False))
             .group_by(Trial.study_frame_id)
         ).all()
     )
