@@ -119,7 +119,7 @@ def _notice(title: str, message: str, status: int) -> tuple[str, int]:
 def _refused(exc: studies.StudyProblem):
     """A polite page for a study that takes nobody now (full, paused, closed)."""
     titles = {"full": "This study is full", "paused": "This study is paused", "closed": "This study is closed",
-              "elsewhere": "Please continue in your first browser"}  # fmt: skip
+              "elsewhere": "Please continue in your first browser", "withdrawn": "You have withdrawn from this study"}  # fmt: skip
     return _notice(titles.get(exc.extra.get("reason"), "Not now"), exc.message, exc.status)
 
 
@@ -206,7 +206,7 @@ def open_link(open_token: str):
         if known is None:
             reason = studies.availability(study)
         else:
-            reason = None if arrival.preview or studies.may_resume(known, arrival, same_browser=same_browser) else "elsewhere"
+            reason = studies.returning(known, arrival, same_browser=same_browser)
         if reason is not None:
             return _refused(studies.refusal(reason))
         page = render_template(

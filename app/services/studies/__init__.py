@@ -77,6 +77,7 @@ from app.services.studies.recruiting import (
     places_taken,
     refusal,
     release,
+    returning,
     set_active,
 )
 from app.services.studies.session import (

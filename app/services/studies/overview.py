@@ -83,9 +83,10 @@ def study_summaries() -> list[StudySummary]:
 
 
 def condition_table(study: Study) -> list[dict[str, Any]]:
-    """Per condition: what it changes, its quota and the places taken (balanced assignment keeps these even)."""
-    places = condition_places(study)
-    return [{"condition": c, "places": places.get(c.id, 0)} for c in study.conditions]
+    """Per condition: what it changes, its quota, the open link's places taken and everyone in it (balanced
+    assignment keeps these even)."""
+    places, everyone = condition_places(study), condition_places(study, open_link=False)
+    return [{"condition": c, "places": places.get(c.id, 0), "everyone": everyone.get(c.id, 0)} for c in study.conditions]
 
 
 def activity_table(study: Study) -> tuple[list[dict[str, Any]], int]:
