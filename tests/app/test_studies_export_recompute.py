@@ -101,7 +101,7 @@ def test_the_docs_script_recomputes_every_mask_of_a_real_export(real_study, tmp_
     # The labels are the app's, regenerated bit for bit by the call regions.json names.
     regions = json.loads((export / "regions.json").read_text())
     assert regions["settings"] == real_study.superpixels and regions["settings"]["max_region_share"] == 0.25
-    assert regions["code_version"].startswith("egonet-studio")
+    assert regions["code_version"].startswith("egonet-studio") and "scikit-image" in regions["libraries"]
     desk = next(f for f in regions["frames"] if f["file"].endswith(f"frame{_frame_id(real_study, DESK)}.npz"))
     rgb = egonet_io.read_image(EGONET_SAMPLES / "rgb" / f"{DESK}.jpg")
     again = egonet_clicks.regions(rgb, **regions["settings"])

@@ -193,7 +193,8 @@ OTHER_FILES = {
                  "and regions.json (below), and this codebook as CODEBOOK.md.",
     "labels/frame<id>.npz": "The frame's region labels as used for every mask of it: numpy's compressed `.npz` with one array "
                             "`labels`, uint16 (or int32) (frame_height, frame_width), ids 0..n-1, row-major like the image.",
-    "regions.json": "How the labels were made: `code_version`, `function` and `settings` (the call that regenerates them from the "
+    "regions.json": "How the labels were made: `code_version` and `libraries` (the versions of numpy, SciPy, scikit-image and "
+                    "OpenCV), `function` and `settings` (the call that regenerates them from the "
                     "frame's RGB image), `max_region_share`, `trials_hit_cap`, and per frame: `frame_id`, `file`, `width`, `height`, "
                     "`sigma_px`, `regions` (how many) and `capped` (the ids of regions that stand where the cap split a larger one).",
 }

@@ -18,6 +18,7 @@ import zipfile
 from collections import defaultdict
 from collections.abc import Iterator
 from datetime import datetime
+from importlib import metadata
 from pathlib import Path
 from typing import Any
 
@@ -357,11 +358,23 @@ def mask_files(study: Study) -> Iterator[tuple[str, bytes]]:
     yield "CODEBOOK.md", codebook.markdown().encode()
 
 
+def _versions(*names: str) -> dict[str, str]:
+    """The installed versions of these packages (the regions depend on scikit-image's and OpenCV's)."""
+    found = {}
+    for name in names:
+        try:
+            found[name] = metadata.version(name)
+        except metadata.PackageNotFoundError:
+            pass
+    return found
+
+
 def _regions_doc(study: Study, frames: list[dict[str, Any]], trials_hit_cap: int) -> dict[str, Any]:
     """regions.json: what regenerates the label maps bit for bit, and how a mask is made from them."""
     settings = dict(study.superpixels)
     return {
         "code_version": code_version(),
+        "libraries": _versions("numpy", "scipy", "scikit-image", "opencv-python", "opencv-python-headless"),
         "function": "egonet.clicks.regions(rgb, **settings).labels, rgb the frame's image as uint8 (H, W, 3) RGB",
         "settings": settings,
         "max_region_share": settings.get("max_region_share") if settings.get("method") == "hierarchical" else None,
