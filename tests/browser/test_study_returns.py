@@ -9,7 +9,7 @@ from app.models.studies import Participant, Study
 from app.services import studies
 from app.services.demo import create_demo
 from app.services.users import create_user
-from tests.browser.conftest import screenshot
+from tests.browser.conftest import screenshot, sign_in
 from tests.browser.test_study import click_frame, wait_for_trial
 
 pytestmark = pytest.mark.browser
@@ -37,7 +37,7 @@ def arrive(browser, live_server, link: str, n: int):
     return context, person
 
 
-def test_a_reload_does_not_restart_the_reaction_time(live_app, live_server, browser):
+def test_a_reload_does_not_restart_the_reaction_time(live_app, live_server, browser, page):
     study_id, link = open_study(live_app)
     context, person = arrive(browser, live_server, link, 1)
     person.wait_for_timeout(1500)
@@ -54,7 +54,14 @@ def test_a_reload_does_not_restart_the_reaction_time(live_app, live_server, brow
         assert trial.rt_ms >= 1800 and server_ms - 1000 < trial.rt_ms <= server_ms + 50, (trial.rt_ms, server_ms)
         assert trial.clicks[0].rt_ms == pytest.approx(trial.rt_ms, abs=100)
         assert [e.kind.value for e in trial.events].count("reload") == 1
+        hit = studies.cap_summary(db.session.get(Study, study_id)).hit
     context.close()
+    # The results page: mean maps without pilots, and the region cap with how many trials hit it.
+    sign_in(page, live_app, live_server)
+    page.goto(f"{live_server}/studies/{study_id}/frames")
+    text = page.inner_text("#region-cap")
+    assert "Region cap: no region over 25 % of the frame." in text and f"{hit} of 1 answered trial had a click" in text
+    screenshot(page, "study-results-cap")
 
 
 def test_a_withdrawn_participant_who_returns_is_told_they_withdrew(live_app, live_server, browser):
