@@ -191,3 +191,20 @@ def test_a_study_from_before_the_cap_keeps_its_regions(ctx, tmp_path):
     upgrade()
     db.session.remove()
     assert db.session.get(Study, ids["study"]).superpixels == {**settings, "max_region_share": 1.0}
+
+
+def test_the_builder_and_the_definition_take_the_cap(app, admin_client, tmp_path):
+    with app.app_context():
+        ids = build_study(tmp_path, participants=0)
+    form = {"name": "capped", "activities": [str(a) for a in ids["activities"]], "frames_per_activity": "1", "seed": "1",
+            "time_limit_minutes": "30", "superpixel_method": "hierarchical", "fine_regions": "500", "level": "0.3",
+            "max_region_share": "0.4", "max_side": "640", "instructions": "Click.", "consent": "Yes."}  # fmt: skip
+    too_big = admin_client.post("/studies/new", data={**form, "max_region_share": "1.5"})
+    assert too_big.status_code == 400 and b"max_region_share must be a number in [0.01, 1.0]" in too_big.data
+    assert admin_client.post("/studies/new", data=form).status_code == 302
+    with app.app_context():
+        study = db.session.execute(db.select(Study).filter_by(name="capped")).scalar_one()
+        assert study.superpixels == {"method": "hierarchical", "fine_regions": 500, "level": 0.3, "max_region_share": 0.4, "max_side": 640}
+        assert studies.definition_of(study)["regions"]["max_region_share"] == 0.4
+        again = studies.study_from_definition({**studies.definition_of(study), "name": "again"})
+        assert again.superpixels == study.superpixels
