@@ -46,7 +46,6 @@ from app.services.studies.masks import (
     cap_summary,
     condition_name,
     frame_regions,
-    hit_cap,
     mask_png,
     mean_soft_mask,
     overlay_png,

@@ -319,32 +319,39 @@ def mask_files(study: Study) -> Iterator[tuple[str, bytes]]:
     """
     manifest = []
     means: dict[int, MaskMean] = defaultdict(MaskMean)
-    capped_in_mean: dict[int, int] = defaultdict(int)
-    labelled: dict[int, Frame] = {}
+    # Per frame: its manifest rows, their clicks and whether they count in the mean; the cap is judged per frame below.
+    rows_of: dict[int, list[tuple[int, list[tuple[float, float]], bool]]] = defaultdict(list)
+    frames: dict[int, Frame] = {}
     for trial in _study_trials(study):
         if trial.outcome not in ANSWERED:
             continue
         frame = trial.frame
         mask = trial_soft_mask(trial)
-        hit = hit_cap(trial)
-        labelled[frame.id] = frame
         name = f"{trial.participant.label}/{trial.position:04d}-frame{frame.id}.png"
+        frames[frame.id] = frame
+        rows_of[frame.id].append((len(manifest), [(c.x, c.y) for c in trial.clicks], not trial.participant.pilot))
         manifest.append([name, trial.participant.label, trial.participant.pilot, trial.position, trial.kind.value, frame.id,
-                         frame.sequence.activity.name, frame.source_name, trial.outcome.value, "", sigma_for(study, frame), hit])  # fmt: skip
+                         frame.sequence.activity.name, frame.source_name, trial.outcome.value, "", sigma_for(study, frame), False])  # fmt: skip
         yield name, mask_png(mask)
         if not trial.participant.pilot:  # the means are data: pilots stay out
             means[frame.id].add(mask)
-            capped_in_mean[frame.id] += hit
+    mean_row: dict[int, int] = {}
     for sf in study.frames:
         frame = sf.frame
         if frame.id in means:
             name = f"mean/frame{frame.id}.png"
+            mean_row[frame.id] = len(manifest)
             manifest.append([name, "mean", "", "", sf.kind.value, frame.id, frame.sequence.activity.name, frame.source_name, "",
-                             means[frame.id].count, sigma_for(study, frame), capped_in_mean[frame.id]])  # fmt: skip
+                             means[frame.id].count, sigma_for(study, frame), 0])  # fmt: skip
             yield name, mask_png(means[frame.id].mean())
     described = []
-    for frame in sorted(labelled.values(), key=lambda f: f.id):
+    for frame_id in sorted(frames):
+        frame = frames[frame_id]
         found = frame_regions(frame, study.superpixels)
+        for row, points, in_mean in rows_of[frame_id]:
+            manifest[row][-1] = bool(points) and hit_cap(found, points)
+            if in_mean and manifest[row][-1]:
+                manifest[mean_row[frame_id]][-1] += 1
         buffer = _io.BytesIO()
         np.savez_compressed(buffer, labels=found.labels)
         name = f"labels/frame{frame.id}.npz"

@@ -15,6 +15,7 @@ import hashlib
 import io as _io
 import json
 import zipfile
+from collections import defaultdict
 from collections.abc import Iterable, Iterator
 from dataclasses import dataclass
 from pathlib import Path
@@ -146,29 +147,35 @@ class CapSummary:
 
 
 def cap_summary(study: Study) -> CapSummary:
-    """The study's region cap and how many answered trials (pilots included, as in the manifest) hit it."""
+    """The study's region cap and how many answered trials (pilots included, as in the manifest) hit it
+    (``hit_cap``); each frame's regions are read once, one frame at a time."""
     share = study.superpixels.get("max_region_share") if study.superpixels.get("method") == "hierarchical" else None
-    trials = list(
-        db.session.execute(
-            db.select(Trial)
-            .join(Participant)
-            .where(Participant.study_id == study.id, Trial.outcome.in_(ANSWERED))
-            .options(selectinload(Trial.clicks), selectinload(Trial.study_frame).selectinload(StudyFrame.frame))
-        ).scalars()
-    )
-    return CapSummary(share if share is not None and share < 1 else None, len(trials), sum(hit_cap(t) for t in trials))
+    trials = db.session.execute(
+        db.select(Trial)
+        .join(Participant)
+        .where(Participant.study_id == study.id, Trial.outcome.in_(ANSWERED))
+        .options(selectinload(Trial.clicks), selectinload(Trial.study_frame).selectinload(StudyFrame.frame))
+    ).scalars()
+    by_frame: dict[int, list[Trial]] = defaultdict(list)
+    count = 0
+    for trial in trials:
+        count += 1
+        if trial.clicks:
+            by_frame[trial.frame.id].append(trial)
+    hit = 0
+    for answered in by_frame.values() if share is not None and share < 1 else ():  # no cap: nothing to hit
+        frame = answered[0].frame
+        found = frame_regions(frame, study.superpixels)
+        hit += sum(hit_cap(found, [(c.x, c.y) for c in t.clicks]) for t in answered)
+    return CapSummary(share if share is not None and share < 1 else None, count, hit)
 
 
-def hit_cap(trial: Trial) -> bool:
-    """Whether one of the trial's clicks fell on a region that stands where the region cap split one
-    (``egonet.clicks.regions``): the trials whose masks the cap changed most."""
-    if not trial.clicks:
-        return False
-    frame = trial.frame
-    found = frame_regions(frame, trial.participant.study.superpixels)
+def hit_cap(found: egonet_clicks.Regions, points: Iterable[tuple[float, float]]) -> bool:
+    """Whether one of these clicks (x, y) fell on a region of ``found`` that stands where the region cap split
+    one (``egonet.clicks.regions``): the trials whose masks the cap changed most."""
     if not len(found.capped):
         return False
-    hit = [found.labels[r, c] for r, c in click_pixels([(c.x, c.y) for c in trial.clicks], (frame.height, frame.width))]
+    hit = [found.labels[r, c] for r, c in click_pixels(points, found.labels.shape)]
     return bool(np.isin(hit, found.capped).any())
 
 
