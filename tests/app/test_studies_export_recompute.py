@@ -82,7 +82,9 @@ def real_study(ctx, tmp_path):
 
 def test_the_docs_script_recomputes_every_mask_of_a_real_export(real_study, tmp_path):
     out = tmp_path / "export"
-    studies.export_to_folder(real_study, out)
+    total, done = [], []
+    written = studies.export_to_folder(real_study, out, on_start=total.append, on_progress=done.append)
+    assert total == [len(written)] == [sum(done)]  # the progress the CLI shows ends at 100 %
     export = out / "masks"
     manifest = list(csv.DictReader(io.StringIO((export / "manifest.csv").read_text())))
     trials = [r for r in manifest if r["participant"] != "mean"]

@@ -23,7 +23,7 @@ from pathlib import Path
 from typing import Any
 
 import numpy as np
-from sqlalchemy import func
+from sqlalchemy import case, func
 from sqlalchemy.orm import selectinload
 
 from app.extensions import db
@@ -432,15 +432,20 @@ def export_to_folder(study: Study, out: Path, *, on_start=None, on_progress=None
     """
     out = Path(out)
     _settle(study)
-    trials, frames = db.session.execute(
-        db.select(func.count(), func.count(func.distinct(Trial.study_frame_id)))
+    trials, frames, averaged = db.session.execute(
+        db.select(
+            func.count(),
+            func.count(func.distinct(Trial.study_frame_id)),
+            func.count(func.distinct(case((Participant.pilot.is_(False), Trial.study_frame_id)))),
+        )
         .select_from(Trial)
         .join(Participant)
         .where(Participant.study_id == study.id, Trial.outcome.in_(ANSWERED))
     ).one()
     if on_start is not None:
-        # tables, JSON documents and the codebook; masks, a mean and labels per frame; regions.json, manifest, clicks, codebook
-        on_start(7 + trials + 2 * frames + 4)
+        # tables, JSON documents and the codebook; masks, labels per frame, means (pilots in none); regions.json,
+        # manifest, clicks, codebook
+        on_start(7 + trials + frames + averaged + 4)
     written = []
 
     def write(path: Path, data: bytes) -> None:
