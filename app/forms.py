@@ -81,6 +81,8 @@ class StudyForm(Form):
                                     default=SUPERPIXEL_DEFAULTS.method)
     fine_regions = IntegerField("Hierarchy: fine regions", default=SUPERPIXEL_DEFAULTS.fine_regions, validators=[Optional()])
     level = FloatField("Hierarchy: merge level", default=SUPERPIXEL_DEFAULTS.level, validators=[Optional()])
+    max_region_share = FloatField("Hierarchy: largest region (share of the frame)", default=SUPERPIXEL_DEFAULTS.max_region_share,
+                                  validators=[Optional()])
     n_segments = IntegerField("SLIC regions", default=SUPERPIXEL_DEFAULTS.n_segments, validators=[Optional()])
     compactness = FloatField("SLIC compactness", default=SUPERPIXEL_DEFAULTS.compactness, validators=[Optional()])
     scale = FloatField("Felzenszwalb scale", default=SUPERPIXEL_DEFAULTS.scale, validators=[Optional()])
@@ -115,7 +117,7 @@ class StudyForm(Form):
     display_allow_phones = BooleanField("Phones may take part", default=True)
 
     JSON_FIELDS = ("catch_trials", "comprehension", "conditions", "open_link_quotas")
-    REGIONS = ("fine_regions", "level", "n_segments", "compactness", "scale", "min_size")
+    REGIONS = ("fine_regions", "level", "max_region_share", "n_segments", "compactness", "scale", "min_size")
 
     def definition(self, activity_names: dict[int, str]) -> dict[str, Any] | None:
         """The form as a definition document; None (with the field's error set) when a JSON field does not parse."""

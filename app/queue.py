@@ -11,8 +11,14 @@ This module is a leaf: it knows the queue, not the jobs. The jobs are the
 functions of ``app.tasks`` marked ``@job``; services queue one by name with
 ``enqueue("train_run", run_id)`` and return at once, and the worker runs it
 inside an application context.
+
+A running worker records a heartbeat in the queue's own storage every
+``HEARTBEAT_S`` seconds (``worker_last_seen``), so a page with queued work
+can say when no worker is running.
 """
 
+import threading
+import time
 from collections.abc import Callable
 from functools import cached_property, update_wrapper, wraps
 from importlib import import_module
@@ -23,6 +29,11 @@ from flask import Flask, current_app
 from huey import Huey, RedisHuey, SqliteHuey
 from huey.api import Result, TaskWrapper
 
+HEARTBEAT_KEY = "egonet:worker-heartbeat"
+HEARTBEAT_S = 10.0
+"""How often a running worker records that it is alive."""
+WORKER_GONE_S = 60.0
+"""A worker not seen for this long is taken as not running (pages with queued work say so)."""
 EXTENSION = "egonet.queue"
 JOBS = "app.tasks"
 """The module whose ``@job`` functions the worker runs."""
@@ -113,8 +124,33 @@ def current_huey() -> Huey:
     return current_app.extensions[EXTENSION].huey
 
 
+def worker_last_seen() -> float | None:
+    """Seconds since a worker last recorded its heartbeat on the current app's queue; None if none ever did."""
+    beat = current_huey().get(HEARTBEAT_KEY, peek=True)
+    return None if beat is None else max(0.0, time.time() - float(beat))
+
+
+def worker_running() -> bool:
+    """Whether a worker was seen within ``WORKER_GONE_S``."""
+    seen = worker_last_seen()
+    return seen is not None and seen < WORKER_GONE_S
+
+
 def run_worker(*, workers: int = 1) -> None:
-    """Consume the current app's jobs until interrupted (``flask egonet worker``)."""
+    """Consume the current app's jobs until interrupted (``flask egonet worker``), beating every ``HEARTBEAT_S``."""
+    huey = current_huey()
+    stop = threading.Event()
+
+    def heartbeat():
+        huey.put(HEARTBEAT_KEY, time.time())
+        while not stop.wait(HEARTBEAT_S):
+            huey.put(HEARTBEAT_KEY, time.time())
+
+    beating = threading.Thread(target=heartbeat, name="egonet-worker-heartbeat", daemon=True)
+    beating.start()
     # Threads share the process; the training jobs themselves use torch's threads.
-    consumer = current_huey().create_consumer(workers=workers, worker_type="thread", periodic=False)
-    consumer.run()
+    consumer = huey.create_consumer(workers=workers, worker_type="thread", periodic=False)
+    try:
+        consumer.run()
+    finally:
+        stop.set()

@@ -71,7 +71,8 @@ METHODS: dict[str, Callable[[np.ndarray], np.ndarray | None]] = {
     "slic 100": lambda rgb: superpixels(rgb, method="slic", n_segments=100),
     "felzenszwalb (scale 100)": lambda rgb: superpixels(rgb, method="felzenszwalb"),
     "felzenszwalb scale 400": lambda rgb: superpixels(rgb, method="felzenszwalb", scale=400.0),
-    "hierarchical (the default)": lambda rgb: superpixels(rgb),
+    "hierarchical (the default: cap 0.25)": lambda rgb: superpixels(rgb),
+    "hierarchical, no cap (before it)": lambda rgb: superpixels(rgb, max_region_share=1.0),
     "hierarchical level 0.5": lambda rgb: superpixels(rgb, level=0.5),
 }
 

@@ -3,6 +3,7 @@
 from flask import current_app, request, url_for
 
 from app.models import Role
+from app.queue import WORKER_GONE_S, worker_last_seen
 from app.security import access_of, current_role
 
 # (label, endpoint): shown when the endpoint exists and the user's role may use it.
@@ -36,4 +37,6 @@ def navigation() -> dict:
             area = TAB_OF.get(request.blueprint, request.blueprint)
             active = area == endpoint.split(".")[0] and request.endpoint != ACCOUNT
             items.append({"label": label, "url": url_for(endpoint), "active": active})
-    return {"navigation": items, "account_url": url_for(ACCOUNT) if _may_use(ACCOUNT, role) else None}
+    return {"navigation": items, "account_url": url_for(ACCOUNT) if _may_use(ACCOUNT, role) else None,
+            # for pages with queued work (templates/_worker.html); asked only where such a page calls it
+            "worker_last_seen": worker_last_seen, "worker_gone_s": WORKER_GONE_S}

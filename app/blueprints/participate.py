@@ -127,7 +127,7 @@ def _notice(title: str, message: str, status: int) -> tuple[str, int]:
 def _refused(exc: studies.StudyProblem):
     """A polite page for a study that takes nobody now (full, paused, closed)."""
     titles = {"full": "This study is full", "paused": "This study is paused", "closed": "This study is closed",
-              "elsewhere": "Please continue in your first browser"}  # fmt: skip
+              "elsewhere": "Please continue in your first browser", "withdrawn": "You have withdrawn from this study"}  # fmt: skip
     return _notice(titles.get(exc.extra.get("reason"), "Not now"), exc.message, exc.status)
 
 
@@ -210,10 +210,11 @@ def open_link(open_token: str):
     known = studies.by_external_id(study, arrival.external_id)
     same_browser = known is not None and current_user.is_authenticated and current_user.id == known.user_id
     if request.method == "GET":
-        # Whether an id takes part shows only to whom may resume it: anyone else gets a newcomer's answer.
+        # Whether an id takes part shows only to whom may resume it: anyone else gets a newcomer's answer
+        # (and learns on the POST, as a newcomer would, whether that id may go on).
         if known is not None and not studies.may_resume(known, arrival, same_browser=same_browser):
             known = None
-        reason = None if known is not None else studies.availability(study)
+        reason = studies.availability(study) if known is None else studies.returning(known, arrival, same_browser=same_browser)
         if reason is not None:
             return _refused(studies.refusal(reason))
         return render_template(
@@ -398,6 +399,7 @@ def _state_json(state: studies.SessionState) -> dict:
         "total": state.total,
         "time_left_s": state.time_left_s,
         "trial_time_left_s": state.trial_time_left_s,
+        "shown_ms": state.shown_ms,
         "feedback": state.feedback,
         "redirect": None if state.step in ("trials", "practice") else url_for(STEP_ENDPOINTS[state.step]),
         "trial": None,

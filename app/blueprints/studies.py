@@ -333,7 +333,8 @@ def frames(study_id: int):
         raise Problem(f"page {page} does not exist (there are {pages})", status=404)
     shown = study.frames[(page - 1) * PER_PAGE : page * PER_PAGE]
     answered = studies.answered_counts(shown)
-    return render_template("studies/frames.html", study=study, frames=shown, answered=answered, page=page, pages=pages)
+    return render_template("studies/frames.html", study=study, frames=shown, answered=answered, page=page, pages=pages,
+                           cap=studies.cap_summary(study))
 
 
 @bp.get("/<int:study_id>/frames/<int:study_frame_id>")

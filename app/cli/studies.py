@@ -127,7 +127,8 @@ def study_superpixels_command(study_id):
     with progress_bar("Superpixels") as (on_start, on_progress):
         on_start(len(study.frames))
         computed = precompute_superpixels(study, on_progress=on_progress)
-    click.echo(f"study {study.id}: {computed} frames computed, {len(study.frames) - computed} already cached")
+    cached = len(study.frames) - computed
+    click.echo(f"study {study.id}: {computed} frame{'s' if computed != 1 else ''} computed, {cached} already cached")
 
 
 @bp.cli.command("study-export")

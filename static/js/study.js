@@ -111,7 +111,8 @@ async function show(state) {
   tick();
   requestAnimationFrame((timestamp) => {
     if (trial !== shown) return;
-    paintedAt = timestamp;
+    // After a reload the clock goes on from the first showing (the server says how long ago), like server_ms.
+    paintedAt = timestamp - (state.shown_ms || 0);
     app.dataset.painted = String(shown.position); // which trial is on screen (tests wait for it)
   });
 }

@@ -29,7 +29,8 @@ def test_an_old_study_keeps_slic_and_a_new_one_records_the_new_default(ctx):
     old, new = db.session.get(Study, old.id), db.session.get(Study, new.id)
     assert old.superpixels == OLD_SLIC
     assert new.superpixels == {"method": "hierarchical", "fine_regions": egonet_clicks.SUPERPIXEL_DEFAULTS.fine_regions,
-                               "level": egonet_clicks.SUPERPIXEL_DEFAULTS.level, "max_side": 640}
+                               "level": egonet_clicks.SUPERPIXEL_DEFAULTS.level,
+                               "max_region_share": egonet_clicks.SUPERPIXEL_DEFAULTS.max_region_share, "max_side": 640}
 
     frame = db.session.get(Frame, old.frames[0].frame_id)
     rgb = io.read_image(media.absolute_path(frame.rgb_path))

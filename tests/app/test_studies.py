@@ -268,7 +268,8 @@ def test_exports_csv_json_and_mask_pngs(ctx, tmp_path):
     json.dumps(doc)  # serialisable
 
     files = dict(studies.mask_files(study))
-    assert len(files) == 4 + 4 + 1  # P01's trials, a mean per answered frame, the manifest
+    # P01's trials, a mean and the labels per answered frame, regions.json, the manifest, clicks.csv, the codebook
+    assert len(files) == 4 + 4 + 4 + 4
     trial = study.participants[0].trials[0]
     png = files[f"P01/{trial.position:04d}-frame{trial.frame.id}.png"]
     decoded = cv2.imdecode(np.frombuffer(png, np.uint8), cv2.IMREAD_UNCHANGED)
@@ -283,7 +284,7 @@ def test_exports_csv_json_and_mask_pngs(ctx, tmp_path):
     out = tmp_path / "export"
     written = studies.export_to_folder(study, out)
     assert (out / "trials.csv").read_text() == studies.export_csv(study, "trials")
-    assert (out / "masks" / "manifest.csv").exists() and len(written) == 6 + len(files)  # 4 tables, 2 JSON documents
+    assert (out / "masks" / "manifest.csv").exists() and len(written) == 7 + len(files)  # 4 tables, 2 JSON documents, the codebook
 
 
 # --------------------------------------------------------------------------

@@ -144,26 +144,43 @@ def test_comprehension_questions_gate_the_timed_part_with_retries(app, client, t
 def test_completion_code_and_redirect_prolific_style(app, client, tmp_path):
     app.config["STUDY_CLOCK"] = clock = Clock(datetime(2026, 6, 1, 12, tzinfo=UTC))
     with app.app_context():
-        ids = build_study(tmp_path, participants=3, time_limit_s=60, multiple_clicks=False,
+        ids = build_study(tmp_path, participants=3, time_limit_s=60, multiple_clicks=False, open_link={"cap": 10},
                           completion={"code": "ABC123", "failed_code": "LATE99", "redirect_url": REDIRECT})  # fmt: skip
         codes = [db.session.get(Participant, pid).code for pid in ids["participants"]]
-    client.post("/s/", data={"code": codes[0]})
-    client.post("/s/consent", data={"decision": "agree"})
-    client.post("/s/start")
-    state = client.get("/s/api/current", headers=JSON).get_json()
-    while state["trial"]:
-        state = client.post(state["trial"]["submit_url"], json={"clicks": [{"x": 3, "y": 3, "rt_ms": 100}]}, headers=JSON).get_json()
-    assert state["redirect"] == "/s/done"
-    done = client.get("/s/done")
+        token = db.session.get(Study, ids["study"]).open_link_token
+
+    def answer_every_trial(browser):
+        browser.post("/s/consent", data={"decision": "agree"})
+        browser.post("/s/start")
+        state = browser.get("/s/api/current", headers=JSON).get_json()
+        while state["trial"]:
+            state = browser.post(state["trial"]["submit_url"], json={"clicks": [{"x": 3, "y": 3, "rt_ms": 100}]}, headers=JSON).get_json()
+        assert state["redirect"] == "/s/done"
+        return browser.get("/s/done")
+
+    # A Prolific arrival through the open link is sent back to Prolific with the code.
+    prolific = app.test_client()
+    assert prolific.post(f"/s/o/{token}", data={"PROLIFIC_PID": "p1", "STUDY_ID": "s1", "SESSION_ID": "v1"}).status_code == 302
+    done = answer_every_trial(prolific)
     assert b'id="completion-code">ABC123<' in done.data
     assert b'data-redirect="https://app.prolific.com/submissions/complete?cc=ABC123"' in done.data and b"study_done.js" in done.data
+    # A lab code gets the code and stays on the page: it did not come from Prolific.
+    client.post("/s/", data={"code": codes[0]})
+    done = answer_every_trial(client)
+    assert b'id="completion-code">ABC123<' in done.data and b"data-redirect" not in done.data
 
     late = app.test_client()
-    late.post("/s/", data={"code": codes[1]})
+    assert late.post(f"/s/o/{token}", data={"PROLIFIC_PID": "p2", "STUDY_ID": "s1", "SESSION_ID": "v2"}).status_code == 302
     late.post("/s/consent", data={"decision": "agree"})
     late.post("/s/start")
     clock.advance(61 + studies.LATE_GRACE_S)
     assert b"LATE99" in late.get("/s/done").data and b"cc=LATE99" in late.get("/s/done").data
+    late_code = app.test_client()
+    late_code.post("/s/", data={"code": codes[1]})
+    late_code.post("/s/consent", data={"decision": "agree"})
+    late_code.post("/s/start")
+    clock.advance(61 + studies.LATE_GRACE_S)
+    assert b"LATE99" in late_code.get("/s/done").data and b"cc=LATE99" not in late_code.get("/s/done").data
 
     declined = app.test_client()
     declined.post("/s/", data={"code": codes[2]})
@@ -172,6 +189,7 @@ def test_completion_code_and_redirect_prolific_style(app, client, tmp_path):
     assert b"completion-code" not in page.data and b"data-redirect" not in page.data and b"return the study" in page.data
     with app.app_context():
         assert [db.session.get(Participant, pid).completion_code for pid in ids["participants"]] == ["ABC123", "LATE99", None]
+        assert [p.completion_code for p in db.session.get(Study, ids["study"]).participants if p.external_id] == ["ABC123", "LATE99"]
 
 
 @pytest.mark.parametrize(

@@ -40,9 +40,10 @@ def test_pilots_are_marked_in_exports_and_left_out_of_scores_and_the_cap(app, ad
         assert [p.pilot for p in people] == [False, True, True]
         for person in people:
             answer_all(person.id)
-        assert studies.places_taken(db.session.get(Study, study_id)) == 1  # the pilots hold no place
+        assert studies.places_taken(db.session.get(Study, study_id)) == 0  # neither the pilots nor a lab code hold a place
         real = people[0].id
-    # One more arrival fits under the cap of 2, whatever the pilots.
+    # Two arrivals fit under the open link's cap of 2, whatever the pilots and the lab code.
+    assert app.test_client().post(f"/s/o/{token}").status_code == 302
     assert app.test_client().post(f"/s/o/{token}").status_code == 302
     assert app.test_client().get(f"/s/o/{token}").status_code == 409
 
@@ -55,12 +56,12 @@ def test_pilots_are_marked_in_exports_and_left_out_of_scores_and_the_cap(app, ad
     assert {r["participant"] for r in manifest if r["pilot"] == "True"} == {"P02", "P03"}
     assert {r["participants"] for r in manifest if r["participant"] == "mean"} == {"1"}  # the means leave pilots out
     document = admin_client.get(f"/studies/{study_id}/export/study.json").get_json()
-    assert [p["pilot"] for p in document["participants"]] == [False, True, True, False]
+    assert [p["pilot"] for p in document["participants"]] == [False, True, True, False, False]
 
     with app.app_context():
         scored = [p.id for p, _ in sources.human_participants([study_id])]
-        assert real in scored and len(scored) == 2  # P01 and the open link's newcomer
-        assert len(studies.study_participants([study_id], include_pilots=True)) == 4
+        assert real in scored and len(scored) == 3  # P01 and the open link's two newcomers
+        assert len(studies.study_participants([study_id], include_pilots=True)) == 5
 
 
 def test_withdrawal_deletes_one_participants_data_and_keeps_their_row(app, admin_client, make_user, tmp_path, caplog):

@@ -305,7 +305,8 @@ def test_bulk_codes_download_and_deactivate(app, admin_client, tmp_path):
     response = admin_client.post(f"/studies/{ids['study']}/participants", data={"count": "5", "entry": "code"})
     assert response.status_code == 302
     rows = list(csv.DictReader(io.StringIO(admin_client.get(f"/studies/{ids['study']}/export/participants.csv").get_data(as_text=True))))
-    assert len(rows) == 5 and all(len(r["code"]) == 8 for r in rows) and Counter(r["condition"] for r in rows) == {"x": 3, "y": 2}
+    # codes in the one form shown to people and on the study page, with their dash
+    assert len(rows) == 5 and all(len(r["code"]) == 9 and r["code"][4] == "-" for r in rows) and Counter(r["condition"] for r in rows) == {"x": 3, "y": 2}
     assert {r["status"] for r in rows} == {"not started"} and {r["entry"] for r in rows} == {"code"}
     with app.app_context():
         person = db.session.get(Study, ids["study"]).participants[0]
@@ -317,7 +318,8 @@ def test_bulk_codes_download_and_deactivate(app, admin_client, tmp_path):
     assert app.test_client().post("/s/", data={"code": code}).status_code == 403
     with app.app_context():
         study = db.session.get(Study, ids["study"])
-        assert studies.places_taken(study) == 4 and studies.progress(study.participants[0]).status == "deactivated"
+        # lab codes take no place of the open link's, deactivated or not
+        assert studies.places_taken(study) == 0 and studies.progress(study.participants[0]).status == "deactivated"
     assert admin_client.post(f"/studies/{ids['study']}/participants/{person_id}/active", data={"active": "2"}).status_code == 400
     assert admin_client.post(f"/studies/{ids['study']}/participants/{person_id}/active", data={"active": "1"}).status_code == 302
     assert app.test_client().post("/s/", data={"code": code}).status_code == 302

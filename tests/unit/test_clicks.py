@@ -5,7 +5,7 @@ import math
 import numpy as np
 import pytest
 
-from egonet.clicks import SUPERPIXEL_DEFAULTS, boundary_strength, click_gaussian, project_to_regions, soft_mask, superpixels
+from egonet.clicks import SUPERPIXEL_DEFAULTS, boundary_strength, click_gaussian, project_to_regions, regions, soft_mask, superpixels
 
 
 def stripes(h=8, w=8, n=4):
@@ -208,10 +208,13 @@ def test_boundary_strength_is_relative_and_peaks_on_edges():
     assert SUPERPIXEL_DEFAULTS.method == "hierarchical"
 
 
-def test_a_flat_frame_is_one_or_few_regions():
+def test_a_flat_frame_is_one_or_few_regions_without_the_cap_and_none_over_it_with_it():
     flat = np.full((30, 40, 3), 128, np.uint8)
-    labels = superpixels(flat, fine_regions=100)
+    labels = superpixels(flat, fine_regions=100, max_region_share=1.0)
     assert labels.shape == (30, 40) and labels.min() == 0 and labels.max() < 5
+    capped = regions(flat, fine_regions=100)  # nothing to merge along: it falls to the watershed regions
+    assert np.bincount(capped.labels.ravel()).max() <= SUPERPIXEL_DEFAULTS.max_region_share * 30 * 40
+    assert capped.capped.tolist() == list(range(capped.labels.max() + 1))  # every region stands where the cap split one
 
 
 def test_superpixels_validation():
@@ -245,3 +248,34 @@ def test_superpixels_feed_soft_mask():
     for r in np.unique(labels):
         assert np.ptp(out[labels == r]) == 0
     assert out[:, 40:].mean() > 10 * out[:, :40].mean()
+
+
+def test_the_region_cap_falls_to_a_finer_level_only_where_a_region_is_too_large():
+    # Two grey halves with a weak boundary between them, and a white square: at the default level the halves merge.
+    img = np.full((80, 80, 3), 100, np.uint8)
+    img[:, 40:] = 125
+    img[5:15, 5:15] = 255
+    whole = regions(img, fine_regions=200, max_region_share=1.0)
+    sizes = np.bincount(whole.labels.ravel())
+    assert sizes.max() > 0.98 * 80 * 80 and len(whole.capped) == 0
+    big = whole.labels == sizes.argmax()
+
+    capped = regions(img, fine_regions=200, max_region_share=0.6)
+    assert np.bincount(capped.labels.ravel()).max() <= 0.6 * 80 * 80
+    assert capped.labels[40, 20] != capped.labels[40, 60]  # split along the weak boundary: the next level down
+    assert len(np.unique(capped.labels[40:, :38])) == 1 and len(np.unique(capped.labels[40:, 42:])) == 1
+    np.testing.assert_array_equal(capped.labels == capped.labels[10, 10], whole.labels == whole.labels[10, 10])  # the square as it was
+    np.testing.assert_array_equal(np.isin(capped.labels, capped.capped), big)  # the capped ids are the split region's pixels
+
+    finer = regions(img, fine_regions=200, max_region_share=0.3)  # halves over the cap too: down to the watershed
+    assert np.bincount(finer.labels.ravel()).max() <= 0.3 * 80 * 80
+
+
+def test_the_region_cap_is_checked():
+    img = np.zeros((20, 20, 3), np.uint8)
+    for bad in (0.0, 1.5, float("nan"), True):
+        with pytest.raises(ValueError, match="max_region_share"):
+            regions(img, max_region_share=bad)
+    with pytest.raises(ValueError, match="max_region_share does not apply"):
+        regions(img, method="slic", max_region_share=0.5)
+    assert len(regions(img, method="slic", n_segments=4).capped) == 0

@@ -25,6 +25,7 @@ from app.models import Sequence as FrameSequence
 from app.services.scoring.report import load_sources
 from app.services.scoring.rows import ScoringProblem
 from app.services.scoring.cells import HUMAN
+from app.services.studies.codebook import PER_FRAME
 from app.spreadsheet import csv_text
 from egonet.metrics import DEFAULT_EMPTY, DEFAULT_THRESHOLDS, frame_scores, threshold_values
 from egonet.metrics.frames import check_empty
@@ -42,7 +43,11 @@ class FrameLine:
     label: str
     scores: dict[str, tuple[float | None, float | None, float | None] | None]
     answered: dict[str, bool] = field(default_factory=dict)  # people: False for an unanswered trial
-    no_truth: bool = False
+    truth_pixels: int = 0  # the ground truth's action-object pixels, at the native size
+
+    @property
+    def no_truth(self) -> bool:
+        return self.truth_pixels == 0
 
 
 @dataclass
@@ -58,13 +63,13 @@ class FrameTable:
     empty: str = DEFAULT_EMPTY
 
     def to_csv(self) -> str:
-        """One line per frame: its id and label, whether it has action-object pixels, then each row's best F, threshold and AP."""
-        header = ["frame_id", "frame", "activity", "action-object pixels", "empty frames policy"]
+        """One line per frame: its id and label, its number of action-object pixels, then each row's best F, threshold and AP."""
+        header = list(PER_FRAME.columns)
         for key, _, _ in self.rows:
-            header += [f"{key} best F", f"{key} threshold", f"{key} AP"]
+            header += [pattern.replace("<row>", key) for pattern in PER_FRAME.patterns]
         lines = []
         for line in self.lines:
-            values: list[object] = [line.frame_id, line.label, self.activity, int(not line.no_truth), self.empty]
+            values: list[object] = [line.frame_id, line.label, self.activity, line.truth_pixels, self.empty]
             for key, _, _ in self.rows:
                 got = line.scores.get(key) or (None, None, None)
                 values += [_fixed(got[0], 4), _fixed(got[1], 2), _fixed(got[2], 4)]
@@ -123,12 +128,12 @@ def frame_table(
     t = threshold_values(thresholds)
     scores: dict[str, dict[int, tuple[float | None, float | None, float | None]]] = {}
     answered: dict[str, dict[int, bool]] = {}
-    no_truth: set[int] = set()
+    truth_pixels: dict[int, int] = {}
     for source, own in having:
         mine = np.intersect1d(ids, own)
         counts = source.stats.select(mine)
         own_scores = frame_scores(counts, empty=empty)
-        no_truth |= set(mine[counts.positives == 0].tolist())
+        truth_pixels.update(zip(mine.tolist(), counts.positives.tolist(), strict=True))
         human = source.kind == HUMAN
         scores[source.key] = {
             int(fid): (float(f), float(t[b]), None if human else float(ap)) if kept else (None, None, None)
@@ -144,7 +149,7 @@ def frame_table(
             labels.get(fid, f"frame {fid}"),
             {key: s.get(fid) for key, s in scores.items()},
             {key: a[fid] for key, a in answered.items() if fid in a},
-            fid in no_truth,
+            int(truth_pixels.get(fid, 0)),
         )
         for fid in ids.tolist()
     ]

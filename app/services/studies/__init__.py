@@ -40,9 +40,12 @@ from app.services.studies.common import LATE_GRACE_S, StudyProblem, now
 from app.services.studies.definition import definition_of, study_from_definition, update_from_definition
 from app.services.studies.exports import EXPORTS, TRIAL_COLUMNS, export_csv, export_json, export_to_folder, mask_files, masks_zip
 from app.services.studies.masks import (
+    CapSummary,
     answered_trials,
     cached_superpixels,
+    cap_summary,
     condition_name,
+    frame_regions,
     mask_png,
     mean_soft_mask,
     overlay_png,
@@ -74,6 +77,7 @@ from app.services.studies.recruiting import (
     platform_urls,
     refusal,
     release,
+    returning,
     set_active,
 )
 from app.services.studies.session import (

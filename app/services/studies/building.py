@@ -38,6 +38,7 @@ DEFAULT_SUPERPIXELS = {
 OPTION_RULES = {
     "fine_regions": (SUPERPIXEL_DEFAULTS.fine_regions, int, 2, 20_000),
     "level": (SUPERPIXEL_DEFAULTS.level, float, 1e-3, 10.0),
+    "max_region_share": (SUPERPIXEL_DEFAULTS.max_region_share, float, 0.01, 1.0),
     "n_segments": (SUPERPIXEL_DEFAULTS.n_segments, int, 1, 10_000),
     "compactness": (SUPERPIXEL_DEFAULTS.compactness, float, 1e-3, 1e3),
     "scale": (SUPERPIXEL_DEFAULTS.scale, float, 1e-3, 1e5),

@@ -44,6 +44,7 @@ SERVICE_FIELDS = {
     "superpixel_method": "regions.method",
     "fine_regions": "regions.fine_regions",
     "level": "regions.level",
+    "max_region_share": "regions.max_region_share",
     "n_segments": "regions.n_segments",
     "compactness": "regions.compactness",
     "scale": "regions.scale",

@@ -18,46 +18,35 @@ import zipfile
 from collections import defaultdict
 from collections.abc import Iterator
 from datetime import datetime
+from importlib import metadata
 from pathlib import Path
 from typing import Any
 
-from sqlalchemy import func
+import numpy as np
+from sqlalchemy import case, func
 from sqlalchemy.orm import selectinload
 
 from app.extensions import db
 from app.models import Frame, Sequence
 from app.models.studies import ANSWERED, FrameKind, Participant, Study, StudyFrame, Trial
 from app.services import ground_truth, media
-from app.services.studies.building import sigma_for
+from app.services.studies import codebook
+from app.services.studies.building import format_code, sigma_for
 from app.services.studies.checks import checks_of, inside_box, inside_mask
 from app.services.studies.common import LATE_GRACE_S
 from app.services.studies.definition import definition_of
-from app.services.studies.masks import condition_name, mask_png, trial_soft_mask
+from app.services.studies.masks import condition_name, frame_regions, hit_cap, mask_png, trial_soft_mask
 from app.services.studies.overview import progress
 from app.services.studies.session import close_overdue
 from app.spreadsheet import csv_text
-from egonet.clicks import MaskMean
+from app.version import code_version
+from egonet.clicks import SUPERPIXEL_DEFAULTS, MaskMean
 
-TRIAL_COLUMNS = [
-    "study_id", "participant", "participant_id", "external_id", "condition", "pilot", "trial_id", "position", "kind", "activity",
-    "frame_id", "frame_source", "frame_width", "frame_height", "outcome", "clicks", "hit", "rt_ms", "shown_at",
-    "submitted_at", "server_ms", "window_width", "window_height", "display_width", "display_height", "pixel_ratio",
-    "sigma_px", "events",
-]  # fmt: skip
-CLICK_COLUMNS = [
-    "study_id", "participant", "external_id", "condition", "pilot", "trial_id", "position", "kind", "frame_id", "click", "x", "y",
-    "inside", "rt_ms", "received_at",
-]  # fmt: skip
-EVENT_COLUMNS = [
-    "study_id", "participant", "external_id", "condition", "pilot", "trial_id", "position", "frame_id", "event", "kind",
-    "client_ms", "server_at", "detail",
-]  # fmt: skip
-PARTICIPANT_COLUMNS = [
-    "study_id", "participant", "participant_id", "code", "entry", "platform", "external_id", "external", "condition",
-    "pilot", "status", "active", "checks_passed", "comprehension", "catch_passed", "catch_total", "completion_code",
-    "consented_at", "started_at", "finished_at", "end_reason", "answered", "total", "user_agent", "screen_width",
-    "screen_height", "window_width", "window_height", "pixel_ratio", "time_zone", "touch",
-]  # fmt: skip
+TRIAL_COLUMNS = list(codebook.TRIALS.columns)
+CLICK_COLUMNS = list(codebook.CLICKS.columns)
+EVENT_COLUMNS = list(codebook.EVENTS.columns)
+PARTICIPANT_COLUMNS = list(codebook.PARTICIPANTS.columns)
+MANIFEST_COLUMNS = list(codebook.MANIFEST.columns)
 EXPORTS = ("trials.csv", "clicks.csv", "events.csv", "participants.csv", "study.json", "definition.json", "masks.zip")
 
 
@@ -207,17 +196,20 @@ def participant_rows(study: Study) -> list[dict[str, Any]]:
     for p in people:
         state, checked, env = progress(p), results[p.id], p.environment or {}
         screen, window = env.get("screen") or {}, env.get("window") or {}
+        withdrawn = p.withdrawn_at is not None  # their answers are gone: no check is known
         rows.append({
-            "study_id": study.id, "participant": p.label, "participant_id": p.id, "code": p.code, "entry": p.entry.value,
+            "study_id": study.id, "participant": p.label, "participant_id": p.id, "code": format_code(p.code), "entry": p.entry.value,
             "platform": p.platform, "external_id": p.external_id, "external": p.external or {}, "condition": condition_name(p),
-            "pilot": p.pilot, "status": state.status, "active": p.user.active, "checks_passed": checked.passed,
-            "comprehension": checked.comprehension, "catch_passed": checked.catch_passed, "catch_total": checked.catch_total,
+            "pilot": p.pilot, "status": state.status, "active": p.user.active, "checks_passed": None if withdrawn else checked.passed,
+            "comprehension": None if withdrawn else checked.comprehension,
+            "catch_passed": None if withdrawn else checked.catch_passed, "catch_total": None if withdrawn else checked.catch_total,
             "completion_code": p.completion_code, "consented_at": _iso(p.consented_at), "started_at": _iso(p.started_at),
             "finished_at": _iso(p.finished_at), "end_reason": p.end_reason.value if p.end_reason else None,
             "answered": state.answered, "total": state.total, "user_agent": p.user_agent,
             "screen_width": screen.get("width"), "screen_height": screen.get("height"), "window_width": window.get("width"),
             "window_height": window.get("height"), "pixel_ratio": env.get("pixel_ratio"), "time_zone": env.get("time_zone"),
-            "touch": env.get("touch"),
+            "touch": env.get("touch"), "withdrawn_at": _iso(p.withdrawn_at),
+            "withdrawn_by": p.withdrawn_by.username if p.withdrawn_by else None,
         })  # fmt: skip
     return rows
 
@@ -291,7 +283,7 @@ def _participant_json(study: Study, p: Participant, trials: list[Trial], row: di
         "withdrawn_by": p.withdrawn_by.username if p.withdrawn_by else None,
         "status": row["status"],
         "active": row["active"],
-        "checks": checks_of([p])[p.id].as_dict(),
+        "checks": None if p.withdrawn_at is not None else checks_of([p])[p.id].as_dict(),
         "completion_code": p.completion_code,
         "user_agent": p.user_agent,
         "environment": p.environment,
@@ -316,33 +308,91 @@ def _participant_json(study: Study, p: Participant, trials: list[Trial], row: di
 
 
 def mask_files(study: Study) -> Iterator[tuple[str, bytes]]:
-    """The soft masks as 16-bit PNGs: one per answered trial and the mean per frame, plus a manifest.
+    """The soft masks as 16-bit PNGs and what recomputes them (the content of ``masks.zip``).
 
     Names: ``P01/0001-frame12.png`` (participant, trial position, frame id)
-    and ``mean/frame12.png`` (pilots left out); ``manifest.csv`` lists them.
+    and ``mean/frame12.png`` (pilots left out), listed in ``manifest.csv``;
+    each frame's region labels as ``labels/frame12.npz``, how they were made
+    in ``regions.json``, the clicks as ``clicks.csv`` and the codebook as
+    ``CODEBOOK.md`` (``docs/studies.md`` shows the script that recomputes a
+    mask from them).
     """
     manifest = []
     means: dict[int, MaskMean] = defaultdict(MaskMean)
+    # Per frame: its manifest rows, their clicks and whether they count in the mean; the cap is judged per frame below.
+    rows_of: dict[int, list[tuple[int, list[tuple[float, float]], bool]]] = defaultdict(list)
+    frames: dict[int, Frame] = {}
     for trial in _study_trials(study):
         if trial.outcome not in ANSWERED:
             continue
         frame = trial.frame
         mask = trial_soft_mask(trial)
         name = f"{trial.participant.label}/{trial.position:04d}-frame{frame.id}.png"
-        manifest.append([name, trial.participant.label, trial.participant.pilot, trial.position, trial.kind.value, frame.id, frame.sequence.activity.name,
-                         frame.source_name, trial.outcome.value, ""])  # fmt: skip
+        frames[frame.id] = frame
+        rows_of[frame.id].append((len(manifest), [(c.x, c.y) for c in trial.clicks], not trial.participant.pilot))
+        manifest.append([name, trial.participant.label, trial.participant.pilot, trial.position, trial.kind.value, frame.id,
+                         frame.sequence.activity.name, frame.source_name, trial.outcome.value, "", sigma_for(study, frame), False])  # fmt: skip
         yield name, mask_png(mask)
         if not trial.participant.pilot:  # the means are data: pilots stay out
             means[frame.id].add(mask)
+    mean_row: dict[int, int] = {}
     for sf in study.frames:
         frame = sf.frame
         if frame.id in means:
             name = f"mean/frame{frame.id}.png"
+            mean_row[frame.id] = len(manifest)
             manifest.append([name, "mean", "", "", sf.kind.value, frame.id, frame.sequence.activity.name, frame.source_name, "",
-                             means[frame.id].count])  # fmt: skip
+                             means[frame.id].count, sigma_for(study, frame), 0])  # fmt: skip
             yield name, mask_png(means[frame.id].mean())
-    header = ["file", "participant", "pilot", "position", "kind", "frame_id", "activity", "frame_source", "outcome", "participants"]
-    yield "manifest.csv", csv_text(manifest, header).encode()
+    described = []
+    for frame_id in sorted(frames):
+        frame = frames[frame_id]
+        found = frame_regions(frame, study.superpixels)
+        for row, points, in_mean in rows_of[frame_id]:
+            manifest[row][-1] = bool(points) and hit_cap(found, points)
+            if in_mean and manifest[row][-1]:
+                manifest[mean_row[frame_id]][-1] += 1
+        buffer = _io.BytesIO()
+        np.savez_compressed(buffer, labels=found.labels)
+        name = f"labels/frame{frame.id}.npz"
+        described.append({"frame_id": frame.id, "file": name, "width": frame.width, "height": frame.height,
+                          "sigma_px": sigma_for(study, frame), "regions": int(found.labels.max()) + 1,
+                          "capped": found.capped.tolist()})  # fmt: skip
+        yield name, buffer.getvalue()
+    yield "regions.json", json.dumps(_regions_doc(study, described, sum(row[-1] is True for row in manifest)), indent=1).encode()
+    yield "manifest.csv", csv_text(manifest, MANIFEST_COLUMNS).encode()
+    yield "clicks.csv", export_csv(study, "clicks").encode()
+    yield "CODEBOOK.md", codebook.markdown().encode()
+
+
+def _versions(*names: str) -> dict[str, str]:
+    """The installed versions of these packages (the regions depend on scikit-image's and OpenCV's)."""
+    found = {}
+    for name in names:
+        try:
+            found[name] = metadata.version(name)
+        except metadata.PackageNotFoundError:
+            pass
+    return found
+
+
+def _regions_doc(study: Study, frames: list[dict[str, Any]], trials_hit_cap: int) -> dict[str, Any]:
+    """regions.json: what regenerates the label maps bit for bit, and how a mask is made from them."""
+    settings = dict(study.superpixels)
+    return {
+        "code_version": code_version(),
+        "libraries": _versions("numpy", "scipy", "scikit-image", "opencv-python", "opencv-python-headless"),
+        "function": "egonet.clicks.regions(rgb, **settings).labels, rgb the frame's image as uint8 (H, W, 3) RGB",
+        "settings": settings,
+        "max_region_share": settings.get("max_region_share") if settings.get("method") == "hierarchical" else None,
+        "default_max_region_share": SUPERPIXEL_DEFAULTS.max_region_share,
+        "trials_hit_cap": trials_hit_cap,
+        "coordinates": "x = column, y = row, native pixels; pixel centres at integer coordinates (the frame spans "
+                       "[-0.5, width - 0.5] x [-0.5, height - 0.5])",
+        "soft_mask": "g = max over clicks of exp(-((col - x)^2 + (row - y)^2) / (2 sigma_px^2)) at every pixel centre (float32); "
+                     "each region takes the mean of g over its pixels, clipped to [0, 1]; no click: zeros",
+        "frames": frames,
+    }
 
 
 class _Chunks(_io.RawIOBase):
@@ -365,30 +415,37 @@ class _Chunks(_io.RawIOBase):
 
 
 def masks_zip(study: Study) -> Iterator[bytes]:
-    """``mask_files`` as a zip archive, produced piece by piece (PNGs are stored, not recompressed)."""
+    """``mask_files`` as a zip archive, produced piece by piece (PNGs and ``.npz`` are stored, not compressed again)."""
     stream = _Chunks()
     with zipfile.ZipFile(stream, "w", compression=zipfile.ZIP_STORED) as archive:
         for name, data in mask_files(study):
-            archive.writestr(name, data)
+            packed = name.endswith((".png", ".npz"))
+            archive.writestr(name, data, compress_type=zipfile.ZIP_STORED if packed else zipfile.ZIP_DEFLATED)
             yield stream.take()
     yield stream.take()
 
 
 def export_to_folder(study: Study, out: Path, *, on_start=None, on_progress=None) -> list[Path]:
-    """Write every export (CSV, JSON, mask PNGs under ``masks/``) into ``out``; return the files.
+    """Write every export (CSV, JSON, the codebook, and under ``masks/`` what ``masks.zip`` holds) into ``out``; return the files.
 
     ``on_start(total)`` and ``on_progress(n)`` report the files written.
     """
     out = Path(out)
     _settle(study)
-    answered = db.session.execute(
-        db.select(func.count(), func.count(func.distinct(Trial.study_frame_id)))
+    trials, frames, averaged = db.session.execute(
+        db.select(
+            func.count(),
+            func.count(func.distinct(Trial.study_frame_id)),
+            func.count(func.distinct(case((Participant.pilot.is_(False), Trial.study_frame_id)))),
+        )
         .select_from(Trial)
         .join(Participant)
         .where(Participant.study_id == study.id, Trial.outcome.in_(ANSWERED))
     ).one()
     if on_start is not None:
-        on_start(6 + answered[0] + answered[1] + 1)  # tables, JSON documents, masks, means, manifest
+        # tables, JSON documents and the codebook; masks, labels per frame, means (pilots in none); regions.json,
+        # manifest, clicks, codebook
+        on_start(7 + trials + frames + averaged + 4)
     written = []
 
     def write(path: Path, data: bytes) -> None:
@@ -401,6 +458,7 @@ def export_to_folder(study: Study, out: Path, *, on_start=None, on_progress=None
         write(out / f"{table}.csv", export_csv(study, table).encode())
     write(out / "study.json", json.dumps(export_json(study), indent=1).encode())
     write(out / "definition.json", json.dumps(definition_of(study), indent=1).encode())
+    write(out / "CODEBOOK.md", codebook.markdown().encode())
     for name, data in mask_files(study):
         write(out / "masks" / name, data)
     return written

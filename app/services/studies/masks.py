@@ -15,7 +15,9 @@ import hashlib
 import io as _io
 import json
 import zipfile
+from collections import defaultdict
 from collections.abc import Iterable, Iterator
+from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
@@ -49,24 +51,30 @@ def cached_superpixels(frame: Frame, settings: dict[str, Any]) -> bool:
     return labels_path(frame, settings).exists()
 
 
-def superpixel_labels(frame: Frame, settings: dict[str, Any]) -> np.ndarray:
-    """The frame's superpixel labels, int (H, W): from the cache, or computed once and cached."""
+def frame_regions(frame: Frame, settings: dict[str, Any]) -> egonet_clicks.Regions:
+    """The frame's regions (labels, uint16 where they fit, and the ids the region cap split): from the cache,
+    or computed once and cached."""
     path = labels_path(frame, settings)
     try:
         with np.load(path, allow_pickle=False) as data:
-            labels = data["labels"]
+            labels, capped = data["labels"], data["capped"] if "capped" in data else np.zeros(0, np.int32)
         if labels.shape == (frame.height, frame.width):
-            return labels
+            return egonet_clicks.Regions(labels, capped)
     except (OSError, ValueError, KeyError, zipfile.BadZipFile):
         pass  # missing or unreadable: compute it again
     rgb = io.read_image(media.absolute_path(frame.rgb_path))
-    labels = egonet_clicks.superpixels(rgb, **settings)
+    found = egonet_clicks.regions(rgb, **settings)
     # uint16 holds any realistic region count and halves the file.
-    stored = labels.astype(np.uint16) if labels.max() < 2**16 else labels
+    stored = found.labels.astype(np.uint16) if found.labels.max() < 2**16 else found.labels
     buffer = _io.BytesIO()
-    np.savez_compressed(buffer, labels=stored)
+    np.savez_compressed(buffer, labels=stored, capped=found.capped)
     media.write_atomic(path, buffer.getvalue())
-    return stored
+    return egonet_clicks.Regions(stored, found.capped)
+
+
+def superpixel_labels(frame: Frame, settings: dict[str, Any]) -> np.ndarray:
+    """The frame's superpixel labels, int (H, W) (``frame_regions``)."""
+    return frame_regions(frame, settings).labels
 
 
 def precompute_superpixels(study: Study, *, on_progress=None) -> int:
@@ -111,11 +119,64 @@ def answered_trials(study_frame: StudyFrame) -> list[Trial]:
 
 
 def mean_soft_mask(study_frame: StudyFrame) -> tuple[np.ndarray | None, int]:
-    """The mean of the participants' soft masks of a frame (the paper's Fig. 5), and how many answered."""
+    """The mean of the participants' soft masks of a frame (the paper's Fig. 5), and how many it averages.
+
+    Pilots are left out, as from every mean, score and count of data (their own masks are shown and exported, marked).
+    """
     mean = egonet_clicks.MaskMean()
     for trial in answered_trials(study_frame):
-        mean.add(trial_soft_mask(trial))
+        if not trial.participant.pilot:
+            mean.add(trial_soft_mask(trial))
     return mean.mean(), mean.count
+
+
+def click_pixels(points: Iterable[tuple[float, float]], shape: tuple[int, int]) -> list[tuple[int, int]]:
+    """The (row, column) of the pixel each click (x, y) falls in: pixel centres are at integer coordinates, so
+    pixel (r, c) spans [c - 0.5, c + 0.5) x [r - 0.5, r + 0.5) (the frame's last edge belongs to its last pixel)."""
+    h, w = shape
+    return [(min(int(np.floor(y + 0.5)), h - 1), min(int(np.floor(x + 0.5)), w - 1)) for x, y in points]
+
+
+@dataclass(frozen=True)
+class CapSummary:
+    """How the region cap touched a study: its share (None: no cap), answered trials, and those that hit it."""
+
+    share: float | None
+    trials: int
+    hit: int
+
+
+def cap_summary(study: Study) -> CapSummary:
+    """The study's region cap and how many answered trials (pilots included, as in the manifest) hit it
+    (``hit_cap``); each frame's regions are read once, one frame at a time."""
+    share = study.superpixels.get("max_region_share") if study.superpixels.get("method") == "hierarchical" else None
+    trials = db.session.execute(
+        db.select(Trial)
+        .join(Participant)
+        .where(Participant.study_id == study.id, Trial.outcome.in_(ANSWERED))
+        .options(selectinload(Trial.clicks), selectinload(Trial.study_frame).selectinload(StudyFrame.frame))
+    ).scalars()
+    by_frame: dict[int, list[Trial]] = defaultdict(list)
+    count = 0
+    for trial in trials:
+        count += 1
+        if trial.clicks:
+            by_frame[trial.frame.id].append(trial)
+    hit = 0
+    for answered in by_frame.values() if share is not None and share < 1 else ():  # no cap: nothing to hit
+        frame = answered[0].frame
+        found = frame_regions(frame, study.superpixels)
+        hit += sum(hit_cap(found, [(c.x, c.y) for c in t.clicks]) for t in answered)
+    return CapSummary(share if share is not None and share < 1 else None, count, hit)
+
+
+def hit_cap(found: egonet_clicks.Regions, points: Iterable[tuple[float, float]]) -> bool:
+    """Whether one of these clicks (x, y) fell on a region of ``found`` that stands where the region cap split
+    one (``egonet.clicks.regions``): the trials whose masks the cap changed most."""
+    if not len(found.capped):
+        return False
+    hit = [found.labels[r, c] for r, c in click_pixels(points, found.labels.shape)]
+    return bool(np.isin(hit, found.capped).any())
 
 
 def study_participants(

@@ -83,9 +83,10 @@ def study_summaries() -> list[StudySummary]:
 
 
 def condition_table(study: Study) -> list[dict[str, Any]]:
-    """Per condition: what it changes, its quota and the places taken (balanced assignment keeps these even)."""
-    places = condition_places(study)
-    return [{"condition": c, "places": places.get(c.id, 0)} for c in study.conditions]
+    """Per condition: what it changes, its quota, the open link's places taken and everyone in it (balanced
+    assignment keeps these even)."""
+    places, everyone = condition_places(study), condition_places(study, open_link=False)
+    return [{"condition": c, "places": places.get(c.id, 0), "everyone": everyone.get(c.id, 0)} for c in study.conditions]
 
 
 def activity_table(study: Study) -> tuple[list[dict[str, Any]], int]:
@@ -101,12 +102,13 @@ def activity_table(study: Study) -> tuple[list[dict[str, Any]], int]:
 
 
 def answered_counts(study_frames: Iterable[StudyFrame]) -> dict[int, int]:
-    """How many participants answered each of these study frames (by study frame id)."""
+    """How many participants answered each of these study frames (by study frame id), pilots left out (as from the means)."""
     ids = [sf.id for sf in study_frames]
     return dict(
         db.session.execute(
             db.select(Trial.study_frame_id, func.count())
-            .where(Trial.study_frame_id.in_(ids), Trial.outcome.in_(ANSWERED))
+            .join(Participant)
+            .where(Trial.study_frame_id.in_(ids), Trial.outcome.in_(ANSWERED), Participant.pilot.is_(False))
             .group_by(Trial.study_frame_id)
         ).all()
     )

@@ -83,6 +83,8 @@ PAUSED = "This study is paused and takes no new participants at the moment. Plea
 CLOSED = "This study is closed and takes no new participants."
 ELSEWHERE = ("You started this study in another browser: please continue there. If you cannot, write to the "
              "researchers; they can let you continue here.")
+WITHDRAWN = ("You withdrew from this study and your answers were deleted, as you asked, so it cannot be taken "
+             "again. Thank you for your time.")
 
 
 @dataclass
@@ -180,25 +182,29 @@ def by_external_id(study: Study, external_id: str | None) -> Participant | None:
     return db.session.execute(db.select(Participant).filter_by(study_id=study.id, external_id=external_id)).scalar_one_or_none()
 
 
-def _holding():
-    """The participants who hold a place: active accounts that did not decline, pilots left out."""
-    return (
+def _holding(*, open_link: bool = True):
+    """The participants who hold a place: active accounts that did not decline, pilots left out; with
+    ``open_link``, only those who came through the open link (the cap and the quotas are its places:
+    lab codes and single-use links, made by staff, take none)."""
+    query = (
         db.select(Participant)
         .join(User, Participant.user)
         .where(User.active.is_(True), or_(Participant.end_reason.is_(None), Participant.end_reason != EndReason.DECLINED))
         .where(Participant.pilot.is_(False))
     )
+    return query.where(Participant.entry == EntryKind.OPEN) if open_link else query
 
 
 def places_taken(study: Study) -> int:
+    """The open link's places taken (see ``_holding``)."""
     query = _holding().where(Participant.study_id == study.id).with_only_columns(func.count())
     return db.session.execute(query).scalar_one()
 
 
-def condition_places(study: Study) -> dict[int, int]:
-    """Places taken per condition id."""
+def condition_places(study: Study, *, open_link: bool = True) -> dict[int, int]:
+    """Places taken per condition id: the open link's (for its quotas), or everyone's (to balance the conditions)."""
     query = (
-        _holding()
+        _holding(open_link=open_link)
         .where(Participant.study_id == study.id, Participant.condition_id.is_not(None))
         .with_only_columns(Participant.condition_id, func.count())
         .group_by(Participant.condition_id)
@@ -219,8 +225,8 @@ def availability(study: Study) -> str | None:
 
 def refusal(reason: str) -> StudyProblem:
     """The polite refusal of the open link: 409 full, paused or elsewhere (another browser's session), 410 closed."""
-    text = {"full": FULL, "paused": PAUSED, "closed": CLOSED, "elsewhere": ELSEWHERE}[reason]
-    return StudyProblem(text, status=410 if reason == "closed" else 409, reason=reason)
+    text = {"full": FULL, "paused": PAUSED, "closed": CLOSED, "elsewhere": ELSEWHERE, "withdrawn": WITHDRAWN}[reason]
+    return StudyProblem(text, status=410 if reason in ("closed", "withdrawn") else 409, reason=reason)
 
 
 def _open_conditions(study: Study, counts: dict[int, int]) -> list[StudyCondition]:
@@ -241,14 +247,22 @@ def may_resume(participant: Participant, arrival: Arrival, *, same_browser: bool
     return same_browser or (visit is not None and visit == participant.external.get(param)) or RELEASED in participant.external
 
 
+def returning(participant: Participant, arrival: Arrival, *, same_browser: bool) -> str | None:
+    """Why a known participant's arrival may not go on (``withdrawn``, ``elsewhere``: see ``refusal``), or None."""
+    if participant.withdrawn_at is not None:
+        return "withdrawn"
+    return None if arrival.preview or may_resume(participant, arrival, same_browser=same_browser) else "elsewhere"
+
+
 def resume(participant: Participant, arrival: Arrival, *, same_browser: bool) -> Participant:
     """The participant again, their platform's parameters now this visit's (a new MTurk assignment, say).
 
     Raises:
-        StudyProblem: 409 (``reason`` elsewhere) when the arrival may not resume them (``may_resume``).
+        StudyProblem: 410 (``reason`` withdrawn) or 409 (``elsewhere``) when the arrival may not resume them (``returning``).
     """
-    if not may_resume(participant, arrival, same_browser=same_browser):
-        raise refusal("elsewhere")
+    reason = returning(participant, arrival, same_browser=same_browser)
+    if reason is not None:
+        raise refusal(reason)
     participant.external = {k: v for k, v in participant.external.items() if k != RELEASED} | arrival.external
     db.session.commit()
     return participant
@@ -284,8 +298,8 @@ def admit(study: Study, arrival: Arrival, *, user_agent: str | None = None, same
         reason = availability(study)
         if reason is not None:
             raise refusal(reason)
-        counts = condition_places(study)
-        condition = _balanced(_open_conditions(study, counts), counts) if study.conditions else None
+        everyone = condition_places(study, open_link=False)
+        condition = _balanced(_open_conditions(study, condition_places(study)), everyone) if study.conditions else None
         participant = _new_participant(
             study, entry=EntryKind.OPEN, condition=condition, user_agent=user_agent, arrival=arrival
         )
@@ -327,7 +341,7 @@ def add_participants(
     if entry is EntryKind.OPEN:
         raise StudyProblem("participants of the open link arrive by themselves", field="entry")
     _lock(study)
-    counts = condition_places(study)
+    counts = condition_places(study, open_link=False)
     created = []
     for _ in range(count):
         condition = _balanced(study.conditions, counts) if study.conditions else None

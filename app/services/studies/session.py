@@ -18,7 +18,7 @@ from sqlalchemy import update
 
 from app.extensions import db
 from app.models import User
-from app.models.studies import EndReason, FrameKind, Outcome, Participant, StudyFrame, StudyStatus, Trial
+from app.models.studies import EndReason, EntryKind, FrameKind, Outcome, Participant, StudyFrame, StudyStatus, Trial
 from app.services.studies import checks, protocol
 from app.services.studies.common import LATE_GRACE_S, StudyProblem, now
 from app.services.studies.recruiting import CODE_LENGTH, CLOSED, PAUSED
@@ -219,10 +219,14 @@ def finish(participant: Participant, reason: EndReason, *, at: datetime) -> None
 
 
 def completion(participant: Participant) -> tuple[str | None, str | None]:
-    """The code given at the end and where to send the participant with it (the study's redirect URL), if any."""
+    """The code given at the end and where to send the participant with it, if anywhere: the study's redirect URL
+    (a platform's completion page) is for those who came from a platform through the open link; lab codes and
+    single-use links stay on the page (MTurk's own form is ``recruiting.mturk_submit_url``)."""
     code = participant.completion_code
     if code is None:
         return None, None
+    if participant.entry is not EntryKind.OPEN:
+        return code, None
     return code, protocol.redirect_to(participant.study.redirect_url, code)
 
 

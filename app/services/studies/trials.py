@@ -46,6 +46,7 @@ class SessionState:
     total: int = 0
     time_left_s: float | None = None
     trial_time_left_s: float | None = None
+    shown_ms: float = 0.0  # how long the trial had been on screen already (server clock): > 0 after a reload
     feedback: str | None = None  # on the practice answer just given
 
 
@@ -170,6 +171,7 @@ def session_state(participant: Participant, *, reload: bool = False, feedback: s
             time_left_s=max(0.0, (participant.deadline - t).total_seconds()) if phase == "trials" else None,
             trial_time_left_s=None if deadline is None or protocol.settings_of(participant).trial_limit_s is None
             else max(0.0, (deadline - t).total_seconds()),
+            shown_ms=round((t - trial.shown_at).total_seconds() * 1000, 1),
             feedback=feedback,
         )
 

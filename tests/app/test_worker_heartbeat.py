@@ -1,0 +1,52 @@
+"""A page with queued work says when no worker is running: a real worker records a heartbeat on the real queue."""
+
+import os
+import subprocess
+import sys
+import time
+
+import pytest
+
+from app.queue import HEARTBEAT_KEY, current_huey, worker_last_seen
+from tests.app.test_exchange import ROOT, labelled_dataset, recording
+
+
+@pytest.mark.slow
+def test_queued_work_says_no_worker_until_one_beats(app, database_url, admin_client, tmp_path):
+    labelled_dataset(app, recording(tmp_path / "rec"))
+
+    def queue_export() -> str:
+        response = admin_client.post("/label/exports", data={"status": ["done", "reviewed"], "images": "1"})
+        return response.location.rsplit("/", 1)[1]
+
+    first = queue_export()
+    page = admin_client.get(f"/label/exports/{first}").get_data(as_text=True)
+    assert 'id="no-worker"' in page and "No worker has ever run on this queue" in page
+
+    env = dict(os.environ, EGONET_QUEUE_URL=app.config["QUEUE_URL"], FLASK_SQLALCHEMY_DATABASE_URI=database_url,
+               FLASK_SECRET_KEY="worker-test-secret-key-0123456789abcdef", FLASK_MEDIA_ROOT=str(tmp_path / "media"),
+               FLASK_CACHE_ROOT=str(tmp_path / "cache"), FLASK_EXPORT_ROOT=app.config["EXPORT_ROOT"], OMP_NUM_THREADS="1")  # fmt: skip
+    worker = subprocess.Popen([sys.executable, "-m", "flask", "--app", "app", "egonet", "worker"], cwd=ROOT, env=env,
+                              stdout=subprocess.PIPE, stderr=subprocess.STDOUT, text=True)  # fmt: skip
+    try:
+        deadline = time.monotonic() + 90
+        while time.monotonic() < deadline:
+            state = admin_client.get(f"/api/label/exports/{first}").get_json()
+            with app.app_context():
+                seen = worker_last_seen()
+            if state["status"] == "done" and seen is not None:
+                break
+            time.sleep(0.2)
+    finally:
+        worker.terminate()
+        out = worker.communicate(timeout=20)[0]
+    assert state["status"] == "done" and seen is not None and seen < 60, out[-3000:]
+
+    # Queued again just after: the worker was seen lately, so no notice.
+    second = queue_export()
+    assert 'id="no-worker"' not in admin_client.get(f"/label/exports/{second}").get_data(as_text=True)
+    # Its last heartbeat two minutes ago: the notice says so.
+    with app.app_context():
+        current_huey().put(HEARTBEAT_KEY, time.time() - 125)
+    page = admin_client.get(f"/label/exports/{second}").get_data(as_text=True)
+    assert "No worker has been seen for 2 min" in page
