@@ -189,7 +189,7 @@ def test_a_study_from_before_the_cap_keeps_its_regions(ctx, tmp_path):
     study.superpixels = settings  # as recorded before the cap existed
     db.session.commit()
     db.session.remove()
-    downgrade(revision="0013")
+    downgrade(revision="0014")
     upgrade()
     db.session.remove()
     assert db.session.get(Study, ids["study"]).superpixels == {**settings, "max_region_share": 1.0}

@@ -1,7 +1,7 @@
 """region cap: studies made before the cap on a region's share of the frame keep their regions (max_region_share 1.0)
 
-Revision ID: 0014
-Revises: 0013
+Revision ID: 0015
+Revises: 0014
 
 A data change only: each hierarchical study's recorded region settings get
 ``max_region_share: 1.0`` (no cap), so its masks stay what they were; new
@@ -13,8 +13,8 @@ import json
 from alembic import op
 import sqlalchemy as sa
 
-revision = "0014"
-down_revision = "0013"
+revision = "0015"
+down_revision = "0014"
 branch_labels = None
 depends_on = None
 
