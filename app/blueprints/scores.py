@@ -19,6 +19,7 @@ bookmarked and its downloads repeat it:
 from flask import Blueprint, Response, render_template, request
 
 from app.services import scoring
+from app.validation import query_ints
 from egonet.metrics import DEFAULT_EMPTY
 
 bp = Blueprint("scores", __name__, url_prefix="/scores")
@@ -32,19 +33,13 @@ DOWNLOADS = {
 FIGURES = {"svg": "image/svg+xml", "pdf": "application/pdf"}
 
 
-def _ids(name: str) -> list[int]:
-    values = request.args.getlist(name)
-    try:
-        return [int(v) for v in values]
-    except ValueError:
-        raise scoring.ScoringProblem(f"{name} must be whole numbers (ids)", fields={name: "must be whole numbers"}) from None
 
 
 def _choice() -> dict:
     """The runs, studies and baselines the query string asks for (defaults: everything)."""
     if "chosen" not in request.args:
         return {"run_ids": None, "study_ids": None, "baselines": True}
-    return {"run_ids": _ids("runs"), "study_ids": _ids("studies"), "baselines": "baselines" in request.args}
+    return {"run_ids": query_ints("runs"), "study_ids": query_ints("studies"), "baselines": "baselines" in request.args}
 
 
 def _view() -> dict:
