@@ -255,10 +255,13 @@ def read_body(limit: int, *, field: str = "body") -> bytes:
     """
     if (request.content_length or 0) > limit:
         raise _too_large(limit, field)
-    data = request.stream.read(limit + 1)
-    if len(data) > limit:
+    chunks, size = [], 0
+    while size <= limit and (chunk := request.stream.read(limit + 1 - size)):  # a read may return less
+        chunks.append(chunk)
+        size += len(chunk)
+    if size > limit:
         raise _too_large(limit, field)
-    return data
+    return b"".join(chunks)
 
 
 def request_json() -> Any:
