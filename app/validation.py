@@ -264,13 +264,13 @@ def read_body(limit: int, *, field: str = "body") -> bytes:
     return b"".join(chunks)
 
 
-def request_json() -> Any:
-    """The request's body decoded by ``egonet.io.decode_json`` (the one JSON reader), None when empty;
-    at most the view's ``takes_json`` limit is read.
+def json_body(schema: dict[str, Field]) -> dict:
+    """The request's JSON body (an empty one is ``{}``), decoded by ``egonet.io.decode_json`` (the one JSON
+    reader) and validated (see module doc); at most the view's ``takes_json`` limit is read.
 
     Raises:
-        Problem: 400 naming the body when it is not JSON (or nests too deep), or the field whose text is
-            unsafe; 413 over the limit; 415 for a body of another type (unread).
+        Problem: 400 naming the body when it is not JSON (or nests too deep), or the field at fault (unsafe
+            text, or the schema's); 413 over the limit; 415 for a body of another type (unread).
     """
     limit = json_limit()
     if limit is None:
@@ -278,20 +278,13 @@ def request_json() -> Any:
     if not request.is_json and _has_body():
         raise Problem("the request body is not JSON (Content-Type: application/json)", status=415, fields={"body": "not JSON"})
     data = read_body(limit)
-    if not data:
-        return None
     try:
-        return decode_json(data)
+        doc = decode_json(data) if data else {}
     except UnsafeText as exc:
         raise Problem(f"invalid field {exc.field}: {UNSAFE_REASON}", fields={exc.field: UNSAFE_REASON}) from None
     except ValueError as exc:
         raise Problem(f"the request body is not valid JSON: {exc}", fields={"body": "not valid JSON"}) from None
-
-
-def json_body(schema: dict[str, Field]) -> dict:
-    """The request's JSON body, validated (see module doc)."""
-    data = request_json()
-    return validate(schema, data if data is not None else {})
+    return validate(schema, doc)
 
 
 def check_text(field: str, value: str) -> None:
