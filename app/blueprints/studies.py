@@ -26,7 +26,7 @@ from app.services import ground_truth, studies
 from app.services.scoring.cache import forget_participant
 from app.throttle import clear_entry_lock, entry_locks, locked_s
 from app.validation import query_int
-from egonet.io import decode_json
+from egonet.io import UNSAFE_REASON, UnsafeText, decode_json
 
 bp = Blueprint("studies", __name__, url_prefix="/studies")
 
@@ -137,6 +137,8 @@ def create_from_file():
         raise Problem("a definition file has at most 1 MiB", status=413, fields={"definition": "too large"})
     try:
         doc = decode_json(data)
+    except UnsafeText as exc:
+        raise Problem(f"the definition file's {exc.field} {UNSAFE_REASON}", fields={"definition": UNSAFE_REASON}) from None
     except ValueError as exc:
         raise Problem(f"the definition file is not valid JSON: {exc}", fields={"definition": "not valid JSON"}) from None
     study = studies.study_from_definition(doc, created_by=current_user._get_current_object())

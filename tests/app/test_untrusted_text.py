@@ -63,8 +63,7 @@ def test_nul_and_surrogates_in_labels_comments_names_and_definitions_are_refused
     for definition in ({"name": "a\x00b"}, {"\udc00": 1}):
         upload = admin_client.post("/studies/import", data={"definition": (io.BytesIO(json.dumps(definition).encode()), "s.json")},
                                    content_type="multipart/form-data", headers=JSON)  # fmt: skip
-        status, body = answer(upload)
-        assert status == 400 and UNSAFE_REASON in body["message"], body
+        assert refused(upload, "definition")
         (tmp_path / "s.json").write_text(json.dumps(definition))
         result = runner.invoke(args=["egonet", "study-create", str(tmp_path / "s.json")])
         assert result.exit_code == 1 and UNSAFE_REASON in result.output
