@@ -12,6 +12,7 @@ import io
 import json
 
 import pytest
+from sqlalchemy import event
 
 from app.extensions import db
 from app.models import Role
@@ -43,6 +44,21 @@ def test_nul_in_a_form_field_or_a_link_is_refused_anonymously(app, client):
             assert answer(client.open(url, method=method, headers=JSON))[0] == 404, (method, url)  # not a token: no query
     assert refused(client.get("/login?next=/a%00b", headers=JSON), "next")
     assert refused(client.get("/login", headers={**JSON, "User-Agent": "a\x00b"}), "header")
+
+
+def test_access_codes_are_checked_against_their_alphabet_before_any_query(ctx):
+    from app.extensions import db as database
+
+    statements = []
+    record = lambda *args: statements.append(args[2])  # noqa: E731
+    event.listen(database.engine, "before_cursor_execute", record)
+    try:
+        for code in ("ＡＢＣＤ-ＥＦＧＨ", "OOOO-0000", "ÀBCD-EFGH", "abcd-efg1"):  # full-width, look-alikes, accents, a 1
+            assert studies.participant_by_code(code) is None
+        assert statements == []
+        assert studies.participant_by_code("ABCD-EFGH") is None and statements  # a code of the alphabet is looked up
+    finally:
+        event.remove(database.engine, "before_cursor_execute", record)
 
 
 def test_nul_and_surrogates_in_labels_comments_names_and_definitions_are_refused(app, admin_client, tmp_path, runner):
