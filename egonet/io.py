@@ -321,15 +321,16 @@ def parse_intrinsics(data: object, *, path: str | Path = "<json>") -> np.ndarray
     return K
 
 
+UNSAFE_REASON = "holds a NUL character or an unpaired surrogate"
+
+
 class UnsafeText(ValueError):
-    """A string holding NUL or an unpaired surrogate (``UNSAFE_TEXT``); ``field`` says where (``a[2].b``)."""
+    """A string holding NUL or an unpaired surrogate (``UNSAFE_TEXT``); ``field`` says where (``a[2].b``;
+    ``body`` when the document is that string)."""
 
     def __init__(self, field: str):
         super().__init__(f"{field or 'the document'}: {UNSAFE_REASON}")
         self.field = field or "body"
-
-
-UNSAFE_REASON = "holds a NUL character or an unpaired surrogate"
 
 
 def _unsafe_path(value: object, path: str = "") -> str | None:
