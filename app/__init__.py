@@ -16,9 +16,9 @@ import cv2
 import threadpoolctl
 from flask import Flask
 from werkzeug.middleware.proxy_fix import ProxyFix
-from werkzeug.routing import IntegerConverter
+from werkzeug.routing import BaseConverter, IntegerConverter
 
-from app.limits import MAX_ID, MIN_SECRET_KEY_LENGTH, SECRET_KEY_FILE
+from app.limits import MAX_ID, MIN_SECRET_KEY_LENGTH, SECRET_KEY_FILE, TOKEN_REGEX
 
 
 
@@ -45,6 +45,12 @@ class IdConverter(IntegerConverter):
     def __init__(self, map, *args, **kwargs):
         kwargs.setdefault("max", MAX_ID)
         super().__init__(map, *args, **kwargs)
+
+
+class TokenConverter(BaseConverter):
+    """``<token:...>`` in URLs: a link's token (``app.limits.TOKEN_REGEX``); another shape matches no route (404)."""
+
+    regex = TOKEN_REGEX
 
 
 def instance_secret_key(instance: Path) -> str:
@@ -94,6 +100,7 @@ def create_app(test_config: dict | None = None, *, instance_path: str | None = N
         static_folder="../static",
     )
     app.url_map.converters["int"] = IdConverter
+    app.url_map.converters["token"] = TokenConverter
     _configure(app, test_config)
     _init_extensions(app)
     _register(app)

@@ -33,7 +33,7 @@ class Problem(Exception):
         message: The sentence shown to the user.
         field: The input at fault: a form or JSON field, a CLI option or a file.
         status: The HTTP status a view answers with: 400 bad input (default),
-            403 not allowed, 404 no such thing, 409 conflict, 410 gone, 413 too large.
+            403 not allowed, 404 no such thing, 409 conflict, 410 gone, 413 too large, 415 a body of a type the address does not take.
         fields: ``{field: reason}`` for the JSON's ``fields``; defaults to
             ``{field: message}`` when ``field`` is given.
         **extra: More keys of the JSON body (for example ``reason="time_up"``).
@@ -54,7 +54,7 @@ class Problem(Exception):
         return cls(exc.message, field=exc.field, fields={exc.field: exc.reason} if exc.field else {})
 
 
-ERROR_NAMES = {400: "bad_request", 404: "not_found", 409: "conflict", 413: "too_large"}
+ERROR_NAMES = {400: "bad_request", 404: "not_found", 409: "conflict", 413: "too_large", 415: "unsupported_media_type"}
 
 
 def wants_json() -> bool:

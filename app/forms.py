@@ -2,8 +2,9 @@
 
 Flask-WTF also fills forms from a JSON body, where a number or a nested
 value breaks the fields (a 500). Our forms are HTML forms: they read the
-form data only, so a JSON body leaves them empty (a 400 naming the missing
-fields).
+form data only (a JSON body never reaches a form's view:
+``app.validation.check_request`` answers it with 415), and a POST without
+fields leaves them empty (a 400 naming the missing fields).
 """
 
 import json

@@ -23,10 +23,10 @@ from collections.abc import Callable
 from flask import Flask, Response, current_app, redirect, request, url_for
 from flask_login import current_user
 
-from app.errors import Problem, error_response, wants_json
+from app.errors import error_response, wants_json
 from app.limits import MIN_SECRET_KEY_LENGTH
 from app.models import Role
-from app.validation import request_json
+from app.validation import check_request
 
 STAFF = frozenset({Role.ADMIN, Role.ANNOTATOR, Role.REVIEWER})
 
@@ -90,18 +90,6 @@ def check_access():
     return None
 
 
-def check_json_body():
-    """before_request hook: a JSON body must be a JSON object, else 400 before any view runs."""
-    if request.method in ("POST", "PUT", "PATCH", "DELETE") and request.is_json and request.get_data(cache=True):
-        try:
-            body = request_json()
-        except Problem as exc:
-            return error_response(400, "bad_request", exc.message, exc.fields)
-        if not isinstance(body, dict):
-            return error_response(400, "bad_request", "the request body must be a JSON object", {"body": "must be a JSON object"})
-    return None
-
-
 def secure_headers(response: Response) -> Response:
     """after_request hook: the security headers every response carries.
 
@@ -125,7 +113,7 @@ def secure_headers(response: Response) -> Response:
 
 def register(app: Flask) -> None:
     app.before_request(check_access)
-    app.before_request(check_json_body)
+    app.before_request(check_request)  # after the access check: nothing is read for whom may not ask
     app.after_request(secure_headers)
 
 

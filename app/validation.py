@@ -6,24 +6,38 @@ whose ``fields`` name every bad field (``"clicks[2].x": "must be >= 0"``).
 Unknown fields are refused, so a misspelt option never does nothing.
 
 Integers fit a SQL INTEGER column unless a field says otherwise, so an id
-past ``app.limits.MAX_ID`` is a 400, not a database error.
+past ``app.limits.MAX_ID`` is a 400, not a database error; so do the query's
+(``query_int``, ``query_ints``).
+
+A view reads a JSON body only when it says so with ``@takes_json(max_bytes)``
+(the body's limit, sized to its schema); ``check_request`` answers a JSON body
+sent anywhere else with 415 without reading it, and one over the limit with
+413. It also holds every string a request carries (path, query, headers, form
+fields and file names; ``decode_json`` does JSON's strings and keys) to one
+rule: no NUL and no unpaired surrogate (``egonet.io.UNSAFE_TEXT``), a 400.
 
 Example::
 
     CLICK = Obj({"x": Float(min=0), "y": Float(min=0)})
-    data = json_body({"clicks": List(CLICK, max_len=50), "none": Bool(default=False)})
+
+    @bp.post("/answer")
+    @takes_json(64 * KIB)
+    def answer():
+        data = json_body({"clicks": List(CLICK, max_len=50), "none": Bool(default=False)})
 """
 
 import math
-from collections.abc import Iterable
+from collections.abc import Callable, Iterable
 from dataclasses import dataclass, field
 from typing import Any
 
-from flask import request
+from flask import current_app, request
 
 from app.errors import Problem
 from app.limits import MAX_ID
-from egonet.io import decode_json
+from egonet.io import UNSAFE_REASON, UNSAFE_TEXT, UnsafeText, decode_json
+
+KIB, MIB = 1024, 1024**2
 
 MISSING = object()
 
@@ -183,34 +197,117 @@ def query_int(name: str, *, min: int | None = 1, max: int | None = MAX_ID) -> in
         Problem: 400 naming ``name`` when it is not such an integer.
     """
     text = request.args.get(name, "")
-    if not text:
-        return None
+    return _int_of(name, text, min, max) if text else None
+
+
+def query_ints(name: str, *, min: int = 1, max: int = MAX_ID) -> list[int]:
+    """Every value of the query parameter ``name`` (``?runs=3&runs=5``, or ``3,5``) as integers (ids by default).
+
+    Raises:
+        Problem: 400 naming ``name`` when one is not such an integer.
+    """
+    return [_int_of(name, part, min, max) for text in request.args.getlist(name) for part in text.split(",") if part.strip()]
+
+
+def _int_of(name: str, text: str, low: int | None, high: int | None) -> int:
     try:
-        return Int(min=min, max=max).check(int(text))
+        if not text.isascii():
+            raise ValueError
+        value = int(text)
     except ValueError:
         raise Problem(f"{name}: must be an integer", fields={name: "must be an integer"}) from None
+    try:
+        return Int(min=-MAX_ID - 1 if low is None else low, max=MAX_ID if high is None else high).check(value)
     except Invalid as exc:
         raise Problem(f"{name}: {exc.message}", fields={name: exc.message}) from None
 
 
-def request_json() -> Any:
-    """The request's body decoded by ``egonet.io.decode_json`` (the one JSON reader), None when empty.
+def takes_json(max_bytes: int = 64 * KIB) -> Callable[[Callable], Callable]:
+    """Mark a view as taking a JSON body of at most ``max_bytes`` (which ``json_body`` reads)."""
+
+    def decorate(view: Callable) -> Callable:
+        view.json_limit = max_bytes
+        return view
+
+    return decorate
+
+
+def json_limit() -> int | None:
+    """The JSON body limit of the request's view (None: it takes no JSON)."""
+    view = current_app.view_functions.get(request.endpoint) if request.endpoint else None
+    return getattr(view, "json_limit", None)
+
+
+def _has_body() -> bool:
+    return bool(request.content_length or request.headers.get("Transfer-Encoding"))
+
+
+def _too_large(limit: int, field: str) -> Problem:
+    return Problem(f"{field}: larger than the {limit} bytes this address takes", status=413,
+                   fields={field: f"over {limit} bytes"}, limit=limit)
+
+
+def read_body(limit: int, *, field: str = "body") -> bytes:
+    """The request's body, reading at most ``limit`` bytes.
 
     Raises:
-        Problem: 400 naming the body when it is not JSON (or nests too deep).
+        Problem: 413 naming ``field`` and the limit, from Content-Length or once more than the limit arrives.
     """
-    data = request.get_data(cache=True)
-    if not data:
-        return None
-    if not request.is_json:
-        raise Problem("the request body is not JSON (Content-Type: application/json)", fields={"body": "not valid JSON"})
-    try:
-        return decode_json(data)
-    except ValueError as exc:
-        raise Problem(f"the request body is not valid JSON: {exc}", fields={"body": "not valid JSON"}) from None
+    if (request.content_length or 0) > limit:
+        raise _too_large(limit, field)
+    chunks, size = [], 0
+    while size <= limit and (chunk := request.stream.read(limit + 1 - size)):  # a read may return less
+        chunks.append(chunk)
+        size += len(chunk)
+    if size > limit:
+        raise _too_large(limit, field)
+    return b"".join(chunks)
 
 
 def json_body(schema: dict[str, Field]) -> dict:
-    """The request's JSON body, validated (see module doc)."""
-    data = request_json()
-    return validate(schema, data if data is not None else {})
+    """The request's JSON body (an empty one is ``{}``), decoded by ``egonet.io.decode_json`` (the one JSON
+    reader) and validated (see module doc); at most the view's ``takes_json`` limit is read.
+
+    Raises:
+        Problem: 400 naming the body when it is not JSON (or nests too deep), or the field at fault (unsafe
+            text, or the schema's); 413 over the limit; 415 for a body of another type (unread).
+    """
+    limit = json_limit()
+    if limit is None:
+        raise RuntimeError(f"{request.endpoint} reads a JSON body without @takes_json")
+    if not request.is_json and _has_body():
+        raise Problem("the request body is not JSON (Content-Type: application/json)", status=415, fields={"body": "not JSON"})
+    data = read_body(limit)
+    try:
+        doc = decode_json(data) if data else {}
+    except UnsafeText as exc:
+        raise Problem(f"invalid field {exc.field}: {UNSAFE_REASON}", fields={exc.field: UNSAFE_REASON}) from None
+    except ValueError as exc:
+        raise Problem(f"the request body is not valid JSON: {exc}", fields={"body": "not valid JSON"}) from None
+    return validate(schema, doc)
+
+
+def check_text(field: str, value: str) -> None:
+    """Refuse ``UNSAFE_TEXT`` (NUL, unpaired surrogates) in a string from a request, with a 400 naming ``field``."""
+    if UNSAFE_TEXT.search(value):
+        raise Problem(f"{field}: {UNSAFE_REASON}", fields={field: UNSAFE_REASON})
+
+
+def check_request() -> None:
+    """before_request hook, after the access check: a JSON body only for a ``takes_json`` view (else 415,
+    unread) and within its limit (else 413, unread); no unsafe text in the path, query, headers or form."""
+    if request.endpoint is None:  # 404 and 405 are answered by Flask itself
+        return
+    if request.is_json and _has_body():
+        limit = json_limit()
+        if limit is None:
+            raise Problem("this address takes no JSON body", status=415, fields={"body": "JSON is not accepted here"})
+        if (request.content_length or 0) > limit:
+            raise _too_large(limit, "body")
+    check_text("path", request.path)
+    for name, value in request.headers.items():
+        check_text("header", name + value)
+    for where, pairs in (("query", request.args), ("form", request.form), ("file", request.files)):
+        for key, value in pairs.items(multi=True):
+            check_text(where, key)
+            check_text(key, value if isinstance(value, str) else value.filename or "")

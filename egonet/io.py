@@ -38,11 +38,17 @@ DEPTH_SUFFIXES = (".png", ".npy", ".npz")
 # JSON from users (request bodies, definition files, imports) nests at most
 # this deep; deeper is refused before the decoder, which would recurse.
 MAX_JSON_DEPTH = 100
-_JSON_STRING = re.compile(r'"[^"\\]*(?:\\.[^"\\]*)*"')
-_NOT_BRACKET = bytes(c for c in range(256) if c not in b"[]{}")
-_DEPTH_STEP = np.zeros(256, np.int32)
+_DEPTH_STEP = np.zeros(256, np.int8)
 _DEPTH_STEP[list(b"[{")] = 1
 _DEPTH_STEP[list(b"]}")] = -1
+_SCAN_CHUNK = 2**20
+# Text no database column holds: NUL (PostgreSQL refuses it) and UTF-16 surrogates, which in a Python
+# string are unpaired ones (not Unicode, so not UTF-8). The project's one rule for text from outside:
+# decode_json refuses them in every string and key, app.validation in every other string a request carries.
+UNSAFE_TEXT = re.compile("[\x00\ud800-\udfff]")
+# Where a JSON text can hold such a string: a raw surrogate, or an escaped NUL or surrogate (a raw NUL is
+# already refused by json.loads). A cheap linear look that decides whether the decoded value is walked.
+_MAYBE_UNSAFE_JSON = re.compile(r"[\ud800-\udfff]|\\u(?:0000|[dD][89a-fA-F])")
 
 # Images larger than this are refused before they are decoded, so a small
 # file that claims a huge size (a decompression bomb) costs nothing.
@@ -315,29 +321,93 @@ def parse_intrinsics(data: object, *, path: str | Path = "<json>") -> np.ndarray
     return K
 
 
+UNSAFE_REASON = "holds a NUL character or an unpaired surrogate"
+
+
+class UnsafeText(ValueError):
+    """A string holding NUL or an unpaired surrogate (``UNSAFE_TEXT``); ``field`` says where (``a[2].b``;
+    ``body`` when the document is that string)."""
+
+    def __init__(self, field: str):
+        super().__init__(f"{field or 'the document'}: {UNSAFE_REASON}")
+        self.field = field or "body"
+
+
+def _unsafe_path(value: object, path: str = "") -> str | None:
+    """Where in a decoded JSON value (nested at most ``MAX_JSON_DEPTH``) a key or string is unsafe text."""
+    if isinstance(value, str):
+        return path if UNSAFE_TEXT.search(value) else None
+    if isinstance(value, dict):
+        for key, item in value.items():
+            where = f"{path}.{key}" if path else key
+            if UNSAFE_TEXT.search(key):
+                return path or "(a key)"
+            if (found := _unsafe_path(item, where)) is not None:
+                return found
+    elif isinstance(value, list):
+        for i, item in enumerate(value):
+            if (found := _unsafe_path(item, f"{path}[{i}]")) is not None:
+                return found
+    return None
+
+
+def json_depth(data: bytes, *, limit: int | None = None) -> int:
+    """How deep the brackets of a JSON text (UTF-8 bytes) nest outside its strings, in one linear pass.
+
+    A quote opens or closes a string unless an odd run of backslashes precedes it; brackets inside
+    strings are text. Vectorised a mebibyte at a time (backslash runs from a running maximum, string
+    state from a running count of quotes), with the state carried from one piece to the next. For
+    valid JSON this is the nesting of its arrays and objects; in an invalid text it is exact up to the
+    first error, where ``json.loads`` stops. With ``limit``, the scan stops at the first piece that
+    goes deeper.
+    """
+    buf = np.frombuffer(data, np.uint8)
+    run, inside, depth, deepest = 0, False, 0, 0
+    for start in range(0, buf.size, _SCAN_CHUNK):
+        piece = buf[start:start + _SCAN_CHUNK]
+        index = np.arange(piece.size, dtype=np.int64)
+        # The last position at or before each one that is not a backslash (-1: none in this piece).
+        last_plain = np.maximum.accumulate(np.where(piece == ord("\\"), -1, index))
+        before = np.concatenate(([-1], last_plain[:-1]))
+        backslashes = index - 1 - before + np.where(before < 0, run, 0)
+        quotes = np.cumsum((piece == ord('"')) & (backslashes % 2 == 0), dtype=np.int64)
+        outside = (quotes % 2 == 1) == inside  # XOR with the state at the piece's start
+        running = depth + np.cumsum(_DEPTH_STEP[piece] * outside, dtype=np.int64)
+        deepest = max(deepest, int(running.max()))
+        run = run + piece.size if last_plain[-1] < 0 else piece.size - 1 - int(last_plain[-1])
+        inside ^= bool(quotes[-1] % 2)
+        depth = int(running[-1])
+        if limit is not None and deepest > limit:
+            break
+    return deepest
+
+
 def decode_json(data: bytes | str) -> object:
     """Decode a JSON document from outside (a request body, a file): the project's one JSON reader for
     what users send, so no document costs more than a linear scan however deep it nests.
 
     Raises:
         ValueError: not JSON (a ``json.JSONDecodeError``, or a ``UnicodeDecodeError`` for bytes that are
-            not UTF-8/16/32), or nested deeper than ``MAX_JSON_DEPTH``.
+            not UTF-8/16/32), or nested deeper than ``MAX_JSON_DEPTH``; ``UnsafeText`` (a ValueError)
+            when a string or key holds ``UNSAFE_TEXT``.
 
     Example:
         >>> decode_json(b'{"clicks": [[1, 2]]}')
         {'clicks': [[1, 2]]}
     """
-    text = data.decode(json.detect_encoding(data), "surrogatepass") if isinstance(data, bytes | bytearray) else data
-    # The depth after each bracket outside strings (a string's brackets are text), summed in numpy a
-    # mebibyte at a time: deeper than the limit is refused before json.loads, which would recurse.
-    brackets = _JSON_STRING.sub("", text).encode("utf-8", "surrogatepass").translate(None, _NOT_BRACKET)
-    depth = 0
-    for start in range(0, len(brackets), 2**20):
-        running = depth + np.cumsum(_DEPTH_STEP[np.frombuffer(brackets[start:start + 2**20], np.uint8)])
-        if running.max() > MAX_JSON_DEPTH:
-            raise ValueError(f"nested deeper than {MAX_JSON_DEPTH} levels")
-        depth = int(running[-1])
-    return json.loads(text)
+    if isinstance(data, bytes | bytearray):
+        encoding = json.detect_encoding(data)
+        text = data.decode(encoding, "surrogatepass")
+        utf8 = data if encoding.startswith("utf-8") else text.encode("utf-8", "surrogatepass")
+    else:
+        text, utf8 = data, data.encode("utf-8", "surrogatepass")
+    # Deeper than the limit is refused before json.loads, which would recurse.
+    if json_depth(utf8, limit=MAX_JSON_DEPTH) > MAX_JSON_DEPTH:
+        raise ValueError(f"nested deeper than {MAX_JSON_DEPTH} levels")
+    value = json.loads(text)
+    if _MAYBE_UNSAFE_JSON.search(text) and (where := _unsafe_path(value)) is not None:
+        raise UnsafeText(where)
+    return value
 
 
 def read_intrinsics(path: str | Path) -> np.ndarray:

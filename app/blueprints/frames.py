@@ -1,6 +1,6 @@
 """Pages for browsing the dataset: activities, frame grids, the frame viewer, media."""
 
-from flask import Blueprint, abort, current_app, render_template, request, send_file, send_from_directory, url_for
+from flask import Blueprint, abort, current_app, render_template, send_file, send_from_directory, url_for
 
 from app.extensions import db
 from app.models import Activity, Frame
@@ -8,6 +8,7 @@ from app.models.training import Prediction
 from app.services import frames as frames_service
 from app.services import labelling, media
 from app.services import training as training_service
+from app.validation import query_int
 
 bp = Blueprint("frames", __name__)
 
@@ -29,9 +30,7 @@ def index():
 @bp.get("/activities/<int:activity_id>")
 def activity(activity_id: int):
     act = db.get_or_404(Activity, activity_id)
-    page = request.args.get("page", 1, type=int)
-    if page < 1:
-        abort(400, "page must be a positive integer")
+    page = query_int("page") or 1
     frames, pages = frames_service.frame_page(act, page, current_app.config["FRAMES_PER_PAGE"])
     if page > pages:
         abort(404, f"page {page} does not exist (the activity has {pages})")
@@ -127,8 +126,8 @@ def points(frame_id: int):
     from app.services import pointcloud
 
     fr = db.get_or_404(Frame, frame_id)
-    max_points = request.args.get("max", pointcloud.BROWSER_POINTS, type=int)
-    data = pointcloud.browser_points(fr, max_points=max_points, prediction_id=request.args.get("prediction", type=int))
+    max_points = query_int("max") or pointcloud.BROWSER_POINTS
+    data = pointcloud.browser_points(fr, max_points=max_points, prediction_id=query_int("prediction"))
     return current_app.response_class(data, mimetype="application/octet-stream")
 
 

@@ -28,7 +28,7 @@ from app.security import roles
 from app.services import exchange
 from app.services import frames as frames_service
 from app.services import labelling, media
-from app.validation import Bool, Float, Int, List, Obj, Str, json_body, query_int
+from app.validation import MIB, Bool, Float, Int, List, Obj, Str, json_body, query_int, read_body, takes_json
 from egonet import io as egonet_io
 
 bp = Blueprint("label", __name__)
@@ -272,6 +272,7 @@ def own_annotation(frame_id: int):
 
 @bp.put("/api/label/frames/<int:frame_id>/annotation")
 @roles(*LABELLERS)
+@takes_json(8 * MIB)
 def save_annotation(frame_id: int):
     """Save with a version check: 409 with ``current_version`` when stale."""
     data = json_body(SAVE)
@@ -282,6 +283,7 @@ def save_annotation(frame_id: int):
 
 @bp.post("/api/label/frames/<int:frame_id>/annotation/reopen")
 @roles(*LABELLERS)
+@takes_json()
 def reopen_annotation(frame_id: int):
     """``{version}``: put the user's done or reviewed annotation back in progress ("Edit")."""
     data = json_body(VERSION)
@@ -291,6 +293,7 @@ def reopen_annotation(frame_id: int):
 
 @bp.post("/api/label/frames/<int:frame_id>/presence")
 @roles(*LABELLERS)
+@takes_json()
 def presence(frame_id: int):
     """``{open}``: the user has the frame open (true, every HEARTBEAT_S) or left it (false);
     answers who else is on the frame (``others``: open, or with an annotation of it)."""
@@ -305,6 +308,7 @@ def presence(frame_id: int):
 
 @bp.post("/api/label/frames/<int:frame_id>/annotation/time")
 @roles(*LABELLERS)
+@takes_json()
 def add_time(frame_id: int):
     """``{seconds}`` spent on the frame since the last save; no new version (204)."""
     data = json_body({"seconds": Float(min=0, max=labelling.MAX_TIME_DELTA_S)})
@@ -316,6 +320,7 @@ def add_time(frame_id: int):
 
 @bp.post("/api/label/frames/<int:frame_id>/suggest")
 @roles(*LABELLERS)
+@takes_json()
 def suggest(frame_id: int):
     """``{version, source?, run_id?}``: a trained run, or a source that needs none (depth, handled,
     saliency), proposes the frame's action-objects into the user's annotation; ``source`` "auto" (the
@@ -339,6 +344,7 @@ def suggest(frame_id: int):
 
 @bp.post("/api/label/frames/<int:frame_id>/annotation/proposals/accept")
 @roles(*LABELLERS)
+@takes_json()
 def accept_proposal(frame_id: int):
     """``{version, key}``: accept the model's proposal ``key``; it becomes an ordinary instance (new version)."""
     data = json_body(ACCEPT)
@@ -353,6 +359,7 @@ def accept_proposal(frame_id: int):
 
 @bp.post("/api/label/frames/<int:frame_id>/propagate")
 @roles(*LABELLERS)
+@takes_json()
 def propagate_next(frame_id: int):
     """``{replace, version}`` -> the next frame's new annotation, with ``url`` to label it.
 
@@ -367,6 +374,7 @@ def propagate_next(frame_id: int):
 
 @bp.post("/api/label/frames/<int:frame_id>/copy-previous")
 @roles(*LABELLERS)
+@takes_json()
 def copy_previous(frame_id: int):
     """``{replace, version}`` -> this frame's annotation, carried over from the previous frame."""
     data = json_body(CARRY)
@@ -454,6 +462,7 @@ def upload_instance_mask(annotation_id: int, position: int):
 
 @bp.put("/api/label/annotations/<int:annotation_id>")
 @roles(*REVIEWERS)
+@takes_json(8 * MIB)
 def fix_annotation(annotation_id: int):
     """A reviewer's fix of a done annotation's masks (``{version, instances, no_action_object}``), before deciding."""
     data = json_body(FIX)
@@ -482,17 +491,14 @@ def put_history(annotation_id: int):
     version = query_int("version", min=1)
     if version is None:
         raise Problem("version: give the annotation's version as ?version=N", fields={"version": "is required"})
-    limit = labelling.MAX_HISTORY_BYTES
-    if (request.content_length or 0) > limit:
-        raise Problem(f"history: more than the {limit} bytes an undo history may take", status=413,
-                      fields={"history": f"over {limit} bytes"})
-    data = request.stream.read(limit + 1)
+    data = read_body(labelling.MAX_HISTORY_BYTES, field="history")
     labelling.put_history(labelling.get_annotation(annotation_id), me(), version=version, data=data)
     return "", 204
 
 
 @bp.post("/api/label/annotations/<int:annotation_id>/review")
 @roles(*REVIEWERS)
+@takes_json()
 def review_annotation(annotation_id: int):
     data = json_body(REVIEW)
     ann = labelling.get_annotation(annotation_id)
@@ -539,6 +545,7 @@ def _target(data: dict) -> tuple[Frame, str]:
 
 @bp.post("/api/label/grabcut/box")
 @roles(*EDITORS)
+@takes_json()
 def grabcut_box():
     """``{frame_id, instance, box: [x0, y0, x1, y1], use_depth?}`` -> the object's first mask (PNG)."""
     started = _clock()
@@ -551,6 +558,7 @@ def grabcut_box():
 
 @bp.post("/api/label/grabcut/stroke")
 @roles(*EDITORS)
+@takes_json(MIB)
 def grabcut_stroke():
     """``{frame_id, instance, points: [[x, y], ...], label: fg|bg, radius}`` -> the updated mask (PNG)."""
     started = _clock()
@@ -564,6 +572,7 @@ def grabcut_stroke():
 
 @bp.post("/api/label/grabcut/undo")
 @roles(*EDITORS)
+@takes_json()
 def grabcut_undo():
     """``{frame_id, instance}`` -> the mask before the last GrabCut operation (PNG)."""
     started = _clock()

@@ -39,7 +39,7 @@ from app.security import CONTENT_SECURITY_POLICY, public, roles
 from app.services import media, studies
 from app import throttle
 from app.throttle import entry_attempts
-from app.validation import Bool, Float, Int, List, Obj, Str, json_body
+from app.validation import MIB, Bool, Float, Int, List, Obj, Str, json_body, takes_json
 
 bp = Blueprint("study", __name__, url_prefix="/s")
 
@@ -177,7 +177,7 @@ def entry():
     return render_template("study/entry.html", form=form), status
 
 
-@bp.route("/l/<token>", methods=["GET", "POST"])
+@bp.route("/l/<token:token>", methods=["GET", "POST"])
 @public
 @entry_attempts
 def link(token: str):
@@ -195,7 +195,7 @@ def link(token: str):
     return _enter(studies.use_link(token))
 
 
-@bp.route("/o/<open_token>", methods=["GET", "POST"])
+@bp.route("/o/<token:open_token>", methods=["GET", "POST"])
 @public
 def open_link(open_token: str):
     """The study's open link: GET says what the study is (or that it is full, paused or closed); its Start
@@ -237,7 +237,7 @@ def open_link(open_token: str):
     return _sign_in(participant)
 
 
-@bp.get("/o/<open_token>/example")
+@bp.get("/o/<token:open_token>/example")
 @public
 def open_example(open_token: str):
     """The frame an MTurk preview shows with the instructions, before anyone is admitted (no ground truth)."""
@@ -333,7 +333,7 @@ def _answers(count: int) -> dict[int, int]:
     answers = {}
     for i in range(count):
         value = request.form.get(f"q{i}", "")
-        if value.isdigit() and len(value) <= 2:
+        if value.isascii() and value.isdigit() and len(value) <= 2:
             answers[i] = int(value)
     return answers
 
@@ -428,6 +428,7 @@ def current():
 
 @bp.post("/api/trials/<int:trial_id>")
 @roles(Role.PARTICIPANT)
+@takes_json(MIB)
 def submit(trial_id: int):
     """Answer a trial; the reply is the next state, like ``current``."""
     participant, trial = _owned_trial(trial_id)
@@ -456,6 +457,7 @@ def submit(trial_id: int):
 
 @bp.post("/api/environment")
 @roles(Role.PARTICIPANT)
+@takes_json()
 def environment():
     """What the page reports of the screen, window, pixel ratio and time zone (stored with the session)."""
     participant = _participant()

@@ -25,10 +25,12 @@ it is.
 """
 
 from flask import Blueprint, Response, render_template, request
+
 from app.errors import Problem
 from app.models import Role
 from app.security import current_role
 from app.services import scoring
+from app.validation import query_ints
 from egonet.metrics import DEFAULT_EMPTY, MIN_FRAMES
 
 bp = Blueprint("scores", __name__, url_prefix="/scores")
@@ -42,15 +44,8 @@ DOWNLOADS = {
 FIGURES = {"svg": "image/svg+xml", "pdf": "application/pdf"}
 
 
-def _ids(name: str) -> list[int]:
-    values = request.args.getlist(name)
-    try:
-        return [int(v) for v in values]
-    except ValueError:
-        raise scoring.ScoringProblem(f"{name} must be whole numbers (ids)", fields={name: "must be whole numbers"}) from None
-
-
 def _sees_people() -> bool:
+    """Whether the user may see study participants' scores (admins only: see docs/scoring.md)."""
     return current_role() is Role.ADMIN
 
 
@@ -58,10 +53,10 @@ def _choice() -> dict:
     """The runs, studies and baselines the query string asks for (defaults: everything the user may see)."""
     if "chosen" not in request.args:
         return {"run_ids": None, "study_ids": None if _sees_people() else [], "baselines": True}
-    study_ids = _ids("studies")
+    study_ids = query_ints("studies")
     if study_ids and not _sees_people():
         raise Problem("only admins see the scores of studies' participants", status=403)
-    return {"run_ids": _ids("runs"), "study_ids": study_ids, "baselines": "baselines" in request.args}
+    return {"run_ids": query_ints("runs"), "study_ids": study_ids, "baselines": "baselines" in request.args}
 
 
 def _studies() -> list:

@@ -25,7 +25,8 @@ from app.security import roles
 from app.services import ground_truth, studies
 from app.services.scoring.cache import forget_participant
 from app.throttle import clear_entry_lock, entry_locks, locked_s
-from egonet.io import decode_json
+from app.validation import query_int
+from egonet.io import UNSAFE_REASON, UnsafeText, decode_json
 
 bp = Blueprint("studies", __name__, url_prefix="/studies")
 
@@ -53,10 +54,12 @@ def _study_frame(study_id: int, study_frame_id: int) -> StudyFrame:
 
 
 def _page() -> int:
-    page = request.args.get("page", 1, type=int)
-    if page < 1:
-        raise Problem("page must be a positive integer", fields={"page": "must be >= 1"})
-    return page
+    return query_int("page") or 1
+
+
+def _width() -> int:
+    """An overlay's ``?width=`` (CSS px), kept within 64-2048."""
+    return min(max(query_int("width", min=0) or 640, 64), 2048)
 
 
 def _png(data: bytes) -> Response:
@@ -129,6 +132,8 @@ def create_from_file():
         raise Problem("a definition file has at most 1 MiB", status=413, fields={"definition": "too large"})
     try:
         doc = decode_json(data)
+    except UnsafeText as exc:
+        raise Problem(f"the definition file's {exc.field} {UNSAFE_REASON}", fields={"definition": UNSAFE_REASON}) from None
     except ValueError as exc:
         raise Problem(f"the definition file is not valid JSON: {exc}", fields={"definition": "not valid JSON"}) from None
     study = studies.study_from_definition(doc, created_by=current_user._get_current_object())
@@ -151,7 +156,8 @@ def edit(study_id: int):
         form.version.data = str(study.version)
     elif form.validate_on_submit():
         doc = form.definition(names)
-        version = int(form.version.data) if (form.version.data or "").isdigit() else -1
+        text = form.version.data or ""
+        version = int(text) if text.isascii() and text.isdigit() and len(text) <= 9 else -1
         if doc is not None:
             try:
                 studies.update_from_definition(study, doc, version=version)
@@ -356,8 +362,7 @@ def mean_overlay(study_id: int, study_frame_id: int):
     if request.args.get("outline") == "1":
         truth = ground_truth.ground_truths([study_frame.frame_id]).get(study_frame.frame_id)
         outline = ground_truth.mask_of(truth) if truth is not None else None
-    width = request.args.get("width", 640, type=int)
-    return _png(studies.overlay_png(study_frame.frame, mean, outline=outline, max_width=min(max(width, 64), 2048)))
+    return _png(studies.overlay_png(study_frame.frame, mean, outline=outline, max_width=_width()))
 
 
 @bp.get("/<int:study_id>/trials/<int:trial_id>/overlay.png")
@@ -366,9 +371,8 @@ def trial_overlay(study_id: int, trial_id: int):
     """One participant's soft mask over the frame, with their clicks."""
     trial = _study_trial(study_id, trial_id)
     mask = studies.trial_soft_mask(trial) if trial.outcome in ANSWERED else None
-    width = request.args.get("width", 640, type=int)
     points = [(c.x, c.y) for c in trial.clicks]
-    return _png(studies.overlay_png(trial.frame, mask, points=points, max_width=min(max(width, 64), 2048)))
+    return _png(studies.overlay_png(trial.frame, mask, points=points, max_width=_width()))
 
 
 @bp.get("/<int:study_id>/trials/<int:trial_id>/mask.png")

@@ -40,7 +40,7 @@ from app.models.training import Checkpoint, Prediction, TrainingRun
 from app.queue import enqueue
 from app.security import current_role, roles
 from app.services import training
-from app.validation import Int, Str, json_body, query_int
+from app.validation import Int, Str, json_body, query_int, query_ints, takes_json
 
 bp = Blueprint("training", __name__, url_prefix="/training")
 
@@ -170,11 +170,7 @@ def start():
 
 @bp.get("/status")
 def status():
-    ids = request.args.get("ids", "")
-    try:
-        wanted = [int(x) for x in ids.split(",") if x.strip()]
-    except ValueError:
-        raise Problem("ids must be run ids separated by commas", fields={"ids": "must be integers"}) from None
+    wanted = query_ints("ids")
     query = db.select(TrainingRun).where(TrainingRun.id.in_(wanted)) if wanted else db.select(TrainingRun)
     runs = db.session.execute(query.order_by(TrainingRun.id.desc()).limit(100)).scalars()
     return {"runs": [run_json(run) for run in runs]}
@@ -229,6 +225,7 @@ FINISH = {
 
 @bp.post("/weights/uploads")
 @roles(Role.ADMIN)
+@takes_json()
 def weights_upload_start():
     data = json_body(UPLOAD)
     return training.start_upload(filename=data["filename"], size=data["size"], user=current_user._get_current_object()), 201
@@ -247,6 +244,7 @@ def weights_upload_chunk(upload: str):
 
 @bp.post("/weights/uploads/<upload>/finish")
 @roles(Role.ADMIN)
+@takes_json()
 def weights_upload_finish(upload: str):
     data = json_body(FINISH)
     run = training.finish_upload(upload, name=data["name"], size=(data["height"], data["width"]),

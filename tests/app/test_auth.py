@@ -72,14 +72,15 @@ def test_signed_out_participant_pages_lead_to_the_study_entry(client):
     assert client.get("/studies/").headers["Location"].startswith("/login")
 
 
-def test_html_forms_ignore_json_bodies(app, admin_client):
-    """Flask-WTF would fill forms from JSON, where nested values crash the fields (a 500)."""
+def test_html_forms_refuse_json_bodies(app, admin_client):
+    """Flask-WTF would fill forms from JSON, where nested values crash the fields (a 500): a form's
+    address takes no JSON (415, app.validation.check_request)."""
     forms = [rule.rule for rule in app.url_map.iter_rules() if rule.endpoint in ("auth.login", "studies.create", "training.start")]
     assert len(forms) == 3
     for url in forms:
         for body in ({"username": ["a", "b"], "epochs": {"x": 1}, "name": 5}, {"model": None}):
-            with admin_client.post(url, json=body) as response:
-                assert response.status_code == 400, (url, response.status_code)
+            with admin_client.post(url, json=body, headers={"Accept": "application/json"}) as response:
+                assert response.status_code == 415 and response.get_json()["error"] == "unsupported_media_type", url
 
 
 def test_a_session_cookie_copied_before_log_out_is_refused_after(app, client, make_user):

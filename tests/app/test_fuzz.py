@@ -5,15 +5,28 @@ GET) malformed JSON, wrong types, huge numbers and strings, missing fields,
 coordinates far outside the frame, and random form fields, with ids in the
 path that are real, zero, negative or past what an id column holds. Any
 500 fails. New routes are fuzzed automatically.
+
+Then every route gets, for each role, the bytes PostgreSQL and the database
+layer refuse: NUL and unpaired surrogates in every string a request can carry
+(path, query, headers, form fields and their names, file names, uploaded
+JSON, JSON strings and keys), and query integers past what any column holds
+(the names come from the app's source, so a new parameter is covered too).
+Such text is refused (4xx, never a 2xx), and nothing answers 500.
 """
 
+import inspect
+import io
 import json
 import re
+from pathlib import Path
+from urllib.parse import quote
 
 import pytest
 from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
+from werkzeug.routing import AnyConverter
 
+from app import IdConverter
 from tests.app.access import all_url_values
 
 FIELDS = [
@@ -27,7 +40,8 @@ FIELDS = [
 HUGE = st.sampled_from([10**30, -(10**30), 1e308, -1e308, 10**400, 2**63, 2**31, -1, 0, 1e-300, 99999999])
 # A path id: the real one (None), or one that no row can have.
 PATH_IDS = st.none() | st.sampled_from([2**31 - 1, 2**31, 2**63, 2**64, 10**30, 0, -1])
-scalars = st.none() | st.booleans() | st.integers() | HUGE | st.floats(allow_nan=False) | st.text(max_size=300)
+UNSAFE = ["a\x00b", "\ud800", "x\udfffy"]  # NUL and unpaired surrogates
+scalars = st.none() | st.booleans() | st.integers() | HUGE | st.floats(allow_nan=False) | st.text(max_size=300) | st.sampled_from(UNSAFE)
 values = st.recursive(scalars, lambda inner: st.lists(inner, max_size=5) | st.dictionaries(st.sampled_from(FIELDS), inner, max_size=5), max_leaves=25)
 objects = st.dictionaries(st.sampled_from(FIELDS) | st.text(max_size=10), values, max_size=8)
 RAW = [b"{", b"null", b"[]", b'"x"', b'{"x": NaN}', b'{"x": Infinity, "y": -Infinity}', b'{"x": 1e999}',
@@ -71,3 +85,78 @@ def test_no_endpoint_answers_500(app, client, make_user, tmp_path_factory, role,
                                            headers={"Accept": "application/json"})
             with response:
                 assert response.status_code < 500, f"{role} {method} {url}: {response.status_code} {response.get_data()[:300]!r}"
+
+
+OUT_OF_RANGE = ["9223372036854775808", "99999999999999999999", "-9223372036854775809", "1" * 5000]
+# Query parameters the app reads, from its source (a new one is fuzzed without listing it here).
+QUERY_READERS = re.compile(r"""(?:query_ints?|args\.get|args\.getlist|source\.get|source\[|args\[)\(?["'](\w+)["']""")
+SOURCE = "\n".join(p.read_text() for p in Path(__file__).resolve().parents[2].glob("app/**/*.py"))
+QUERY_NAMES = sorted(set(QUERY_READERS.findall(SOURCE)) | {"PROLIFIC_PID", "workerId", "assignmentId", "external_id", "STUDY_ID"})
+
+
+def query(pairs: dict[str, str]) -> str:
+    """A query string as a client may send it (a surrogate goes as its UTF-8 bytes, which werkzeug decodes leniently)."""
+    return "&".join(f"{quote(k, errors='surrogatepass')}={quote(v, errors='surrogatepass')}" for k, v in pairs.items())
+
+
+def unsafe_bodies(view):
+    """(kwargs for client.open, whether it carries unsafe text) for a view's state-changing methods."""
+    if getattr(view, "json_limit", None) is not None:
+        for value in UNSAFE:
+            yield {"data": json.dumps({value: 1}), "content_type": "application/json"}, True
+            yield {"data": json.dumps({name: value for name in FIELDS}), "content_type": "application/json"}, True
+            yield {"data": json.dumps({name: [{"label": value, "key": value}] for name in FIELDS}), "content_type": "application/json"}, True
+        yield {"data": b'{"label": "\xed\xa0\x80"}', "content_type": "application/json"}, True  # a surrogate in UTF-8
+        return
+    yield {"data": {name: "a\x00b" for name in FIELDS}}, True
+    yield {"data": {"a\x00b": "x"}}, True
+    definition = json.dumps({"name": "\ud800", "activities": ["a\x00b"]}).encode()
+    yield {"data": {"definition": (io.BytesIO(definition), "study.json")}, "content_type": "multipart/form-data"}, False
+    yield {"data": {"definition": (io.BytesIO(b"{}"), "a\x00b.json")}, "content_type": "multipart/form-data"}, True
+
+
+@pytest.mark.slow
+@pytest.mark.parametrize("role", ["anonymous", "admin", "annotator", "reviewer", "participant"])
+def test_no_route_takes_unsafe_text_or_answers_500_to_huge_integers(app, client, make_user, tmp_path, role):
+    values = all_url_values(app, tmp_path)
+    user = None if role == "anonymous" else make_user(role, f"bytes-{role}")
+    checked = 0
+
+    def send(url, method="GET", *, unsafe, **kwargs):
+        nonlocal checked
+        if user is not None:
+            client.login_as(user)
+        with client.open(url, method=method, headers={"Accept": "application/json", **kwargs.pop("headers", {})}, **kwargs) as response:
+            status = response.status_code
+            assert status < 500, f"{role} {method} {url} {kwargs}: {status} {response.get_data()[:300]!r}"
+            assert not (unsafe and status < 300), f"{role} {method} {url} {kwargs}: {status} took unsafe text"
+        checked += 1
+
+    for rule in app.url_map.iter_rules():
+        if rule.endpoint == "auth.logout":
+            continue
+        view = app.view_functions[rule.endpoint]
+        url = rule.build(values, append_unknown=False)[1]
+        methods = sorted(rule.methods - {"HEAD", "OPTIONS"})
+        for name in [n for n, c in rule._converters.items() if not isinstance(c, IdConverter | AnyConverter)]:  # text, not ids or choices
+            for value in ("a\x00b", "%00", "%ED%A0%80"):  # a surrogate's bytes in a URL are decoded to U+FFFD, which is safe
+                bad = rule.build({**values, name: "PLACEHOLDER"}, append_unknown=False)[1].replace("PLACEHOLDER", quote(value, safe="%"))
+                send(bad, methods[0], unsafe="0" in value)
+        if "GET" in methods:
+            module = inspect.getsource(inspect.getmodule(view))
+            names = [n for n in QUERY_NAMES if f'"{n}"' in module] or QUERY_NAMES[:5]
+            for value in UNSAFE:
+                send(f"{url}?{query({n: value for n in QUERY_NAMES})}", unsafe="\x00" in value)
+                send(f"{url}?{query({value: '1'})}", unsafe="\x00" in value)
+            send(url, headers={"User-Agent": "a\x00b", "X-Requested-With": "a\x00b"}, unsafe=True)
+            for name in names:
+                for value in OUT_OF_RANGE[:2]:
+                    send(f"{url}?{query({name: value})}", unsafe=False)
+            send(f"{url}?{query({n: v for n in QUERY_NAMES for v in OUT_OF_RANGE[2:]})}", unsafe=False)
+        for method in methods:
+            if method == "GET":
+                continue
+            for kwargs, unsafe in unsafe_bodies(view):
+                send(url, method, unsafe=unsafe, **kwargs)
+            send(f"{url}?{query({n: OUT_OF_RANGE[0] for n in QUERY_NAMES})}", method, unsafe=False)
+    assert checked > 500

@@ -465,7 +465,7 @@ def test_scores_pages_refuse_bad_choices(admin_client):
     page = admin_client.get("/scores/?chosen=1&studies=99")
     assert page.status_code == 400 and "study 99 does not exist" in page.get_data(as_text=True)
     with admin_client.get("/scores/table.csv?chosen=1&runs=abc", headers={"Accept": "application/json"}) as response:
-        assert response.status_code == 400 and response.get_json()["fields"] == {"runs": "must be whole numbers"}
+        assert response.status_code == 400 and response.get_json()["fields"] == {"runs": "must be an integer"}
     with admin_client.get("/scores/table.json?chosen=1&runs=5", headers={"Accept": "application/json"}) as response:
         assert response.status_code == 400 and "runs" in response.get_json()["fields"]
     for query, field in (("metric=mean", "metric"), ("frames=most", "frames"), ("compare_a=run:1", "compare_b"),

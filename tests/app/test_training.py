@@ -281,7 +281,7 @@ def test_progress_is_polled_as_json_and_runs_are_cancelled_from_the_page(app, de
     assert body["runs"][0] | {"updated_at": None} == {
         "id": run_id, "status": "queued", "progress": 0.0, "loss": None, "eta_s": None, "message": None, "mean": {}, "updated_at": None,
     }
-    assert admin_client.get("/training/status?ids=x", headers={"Accept": "application/json"}).get_json()["fields"] == {"ids": "must be integers"}
+    assert admin_client.get("/training/status?ids=x", headers={"Accept": "application/json"}).get_json()["fields"] == {"ids": "must be an integer"}
     assert admin_client.post(f"/training/runs/{run_id}/cancel").status_code == 302
     response = admin_client.post(f"/training/runs/{run_id}/cancel", headers={"Accept": "application/json"})
     assert response.status_code == 409 and "cancelled already" in response.get_json()["message"]

@@ -13,12 +13,13 @@ from typing import Any
 from flask import current_app
 
 from app.errors import Problem
+from app.limits import TOKEN_REGEX
 from app.models import utcnow
 
 LATE_GRACE_S = 2.0
 """Seconds after a deadline during which an answer is still accepted (network latency)."""
 
-TOKEN_PATTERN = re.compile(r"[A-Za-z0-9_.\-]{1,64}")
+TOKEN_PATTERN = re.compile(TOKEN_REGEX)
 """What a completion code, a condition name or a platform's id may hold (letters, digits, ``_ . -``)."""
 
 

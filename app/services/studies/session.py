@@ -21,7 +21,7 @@ from app.models import User
 from app.models.studies import EndReason, EntryKind, FrameKind, Outcome, Participant, StudyFrame, StudyStatus, Trial
 from app.services.studies import checks, protocol
 from app.services.studies.common import LATE_GRACE_S, StudyProblem, now
-from app.services.studies.recruiting import CODE_LENGTH, CLOSED, PAUSED
+from app.services.studies.recruiting import CLOSED, CODE_ALPHABET, CODE_LENGTH, PAUSED
 
 LINK_USED = "this study link has already been used; enter your access code instead"
 ENVIRONMENT_KEYS = ("screen", "window", "pixel_ratio", "time_zone", "touch")
@@ -30,7 +30,7 @@ ENVIRONMENT_KEYS = ("screen", "window", "pixel_ratio", "time_zone", "touch")
 def participant_by_code(code: str) -> Participant | None:
     """The participant with this access code (case, spaces and dashes ignored)."""
     cleaned = "".join(c for c in (code or "").upper() if c.isalnum())
-    if len(cleaned) != CODE_LENGTH:
+    if len(cleaned) != CODE_LENGTH or not set(cleaned) <= set(CODE_ALPHABET):  # checked before any query
         return None
     return db.session.execute(db.select(Participant).filter_by(code=cleaned)).scalar_one_or_none()
 
