@@ -55,7 +55,7 @@ def test_the_open_links_places_are_its_own_arrivals(app, admin_client, tmp_path)
         studies.add_participants(study, count=1, entry="link")  # a single-use link, never used
         token = study.open_link_token
     newcomer = app.test_client()
-    assert newcomer.post(f"/s/o/{token}", data={"PROLIFIC_PID": "p1", "STUDY_ID": "s", "SESSION_ID": "v1"}).status_code == 302
+    assert newcomer.post(f"/s/o/{token}", data={"PROLIFIC_PID": "5f1e2d3c4b5a69788796a5b1", "STUDY_ID": "s", "SESSION_ID": "v1"}).status_code == 302
     page = admin_client.get(f"/studies/{ids['study']}").get_data(as_text=True)
     assert "Open link (1 place taken of 3)" in page
     with app.app_context():

@@ -14,7 +14,7 @@ from tests.browser.test_study import click_frame, wait_for_trial
 
 pytestmark = pytest.mark.browser
 
-PROLIFIC = "?PROLIFIC_PID=pid{n}&STUDY_ID=s1&SESSION_ID=visit{n}"
+PROLIFIC = "?PROLIFIC_PID=5f1e2d3c4b5a69788796a5b{n}&STUDY_ID=s1&SESSION_ID=visit{n}"
 
 
 def open_study(live_app) -> tuple[int, str]:
@@ -68,11 +68,16 @@ def test_a_withdrawn_participant_who_returns_is_told_they_withdrew(live_app, liv
     study_id, link = open_study(live_app)
     context, person = arrive(browser, live_server, link, 2)
     with live_app.app_context():
-        participant = db.session.execute(db.select(Participant).filter_by(study_id=study_id, external_id="pid2")).scalar_one()
+        participant = db.session.execute(db.select(Participant).filter_by(study_id=study_id, external_id="5f1e2d3c4b5a69788796a5b2")).scalar_one()
         staff, _ = create_user("staff", "admin")
         studies.withdraw(participant, by=staff)
     for browser_page in (person, browser.new_context().new_page()):  # the first browser, and another
         browser_page.goto(live_server + link + PROLIFIC.format(n=2))
+        # The page shows no sign that the id takes part (whether an id takes part never leaks, issue 32.7):
+        # its Start decides, and tells the participant they withdrew.
+        assert browser_page.inner_text("#start-open") == "Start"
+        with browser_page.expect_navigation():
+            browser_page.click("#start-open")
         heading = browser_page.inner_text("h1")
         assert heading == "You have withdrawn from this study", heading
         assert "answers were deleted" in browser_page.inner_text("main")
