@@ -160,7 +160,7 @@ def test_completion_code_and_redirect_prolific_style(app, client, tmp_path):
 
     # A Prolific arrival through the open link is sent back to Prolific with the code.
     prolific = app.test_client()
-    assert prolific.post(f"/s/o/{token}", data={"PROLIFIC_PID": "p1", "STUDY_ID": "s1", "SESSION_ID": "v1"}).status_code == 302
+    assert prolific.post(f"/s/o/{token}", data={"PROLIFIC_PID": "5f1e2d3c4b5a69788796a5b1", "STUDY_ID": "s1", "SESSION_ID": "v1"}).status_code == 302
     done = answer_every_trial(prolific)
     assert b'id="completion-code">ABC123<' in done.data
     assert b'data-redirect="https://app.prolific.com/submissions/complete?cc=ABC123"' in done.data and b"study_done.js" in done.data
@@ -170,7 +170,7 @@ def test_completion_code_and_redirect_prolific_style(app, client, tmp_path):
     assert b'id="completion-code">ABC123<' in done.data and b"data-redirect" not in done.data
 
     late = app.test_client()
-    assert late.post(f"/s/o/{token}", data={"PROLIFIC_PID": "p2", "STUDY_ID": "s1", "SESSION_ID": "v2"}).status_code == 302
+    assert late.post(f"/s/o/{token}", data={"PROLIFIC_PID": "5f1e2d3c4b5a69788796a5b2", "STUDY_ID": "s1", "SESSION_ID": "v2"}).status_code == 302
     late.post("/s/consent", data={"decision": "agree"})
     late.post("/s/start")
     clock.advance(61 + studies.LATE_GRACE_S)
