@@ -30,7 +30,9 @@ from __future__ import annotations
 from typing import Any
 
 from egonet.baselines.aop import ActionObjectPrior
+from egonet.baselines.fpmcg import FirstPersonMCG
 from egonet.baselines.handled import HandledViewedObject
+from egonet.baselines.judd import Judd
 from egonet.baselines.protocol import (
     Predictor,
     Summary,
@@ -41,6 +43,7 @@ from egonet.baselines.protocol import (
     params,
     save_baseline,
 )
+from egonet.baselines.salobj import SalientObjectDepth
 from egonet.baselines.simple import CenterPrior, SpectralResidualSaliency
 from egonet.errors import EgonetError
 from egonet.saliency import GraphSaliency
@@ -49,9 +52,12 @@ __all__ = [
     "BASELINES",
     "ActionObjectPrior",
     "CenterPrior",
+    "FirstPersonMCG",
     "GraphSaliency",
     "HandledViewedObject",
+    "Judd",
     "Predictor",
+    "SalientObjectDepth",
     "SpectralResidualSaliency",
     "Summary",
     "TrainedBaseline",
@@ -65,9 +71,12 @@ __all__ = [
 ]
 
 BASELINES: dict[str, type] = {
+    "judd": Judd,
     "gbvs": GraphSaliency,
     "handled": HandledViewedObject,
     "aop": ActionObjectPrior,
+    "fpmcg": FirstPersonMCG,
+    "salobj": SalientObjectDepth,
     "center": CenterPrior,
     "saliency": SpectralResidualSaliency,
 }
