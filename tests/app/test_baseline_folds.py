@@ -24,11 +24,13 @@ import pytest
 from app.extensions import db
 from app.models import Annotation
 from app.services import ground_truth, media
+from app.services.demo import create_demo
 from app.services import scoring
 from app.services.scoring import fitting
 from app.services.scoring import sources as scoring_sources
 from egonet import io as egonet_io
 from egonet.baselines import BASELINES, TrainedBaseline, fit_folds, is_trained
+from egonet.metrics import score_maps
 from tests.app.test_scoring import add_activity, frames_by_activity
 
 ROOT = Path(__file__).resolve().parents[2]
@@ -179,3 +181,17 @@ def test_the_docs_example_of_a_new_baseline_is_one_module_and_one_registry_line(
     row = next(r for r in report.rows if r.key == "baseline:brightness")
     assert row.name == "brightness" and row.detail == "fitted per fold under leave-one-activity-out"
     assert set(row.cells) == {"cooking", "hotel"} and all(c.n_frames == 3 for c in row.cells.values())
+
+
+@pytest.mark.slow
+def test_every_baseline_beats_a_random_map_on_the_demo(ctx):
+    create_demo(frames_per_activity=6, unlabelled_fraction=0, width=160, height=120)
+    report = scoring.build_report(run_ids=[], study_ids=[], resamples=0)
+    truth = scoring_sources.load_truth()
+    masks = [truth.mask(frame.id) for frame in truth.frames]
+    rng = np.random.default_rng(0)
+    chance = score_maps([rng.random(m.shape).astype(np.float32) for m in masks], masks)  # pooled, as the rows' "overall"
+    assert [r.key for r in report.rows] == [f"baseline:{key}" for key in BASELINES]
+    for r in report.rows:
+        assert r.overall.n_frames == len(masks) == 42
+        assert r.overall.max_f > chance.max_f or r.overall.ap > chance.ap, (r.name, r.overall.max_f, r.overall.ap, chance)

@@ -40,6 +40,7 @@ from egonet import io
 from app.services.scoring import fitting
 from egonet.baselines import BASELINES, build_baseline, is_trained
 from egonet.metrics import count_stats
+from egonet.network.builders import PAPER_NAMES
 
 # The handled row's hands are the labelled tactile objects (no hand detector is installed): an oracle for the hands.
 HANDLED_HANDS = "labelled tactile objects"
@@ -147,11 +148,16 @@ def _accumulate(
     return stats, missing
 
 
+def model_label(run: TrainingRun) -> str:
+    """A run's model as the paper names it (EgoNet, DeepLab-RGB, DeepLab-DHG), else the variant's own name."""
+    return PAPER_NAMES.get(run.model_name, run.model_name)
+
+
 def run_row_name(run: TrainingRun) -> str:
     """A run's row: its model, or "released model" for the authors' weights (scored on every frame it predicted)."""
     if run.folds == "released":
         return f"released model, {run.config.get('released', {}).get('release', '').upper()} (run {run.id})"
-    return f"{run.model_name} (run {run.id})"
+    return f"{model_label(run)} (run {run.id})"
 
 
 def run_stats(run: TrainingRun, truth: Truth, thresholds: int, on_progress: Callable[[int], None]) -> Scored:
