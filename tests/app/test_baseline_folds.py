@@ -23,6 +23,7 @@ import pytest
 
 from app.extensions import db
 from app.models import Annotation
+from app.queue import current_huey
 from app.services import ground_truth, media
 from app.services.demo import create_demo
 from app.services import scoring
@@ -128,8 +129,6 @@ def test_a_long_fit_goes_to_the_worker_and_its_rows_appear_when_it_is_done(app, 
     again = admin_client.get("/scores/").get_data(as_text=True)  # queued once, not once per view
     assert "being fitted per fold" in again
     with app.app_context():
-        from app.queue import current_huey
-
         assert current_huey().pending_count() == 1
 
     env = dict(
@@ -195,3 +194,16 @@ def test_every_baseline_beats_a_random_map_on_the_demo(ctx):
     for r in report.rows:
         assert r.overall.n_frames == len(masks) == 42
         assert r.overall.max_f > chance.max_f or r.overall.ap > chance.ap, (r.name, r.overall.max_f, r.overall.ap, chance)
+
+
+def test_a_failed_worker_fit_is_said_on_the_page_and_not_queued_again(app, admin_client):
+    app.config["BASELINE_INLINE_S"] = 0.0
+    with app.app_context():
+        for seed, name in enumerate(("cooking", "hotel")):
+            add_activity(name, seed=seed)
+        fitting.worker_done(scoring_sources.load_truth(), 99, "ValueError: a mask of another size")
+    page = admin_client.get("/scores/").get_data(as_text=True)
+    assert "AOP: fitting in the worker failed (ValueError: a mask of another size)" in page
+    assert 'data-row="baseline:aop"' not in page and 'data-row="baseline:gbvs"' in page
+    with app.app_context():
+        assert current_huey().pending_count() == 0

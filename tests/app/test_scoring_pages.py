@@ -311,7 +311,7 @@ def test_report_command_writes_the_facts_or_a_methods_paragraph(ctx, runner, tmp
     assert f"({sum(frames.values())} frames: cooking {frames['cooking']}, hotel {frames['hotel']})" in text
     assert "T = 99 thresholds t_k = k/100" in text and "Convention: Pooled: max F and AP of the pixel counts" in text
     assert "bias-corrected and accelerated (BCa) bootstrap intervals over frames" in text and "B = 2000 resamples (seed 4)" in text
-    assert "reported as p < 0.0005" in text and "Rows: 5 baselines on every labelled frame" in text and "1 participant of the human study" in text
+    assert "reported as p < 0.0005" in text and "Rows: 8 baselines on every labelled frame (the learned ones fitted per fold under leave-one-activity-out" in text and "1 participant of the human study" in text
     assert "each click is a Gaussian (click Gaussians of sigma 6 px" in text and f"computed with {code_version()}." in text
     assert "@inproceedings{bertasius2017egonet," in text and "title     = {First-Person Action-Object Detection with {EgoNet}}," in text
     assert "author    = {Gedas Bertasius and Hyun Soo Park and Stella X. Yu and Jianbo Shi}" in text and "year      = {2017}" in text

@@ -46,6 +46,11 @@ from egonet.network.builders import PAPER_NAMES
 HANDLED_HANDS = "labelled tactile objects"
 
 
+def baseline_rows() -> list[tuple[str, bool]]:
+    """Every baseline's row name and whether it is learned (fitted per fold), in the table's order."""
+    return [(baseline_name(key), is_trained(key)) for key in BASELINES]
+
+
 def baseline_name(key: str) -> str:
     """The row name of baseline ``key``: the paper's name of its method."""
     name = BASELINES[key].name
