@@ -79,12 +79,17 @@ def build_export(export_id: int) -> int:
 
 @job
 def score_baselines(thresholds: int) -> int:
-    """Fit the learned baselines per fold and score every baseline into the score cache (a request queued it); returns rows."""
+    """Fit the learned baselines per fold and score every baseline into the score cache (a request queued it); returns rows.
+
+    A baseline that could not be scored is kept as the error the page shows,
+    so that the page does not queue the same failing work again.
+    """
     truth = sources.load_truth()
     try:
-        found, _ = load_sources(run_ids=[], study_ids=[], baselines=True, thresholds=thresholds)
+        found, notes = load_sources(run_ids=[], study_ids=[], baselines=True, thresholds=thresholds)
     except Exception as exc:
         fitting.worker_done(truth, thresholds, f"{type(exc).__name__}: {exc}")
         raise
-    fitting.worker_done(truth, thresholds, None)
+    failed = [note for note in notes if " could not be scored: " in note]
+    fitting.worker_done(truth, thresholds, "; ".join(failed) or None)
     return len(found)

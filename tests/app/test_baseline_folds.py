@@ -28,6 +28,7 @@ from app.services import ground_truth, media
 from app.services.demo import create_demo
 from app.services import scoring
 from app.services.scoring import fitting
+from app.tasks import score_baselines
 from app.services.scoring import sources as scoring_sources
 from egonet import io as egonet_io
 from egonet.baselines import BASELINES, TrainedBaseline, fit_folds, is_trained
@@ -120,11 +121,12 @@ def test_the_fold_files_hold_plain_data_that_fits_like_the_protocol(ctx):
 @pytest.mark.slow
 def test_a_long_fit_goes_to_the_worker_and_its_rows_appear_when_it_is_done(app, database_url, tmp_path, admin_client):
     app.config["BASELINE_INLINE_S"] = 0.0  # every learned baseline counts as long
+    learned = fitting.trained_keys()
     with app.app_context():
         for seed, name in enumerate(("cooking", "hotel")):
             add_activity(name, seed=seed)
     page = admin_client.get("/scores/").get_data(as_text=True)
-    assert 'data-row="baseline:aop"' not in page and "being fitted per fold and scored by the worker" in page
+    assert 'data-row="baseline:aop"' not in page and page.count("being fitted per fold and scored by the worker") == 1
     assert 'data-row="baseline:gbvs"' in page  # not trained: scored in the request
     again = admin_client.get("/scores/").get_data(as_text=True)  # queued once, not once per view
     assert "being fitted per fold" in again
@@ -146,13 +148,13 @@ def test_a_long_fit_goes_to_the_worker_and_its_rows_appear_when_it_is_done(app, 
         deadline = time.monotonic() + 180
         while time.monotonic() < deadline:
             page = admin_client.get("/scores/").get_data(as_text=True)
-            if 'data-row="baseline:aop"' in page:
+            if all(f'data-row="baseline:{key}"' in page for key in learned):
                 break
             time.sleep(0.5)
     finally:
         worker.terminate()
         out = worker.communicate(timeout=20)[0]
-    assert 'data-row="baseline:aop"' in page, out[-3000:]
+    assert all(f'data-row="baseline:{key}"' in page for key in learned), out[-3000:]
     assert "being fitted per fold" not in page
     with app.app_context():
         assert not list((Path(app.config["CACHE_ROOT"]) / "baselines").glob("queued-*"))
@@ -203,7 +205,23 @@ def test_a_failed_worker_fit_is_said_on_the_page_and_not_queued_again(app, admin
             add_activity(name, seed=seed)
         fitting.worker_done(scoring_sources.load_truth(), 99, "ValueError: a mask of another size")
     page = admin_client.get("/scores/").get_data(as_text=True)
-    assert "AOP: fitting in the worker failed (ValueError: a mask of another size)" in page
+    assert "The worker could not fit the learned baselines not shown: ValueError: a mask of another size." in page
     assert 'data-row="baseline:aop"' not in page and 'data-row="baseline:gbvs"' in page
     with app.app_context():
         assert current_huey().pending_count() == 0
+
+
+def test_a_frame_that_cannot_be_learned_from_is_a_note_and_the_worker_keeps_it(app, admin_client):
+    app.config["BASELINE_INLINE_S"] = 0.0
+    with app.app_context():
+        for seed, name in enumerate(("cooking", "hotel")):
+            add_activity(name, seed=seed)
+        annotation = ground_truth.ground_truths([frames_by_activity()["hotel"][0].id]).popitem()[1]
+        annotation.instances[0].mask_path = media.store(egonet_io.encode_png(np.full((8, 8), 255, np.uint8)), ".png")
+        db.session.commit()  # an instance whose mask is not the frame's size
+        assert score_baselines.func(99) == 4  # GBVS, handled, centre, saliency: they learn nothing
+    page = admin_client.get("/scores/").get_data(as_text=True)
+    (note,) = re.findall(r"<li>The worker could not fit[^<]*</li>", page)  # said once
+    assert "AOP could not be scored: instances[0] must be a bool (48, 64) mask" in note and 'data-row="baseline:aop"' not in page
+    with app.app_context():
+        assert current_huey().pending_count() == 0  # not queued again

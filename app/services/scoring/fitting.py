@@ -124,6 +124,8 @@ def _marker(truth: Any, thresholds: int) -> Path:
 def defer_to_worker(key: str, truth: Any, thresholds: int) -> str | None:
     """Queue the learned baselines' scoring for the worker when ``key`` would take long now; the note that says so, or None.
 
+    Every learned baseline left out gives the same note (the report says it once).
+
     The job is queued once per ground truth and number of thresholds (again
     after :data:`QUEUED_FOR_S`); a job that failed says why instead.
     """
@@ -134,14 +136,13 @@ def defer_to_worker(key: str, truth: Any, thresholds: int) -> str | None:
         state = json.loads(marker.read_text())
     except (OSError, ValueError):
         state = None
-    name = BASELINES[key].name
     if state and state.get("error"):
-        return f"{name}: fitting in the worker failed ({state['error']}); run `flask egonet score` to see it happen."
+        return f"The worker could not fit the learned baselines not shown: {state['error']}."
     if state is None or time.time() - state.get("queued", 0) > QUEUED_FOR_S:
         marker.parent.mkdir(parents=True, exist_ok=True)
         marker.write_text(json.dumps({"queued": time.time()}))
         enqueue("score_baselines", thresholds)
-    return (f"{name}: being fitted per fold and scored by the worker (`flask egonet worker`); "
+    return ("The learned baselines not shown are being fitted per fold and scored by the worker (`flask egonet worker`); "
             "reload when it is done, or run `flask egonet score` to do it now.")  # fmt: skip
 
 

@@ -295,7 +295,7 @@ def load_sources(
     cached = [(cache.cache_path(job.cache_key), job) for job in jobs]
     cached = [(path, job, cache.read_cached(path, thresholds) if use_cache else None) for path, job in cached]
     deferred = {id(job): job.defer() for _, job, got in cached if got is None and job.defer is not None}
-    notes += [note for note in deferred.values() if note]
+    notes += list(dict.fromkeys(note for note in deferred.values() if note))
     cached = [(path, job, got) for path, job, got in cached if not deferred.get(id(job))]
     if on_start is not None:
         on_start(sum(job.frames for _, job, got in cached if got is None))
