@@ -100,6 +100,13 @@ def test_folds_are_cached_per_fold_and_refitted_only_where_the_training_frames_c
     rewrite_truth(frames_by_activity()["hotel"][0].id, np.ones(first[next(iter(first))].shape, bool))
     maps_of(key)
     assert sorted(fitted) == ["cooking", "desk work"]  # hotel's fold never trained on hotel
+    # The fold files are a cache: one deleted, or not a fold file any more, is fitted again, alone.
+    fitted.clear()
+    truth = scoring_sources.load_truth()
+    fitting.fold_path(key, truth, "hotel").unlink()
+    fitting.fold_path(key, truth, "cooking").write_bytes(b"not a zip")
+    maps_of(key)
+    assert sorted(fitted) == ["cooking", "hotel"]
 
 
 def test_the_fold_files_hold_plain_data_that_fits_like_the_protocol(ctx):
