@@ -52,8 +52,8 @@ from egonet.errors import EgonetError
 from egonet.io import check_rgb
 
 __all__ = ["DEFAULT_SIGMA", "METHOD_OPTIONS", "SUPERPIXEL_DEFAULTS", "SUPERPIXEL_METHODS", "MaskMean", "Regions",
-           "SuperpixelDefaults", "boundary_strength", "click_gaussian", "project_to_regions", "regions", "soft_mask",
-           "superpixels"]
+           "SuperpixelDefaults", "boundary_strength", "click_gaussian", "project_to_regions", "region_hierarchy", "regions",
+           "soft_mask", "superpixels"]
 
 DEFAULT_SIGMA = 60.0
 """The paper's click width: standard deviation in native-resolution pixels."""
@@ -309,8 +309,49 @@ def _hierarchical(work: np.ndarray, *, fine_regions: int, level: float, max_regi
     return labels, capped
 
 
+def region_hierarchy(image: np.ndarray, *, levels: Sequence[float], fine_regions: int = SUPERPIXEL_DEFAULTS.fine_regions,
+                     strength: np.ndarray | None = None) -> list[np.ndarray]:
+    """The hierarchy of the ``"hierarchical"`` superpixels, cut at several levels in one pass.
+
+    Fine watershed regions of the boundary map (:func:`boundary_strength`)
+    are merged, weakest shared boundary first, up to each level in turn
+    (increasing): every level's regions are unions of the previous level's,
+    as MCG's hierarchy is. The region proposals of the FP-MCG and
+    salObj+depth baselines are these regions (``egonet.baselines.regions``).
+
+    Args:
+        image: uint8 (H, W, 3), RGB, at the working resolution (no resizing here).
+        levels: Merge thresholds, increasing, in units of the frame's
+            99th-percentile boundary strength (as ``superpixels``' ``level``).
+        fine_regions: Watershed regions before merging.
+        strength: The boundary map of ``image`` if the caller has it already.
+
+    Returns:
+        One label map per level, int32 (H, W) each (labels need not be contiguous).
+
+    Example:
+        >>> img = np.zeros((20, 20, 3), np.uint8); img[:, 10:] = 200
+        >>> fine, coarse = region_hierarchy(img, levels=(0.1, 5.0), fine_regions=8)
+        >>> len(np.unique(fine)) >= len(np.unique(coarse))
+        True
+    """
+    from skimage.segmentation import watershed
+
+    if list(levels) != sorted(levels) or not len(levels):
+        raise EgonetError(f"levels must be increasing and not empty, got {levels!r}", field="levels")
+    if strength is None:
+        strength = boundary_strength(image)
+    labels = watershed(strength, markers=int(fine_regions))
+    out = []
+    for level in levels:
+        # A new graph per level: its boundary weights are again the mean strength along each boundary.
+        labels = _merge(labels, strength, float(level))
+        out.append(np.asarray(labels, dtype=np.int32))
+    return out
+
+
 def _merge(fine: np.ndarray, strength: np.ndarray, level: float) -> np.ndarray:
-    """The watershed regions merged weakest shared boundary first while the boundary is below ``level``."""
+    """Regions merged weakest shared boundary first while the boundary is below ``level``."""
     from skimage import graph
 
     rag = graph.rag_boundary(fine, strength)

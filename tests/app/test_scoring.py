@@ -22,12 +22,22 @@ from app.services.scoring import cache as scoring_cache
 from app.services.scoring import sources as scoring_sources
 from egonet import clicks as egonet_clicks
 from egonet import io as egonet_io
-from egonet.baselines import ActionObjectPrior, CenterPrior, GraphSaliency, HandledViewedObject, SpectralResidualSaliency
+from egonet.baselines import (
+    BASELINES,
+    ActionObjectPrior,
+    CenterPrior,
+    GraphSaliency,
+    HandledViewedObject,
+    SpectralResidualSaliency,
+    TrainingFrame,
+)
 from egonet.metrics import MIN_FRAMES, count_stats, score_maps
 from tests.app.access.studies import build_study
 
 SIZE = (48, 64)
-HANDLED_ROW = "handled + viewed object (hands: labelled tactile objects)"
+HANDLED_ROW = "Handled+Viewed-Obj (hands: labelled tactile objects)"
+# The paper's Table 2 order, then the references.
+BASELINE_ROWS = ["Judd", "GBVS", HANDLED_ROW, "AOP", "FP-MCG", "salObj+depth", "centre prior", "saliency"]
 # Each activity's action-object sits somewhere else, so a prior fitted with
 # or without the tested activity's own masks gives different scores.
 BOXES = {"cooking": (slice(5, 20), slice(5, 25)), "hotel": (slice(25, 45), slice(35, 60)), "desk work": (slice(15, 35), slice(20, 45))}
@@ -235,23 +245,26 @@ def test_baselines_match_a_direct_computation_and_aop_follows_the_fold_rule(ctx)
     for seed, name in enumerate(BOXES):
         add_activity(name, seed=seed)
     report = scoring.build_report(run_ids=[], study_ids=[], baselines=True)
-    assert [r.name for r in report.rows] == [
-        "AOP", "centre prior", "saliency", "GBVS", "handled + viewed object (hands: labelled tactile objects)"
-    ]
+    assert [r.name for r in report.rows] == BASELINE_ROWS
+    learned = {r.name for r in report.rows if r.detail == "fitted per fold under leave-one-activity-out"}
+    assert learned == {"Judd", "AOP", "FP-MCG", "salObj+depth"}
     assert report.activities == sorted(BOXES)
 
     frames = frames_by_activity()
     masks = {a: [truth_mask(f) for f in fs] for a, fs in frames.items()}
     rgbs = {a: [rgb_of(f) for f in fs] for a, fs in frames.items()}
-    aop = row(report, "AOP")
+    training = {a: [TrainingFrame(rgb, None, m) for rgb, m in zip(rgbs[a], masks[a])] for a in frames}
+    for key in ("judd", "aop", "fpmcg", "salobj"):
+        got = row(report, BASELINES[key].name)
+        for activity in frames:
+            # The fold's model: fitted on the *other* activities' labelled frames only.
+            model = BASELINES[key]().fit([f for a, fs in training.items() if a != activity for f in fs])
+            expected = score_maps([model.predict(rgb) for rgb in rgbs[activity]], masks[activity])
+            assert_cell(got.cells[activity], expected, 3)
     for activity in frames:
-        # The fold's prior: the mean mask of the *other* activities' labelled frames.
-        others = [m for a, ms in masks.items() if a != activity for m in ms]
-        prior = ActionObjectPrior.fit(others)
-        expected = score_maps([prior.predict(rgb) for rgb in rgbs[activity]], masks[activity])
-        assert_cell(aop.cells[activity], expected, 3)
         # A prior that has seen the tested activity scores differently: the fold rule matters here.
-        leaky = ActionObjectPrior.fit([m for ms in masks.values() for m in ms])
+        expected = row(report, "AOP").cells[activity]
+        leaky = ActionObjectPrior().fit_masks([m for ms in masks.values() for m in ms])
         assert score_maps([leaky.predict(rgb) for rgb in rgbs[activity]], masks[activity]).ap != pytest.approx(expected.ap, abs=1e-3)
 
     def handled(rgb, mask, activity):  # the hands: the labelled tactile object (cooking's), else the centre
@@ -260,7 +273,7 @@ def test_baselines_match_a_direct_computation_and_aop_follows_the_fold_rule(ctx)
     predictors = (("centre prior", lambda rgb, m, a: CenterPrior().predict(rgb)),
                   ("saliency", lambda rgb, m, a: SpectralResidualSaliency().predict(rgb)),
                   ("GBVS", lambda rgb, m, a: GraphSaliency().predict(rgb)),
-                  ("handled + viewed object (hands: labelled tactile objects)", handled))
+                  (HANDLED_ROW, handled))
     for name, predict in predictors:
         got = row(report, name)
         for activity in frames:
@@ -276,11 +289,12 @@ def test_baselines_match_a_direct_computation_and_aop_follows_the_fold_rule(ctx)
         assert got.mean.too_few and got.overall.too_few and got.mean.ci["max_f"] is None
 
 
-def test_with_one_activity_there_is_no_aop(ctx):
+def test_with_one_activity_there_are_no_learned_baselines(ctx):
     add_activity("cooking")
     report = scoring.build_report(run_ids=[], study_ids=[])
-    assert [r.name for r in report.rows] == ["centre prior", "saliency", "GBVS", "handled + viewed object (hands: labelled tactile objects)"]
-    assert report.notes == ["AOP: no other activity has labelled frames to fit the prior for cooking."]
+    learned = ("Judd", "AOP", "FP-MCG", "salObj+depth")
+    assert [r.name for r in report.rows] == [name for name in BASELINE_ROWS if name not in learned]
+    assert report.notes == [f"{name}: no other activity has labelled frames to fit the fold of cooking." for name in learned]
 
 
 def test_frames_without_an_action_object_follow_the_chosen_policy_and_are_counted(ctx):
@@ -519,9 +533,9 @@ def test_a_run_whose_maps_cannot_be_scored_is_a_note_not_an_error(ctx, app):
     prediction.path = media.store(egonet_io.encode_png(np.zeros((10, 10), np.uint16)), ".png")  # not the frame's size
     db.session.commit()
     report = scoring.build_report(study_ids=[])
-    assert [r.name for r in report.rows] == ["AOP", "centre prior", "saliency", "GBVS", HANDLED_ROW]
+    assert [r.name for r in report.rows] == BASELINE_ROWS
     assert any(note.startswith(f"egonet-lite (run {run.id}) could not be scored:") and "10x10" in note for note in report.notes)
-    assert len(list((Path(app.config["CACHE_ROOT"]) / "scores").glob("*.npz"))) == 1  # the baselines only
+    assert len(list((Path(app.config["CACHE_ROOT"]) / "scores").glob("*.npz"))) == len(BASELINE_ROWS)  # the baselines only
 
 
 @pytest.mark.slow
@@ -574,7 +588,7 @@ def test_statistics_are_cached_and_recomputed_when_their_inputs_change(ctx, monk
     scored = []
     run_stats, baseline_stats = scoring_sources.run_stats, scoring_sources.baseline_stats
     monkeypatch.setattr(scoring_sources, "run_stats", lambda *a: scored.append("run") or run_stats(*a))
-    monkeypatch.setattr(scoring_sources, "baseline_stats", lambda *a: scored.append("baselines") or baseline_stats(*a))
+    monkeypatch.setattr(scoring_sources, "baseline_stats", lambda key, *a: scored.append(key) or baseline_stats(key, *a))
 
     again = scoring.build_report(study_ids=[])
     assert scored == []  # read back
@@ -584,7 +598,7 @@ def test_statistics_are_cached_and_recomputed_when_their_inputs_change(ctx, monk
         scoring.build_report(study_ids=[], **view)
     assert scored == []
     assert scoring.build_report(study_ids=[], use_cache=False).to_json() == first.to_json()
-    assert scored == ["run", "baselines"]
+    assert scored == ["run", *BASELINES]
 
     # The run's held-out maps are predicted again: only the run is scored again.
     scored.clear()
@@ -603,7 +617,7 @@ def test_statistics_are_cached_and_recomputed_when_their_inputs_change(ctx, monk
     annotation.review_comment = "checked again"
     db.session.commit()
     fresh = scoring.build_report(study_ids=[])
-    assert scored == ["run", "baselines"]
+    assert scored == ["run", *BASELINES]
     assert fresh.to_json() == first.to_json()  # the masks and maps themselves did not change
 
 
@@ -612,7 +626,7 @@ def test_an_unreadable_or_old_cache_file_is_scored_again(ctx, app):
     add_activity("hotel", seed=2)
     first = scoring.build_report(run_ids=[], study_ids=[])
     folder = Path(app.config["CACHE_ROOT"]) / "scores"
-    (path,) = folder.glob("*.npz")
+    path = sorted(folder.glob("*.npz"))[0]
     (folder / "0123.json").write_text('{"stats": {}, "notes": []}')  # a version 1 file: never read
     for junk in (b"PK\x03\x04 truncated", b"", b"not a zip at all"):
         path.write_bytes(junk)
@@ -620,3 +634,17 @@ def test_an_unreadable_or_old_cache_file_is_scored_again(ctx, app):
         assert path.read_bytes()[:2] == b"PK"  # rewritten
     # Statistics of another shape (another number of thresholds) are not used either.
     assert scoring_cache.read_cached(path, 99) is not None and scoring_cache.read_cached(path, 9) is None
+
+
+def test_rows_carry_the_papers_names(ctx):
+    add_activity("cooking", seed=1)
+    add_activity("hotel", seed=2)
+    runs = {}
+    for model in ("egonet", "deeplab-rgb", "deeplab-dhg", "egonet-lite"):
+        runs[model] = make_run(model, held_out=["cooking", "hotel"])
+        runs[model].model_name = model
+    db.session.commit()
+    names = [r.name for r in scoring.build_report(study_ids=[], resamples=0).rows]
+    assert names == [f"egonet-lite (run {runs['egonet-lite'].id})", f"DeepLab-DHG (run {runs['deeplab-dhg'].id})",
+                     f"DeepLab-RGB (run {runs['deeplab-rgb'].id})", f"EgoNet (run {runs['egonet'].id})",
+                     *BASELINE_ROWS]  # newest run first  # fmt: skip

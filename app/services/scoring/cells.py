@@ -69,8 +69,9 @@ METRIC_DEFINITIONS = {
 
 COMMON_DEFINITION = (
     "Thresholds t_k = k / (T + 1), k = 1..T (T = 99: 0.01 .. 0.99), a pixel being positive when its probability "
-    "is >= t_k (maps are never normalised). Models are scored on held-out frames only; AOP is the mean "
-    "ground-truth mask of the other activities' labelled frames (leave-one-activity-out); people on the frames "
+    "is >= t_k (maps are never normalised). Models are scored on held-out frames only; the learned "
+    "baselines (AOP, Judd, FP-MCG, salObj+depth) are fitted on the other activities' labelled frames "
+    "(leave-one-activity-out); people on the frames "
     "of their trials, MF only. The mean column is the unweighted mean of the per-activity values. 95% intervals: "
     f"BCa bootstrap over frames, resampled within each activity; none where an activity has fewer than {MIN_FRAMES} "
     "frames (n too small)."

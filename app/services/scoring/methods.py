@@ -16,6 +16,7 @@ from collections.abc import Mapping, Sequence
 
 from app.services.scoring.cells import BASELINE, HUMAN, METRIC_TITLES, MODEL, Row, count, frames_text
 from app.services.scoring.provenance import EMPTY_TITLES, HumanMaps, Provenance
+from egonet.baselines import is_trained
 from egonet.metrics import MIN_FRAMES, PER_FRAME_MEANS
 
 SPLITS = {
@@ -165,6 +166,10 @@ def _model_sentence(rows: list[Row], p: Provenance) -> str:
 def _baseline_sentence(rows: list[Row], p: Provenance) -> str:
     what = "the labelled frames" if p.frames == "shared" else "every labelled frame"
     text = f"Baselines: {_listed([r.name for r in rows])}, scored {_scored_on(rows, p, what)}"
+    learned = [r.name for r in rows if is_trained(r.key.removeprefix("baseline:"))]
+    if learned:
+        text += (f"; {_listed(learned)} {'was' if len(learned) == 1 else 'were'} fitted per fold under leave-one-activity-out "
+                 "(a frame is mapped by a model fitted on the other activities' labelled frames only), the others are not trained")
     if any(r.key == "baseline:aop" for r in rows):
         text += "; the action-object prior (AOP) is the mean ground-truth mask of the other activities' labelled frames"
     return text + "."
