@@ -31,6 +31,34 @@ class InstanceKind(enum.StrEnum):
     VISUAL = "visual"
 
 
+HAND_LABEL = "hand"
+"""The label of an instance that outlines the wearer's hands, not an action-object.
+
+Such instances train the hand detector of the Handled+Viewed-Obj baseline
+(``egonet.hands``) and are left out of the annotation's action-object mask
+(:func:`is_hand`); the demo ships them for every frame where hands show.
+"""
+
+
+def is_hand(label: str | None) -> bool:
+    """Whether an instance with this label outlines hands (:data:`HAND_LABEL`, any case, outer spaces ignored)."""
+    return label is not None and label.strip().lower() == HAND_LABEL
+
+
+class ObjectClass(Base):
+    """A name in the project-wide list of object classes the labelling page's label field completes from.
+
+    Whether a label outside the list is refused is the ``LABEL_CLASSES_STRICT``
+    setting (``app.services.labelling.classes``).
+    """
+
+    __tablename__ = "object_class"
+
+    id: Mapped[int] = mapped_column(primary_key=True)
+    name: Mapped[str] = mapped_column(String(120), unique=True)
+    created_at: Mapped[datetime] = mapped_column(UTCDateTime(), default=utcnow)
+
+
 class Annotation(Base):
     """A person's action-object labelling of one frame.
 
