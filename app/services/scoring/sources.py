@@ -117,9 +117,17 @@ def _accumulate(
 
 
 def run_row_name(run: TrainingRun) -> str:
-    """A run's row: its model, or "released model" for the authors' weights (scored on every frame it predicted)."""
+    """A run's row: its model, or "released model" for the authors' weights (scored on every frame it predicted).
+
+    An object-class run (DeepLab-Obj) says how many classes its folds learned
+    ("DeepLab-Obj, 12 classes" or "10-12 classes" when the folds differ).
+    """
     if run.folds == "released":
         return f"released model, {run.config.get('released', {}).get('release', '').upper()} (run {run.id})"
+    counts = sorted({c.metrics["classes"] for c in run.checkpoints if "classes" in (c.metrics or {})})
+    if counts:
+        n = str(counts[0]) if len(counts) == 1 else f"{counts[0]}-{counts[-1]}"
+        return f"DeepLab-Obj, {n} classes (run {run.id})"
     return f"{run.model_name} (run {run.id})"
 
 
