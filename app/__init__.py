@@ -120,6 +120,9 @@ def _default_config(instance: Path) -> dict:
         EXPORT_INLINE_MAX_PIXELS=50_000_000,
         EXPORT_MAX_PENDING=2,
         EXPORT_KEEP=10,
+        # Scoring (app.services.scoring.fitting): learned baselines whose
+        # fitting and maps would take longer than this are scored by the worker.
+        BASELINE_INLINE_S=20.0,
         QUEUE_URL=os.environ.get("EGONET_QUEUE_URL") or f"sqlite:///{instance / 'queue.sqlite3'}",
         MAX_CONTENT_LENGTH=64 * 1024 * 1024,
         SESSION_COOKIE_HTTPONLY=True,

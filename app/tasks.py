@@ -12,6 +12,7 @@ from app.models import User
 from app.models.training import Checkpoint, TrainingRun
 from app.queue import job
 from app.services import exchange, labelling
+from app.services.scoring import fitting, load_sources, sources
 from app.services.training import (
     TrainingProblem,
     convert_release,
@@ -74,3 +75,16 @@ def suggest_frames(run_id: int | None, frame_ids: list[int], user_id: int, devic
 def build_export(export_id: int) -> int:
     """Write a queued export's zip (see app.services.exchange.jobs); returns its frames."""
     return exchange.build_export(export_id).done
+
+
+@job
+def score_baselines(thresholds: int) -> int:
+    """Fit the learned baselines per fold and score every baseline into the score cache (a request queued it); returns rows."""
+    truth = sources.load_truth()
+    try:
+        found, _ = load_sources(run_ids=[], study_ids=[], baselines=True, thresholds=thresholds)
+    except Exception as exc:
+        fitting.worker_done(truth, thresholds, f"{type(exc).__name__}: {exc}")
+        raise
+    fitting.worker_done(truth, thresholds, None)
+    return len(found)

@@ -179,6 +179,8 @@ class GraphSaliency:
         EgonetError: An option out of range (named).
     """
 
+    name, version = "GBVS", 1
+
     def __init__(
         self,
         *,

@@ -461,7 +461,7 @@ def fit(
         run.restore(start)
         tracker.skip(run.epoch * len(loader))
     trainer = model if world_size == 1 else DistributedDataParallel(model, device_ids=[device] if device.type == "cuda" else None)
-    prior = ActionObjectPrior.fit(train_set.base(i)[2] for i in range(len(train_set)))
+    prior = ActionObjectPrior().fit_masks(train_set.base(i)[2] for i in range(len(train_set)))
 
     while run.epoch < config.epochs:
         record = run.train_epoch(trainer, loader, lr_at, test_set)

@@ -96,7 +96,7 @@ def _query(choice: dict, view: dict, runs: list, studies: list) -> dict:
 @bp.get("/")
 def index():
     choice, view = _choice(), _view()
-    report = scoring.build_report(**choice, **view, compare_keys=_compare())
+    report = scoring.build_report(**choice, **view, compare_keys=_compare(), fit_in_worker=True)
     shown = _plot_rows()
     keys = [scoring.ALL, *report.activities] if report.rows else []
     plots = [scoring.pr_plot(report, key, rows=shown) for key in keys]
@@ -126,7 +126,7 @@ def index():
 @bp.get("/table.<any(csv, tex, json):table_format>")
 def download(table_format: str):
     """The table as CSV, LaTeX (booktabs) or JSON (with the curves), for the same choice as the page."""
-    report = scoring.build_report(**_choice(), **_view(), compare_keys=_compare())
+    report = scoring.build_report(**_choice(), **_view(), fit_in_worker=True, compare_keys=_compare())
     mimetype, render = DOWNLOADS[table_format]
     headers = {"Content-Disposition": f'attachment; filename="scores.{table_format}"'}
     return Response(render(report), mimetype=mimetype, headers=headers)
@@ -138,7 +138,7 @@ def comparison(table_format: str):
     keys = _compare()
     if keys is None:
         raise scoring.ScoringProblem("compare: choose two rows", fields={"compare_a": "choose a row", "compare_b": "choose a row"})
-    report = scoring.build_report(**_choice(), **_view(), compare_keys=keys)
+    report = scoring.build_report(**_choice(), **_view(), fit_in_worker=True, compare_keys=keys)
     mimetype, render = DOWNLOADS[table_format]
     headers = {"Content-Disposition": f'attachment; filename="comparison.{table_format}"'}
     return Response(render(report.comparison), mimetype=mimetype, headers=headers)
@@ -147,7 +147,7 @@ def comparison(table_format: str):
 @bp.get("/figure.<any(svg, pdf):figure_format>")
 def figure(figure_format: str):
     """One precision-recall plot (``activity``, default all activities) as an SVG or PDF file for a paper."""
-    report = scoring.build_report(**_choice(), **_view())
+    report = scoring.build_report(**_choice(), **_view(), fit_in_worker=True)
     key = request.args.get("activity", scoring.ALL)
     if key != scoring.ALL and key not in report.activities:
         raise scoring.ScoringProblem(f"activity: no row has frames of {key!r}", fields={"activity": "not an activity of the table"})
@@ -166,6 +166,7 @@ def _frame_table():
         empty=view["empty"],
         answered_only=view["answered_only"],
         sort=request.args.get("sort") or None,
+        fit_in_worker=True,
     )
 
 

@@ -12,7 +12,7 @@ from app.extensions import db
 from app.models.studies import Participant
 from app.services import scoring, studies
 from tests.app.access.studies import build_study
-from tests.app.test_scoring import HANDLED_ROW, add_activity, answer, make_run
+from tests.app.test_scoring import BASELINE_ROWS, add_activity, answer, make_run
 
 # --------------------------------------------------------------------------
 # Renderers, on a report made by hand
@@ -231,7 +231,7 @@ def test_score_command_prints_each_format_and_view(ctx, runner, tmp_path):
     result = runner.invoke(args=["egonet", "score", "--format", "csv", "--runs", "", "--studies", str(ids["study"])])
     assert result.exit_code == 0, result.output
     rows = list(csv.reader(io.StringIO(result.stdout)))  # stdout holds the CSV only
-    assert [r[1] for r in rows[1:]] == ["AOP", "centre prior", "saliency", "GBVS", HANDLED_ROW, "P01"]
+    assert [r[1] for r in rows[1:]] == [*BASELINE_ROWS, "P01"]
 
     result = runner.invoke(args=["egonet", "score", "--format", "latex", "--no-baselines"])
     assert result.exit_code == 0 and "\\begin{tabular}" in result.stdout and "AOP" not in result.stdout
@@ -239,7 +239,7 @@ def test_score_command_prints_each_format_and_view(ctx, runner, tmp_path):
     args = ["egonet", "score", "--format", "json", "--studies", "", "--thresholds", "19", "--metric", "ods-ois", "--frames", "each", "--no-cache"]
     data = json.loads(runner.invoke(args=args).stdout)
     assert (data["frames"], data["metric"], data["thresholds"]) == ("each", "ods-ois", 19)
-    assert [r["key"] for r in data["rows"]] == ["baseline:aop", "baseline:center", "baseline:saliency", "baseline:gbvs", "baseline:handled"]
+    assert [r["key"] for r in data["rows"]] == ["baseline:gbvs", "baseline:handled", "baseline:aop", "baseline:center", "baseline:saliency"]
     assert set(data["rows"][0]["cells"]["cooking"]) >= {"max_f", "max_f_ci", "ois", "ois_ci", "ap", "ap_ci", "n_frames"}
 
     data = json.loads(runner.invoke(args=["egonet", "score", "--format", "json", "--resamples", "0", "--answered-only"]).stdout)
@@ -377,7 +377,7 @@ def test_scores_page_shows_the_tables_switches_comparison_plots_and_downloads(ap
         assert 'filename="scores.csv"' in response.headers["Content-Disposition"]
         rows = list(csv.reader(io.StringIO(response.get_data(as_text=True))))
         # The old name still works for a release: it is ois-mean, and the download says so.
-        assert [r[1] for r in rows[1:]] == ["AOP", "centre prior", "saliency", "GBVS", HANDLED_ROW, "P01"] and rows[1][4] == "ois-mean"
+        assert [r[1] for r in rows[1:]] == [*BASELINE_ROWS, "P01"] and rows[1][4] == "ois-mean"
     with admin_client.get("/scores/table.tex") as response:
         assert response.status_code == 200 and "\\begin{tabular}" in response.get_data(as_text=True)
     with admin_client.get("/scores/table.json?compare_a=baseline:aop&compare_b=baseline:center") as response:
@@ -407,7 +407,7 @@ def test_figures_and_per_image_scores(app, admin_client):
     assert [int(m) for m in re.findall(r'<tr data-frame="(\d+)"', html)] == order
     with admin_client.get("/scores/frames.csv?activity=hotel") as response:
         rows = list(csv.reader(io.StringIO(response.get_data(as_text=True))))
-        assert rows[0][:6] == ["frame_id", "frame", "activity", "action-object pixels", "empty frames policy", "baseline:aop best F"]
+        assert rows[0][:6] == ["frame_id", "frame", "activity", "action-object pixels", "empty frames policy", "baseline:gbvs best F"]
         assert len(rows) == 4 and rows[1][3:5] == ["1", "leave-out"]
         assert 'filename="per-frame-hotel.csv"' in response.headers["Content-Disposition"]
 

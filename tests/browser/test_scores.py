@@ -11,7 +11,7 @@ from app.extensions import db
 from app.models import Activity, utcnow
 from app.services import ground_truth, studies
 from app.services.demo import create_demo
-from tests.app.test_scoring import config_of, make_run
+from tests.app.test_scoring import BASELINE_ROWS, config_of, make_run
 from tests.browser.conftest import screenshot, sign_in
 
 pytestmark = pytest.mark.browser
@@ -76,8 +76,7 @@ def test_scores_page_switches_seeds_comparison_plots_and_per_frame_scores(live_a
     # Pooled and shared frames by default, said above the tables; the seeds are one row.
     assert page.locator("#convention .metric-name").inner_text().startswith("Pooled: max F and AP")
     assert "shared by all rows" in page.locator("#convention .frames-name").inner_text()
-    assert rows_of(page) == ["egonet-lite (3 seeds) show 3 seeds", "AOP", "centre prior", "saliency", "GBVS",
-                             "handled + viewed object (hands: labelled tactile objects)", "P01 0 unanswered", "P02 2 unanswered"]
+    assert rows_of(page) == ["egonet-lite (3 seeds) show 3 seeds", *BASELINE_ROWS, "P01 0 unanswered", "P02 2 unanswered"]
     group_row = page.locator(f'#score-table-max_f tr[data-row="{group}"]')
     cooking = group_row.locator("td").first
     assert re.fullmatch(r"0\.\d{3}±0\.\d{3}\n0\.\d{3}–0\.\d{3}\nn 2", cooking.inner_text().strip()), cooking.inner_text()

@@ -12,8 +12,12 @@ from egonet.baselines import (
     HandledViewedObject,
     Predictor,
     SpectralResidualSaliency,
-    aop_fold_priors,
+    TrainingFrame,
     build_baseline,
+    fit_folds,
+    is_trained,
+    load_baseline,
+    save_baseline,
 )
 
 
@@ -23,7 +27,7 @@ def frame(h=48, w=64, value=90):
 
 def all_predictors():
     masks = [np.zeros((30, 40), bool), np.ones((60, 80), bool)]
-    return [ActionObjectPrior.fit(masks), CenterPrior(), SpectralResidualSaliency(), GraphSaliency(), HandledViewedObject()]
+    return [ActionObjectPrior().fit_masks(masks), CenterPrior(), SpectralResidualSaliency(), GraphSaliency(), HandledViewedObject()]
 
 
 # --------------------------------------------------------------------------
@@ -61,11 +65,14 @@ def test_aop_is_mean_of_masks_on_grid():
     a = np.array([[1, 0, 0], [1, 0, 0]], bool)
     b = np.array([[1, 1, 0], [0, 0, 0]], bool)
     c = np.array([[1, 1, 1], [1, 1, 1]], bool)
-    aop = ActionObjectPrior.fit([a, b, c], size=(2, 3))
+    aop = ActionObjectPrior(size=(2, 3)).fit_masks([a, b, c])
     # mean: [[3, 2, 1], [2, 1, 1]] / 3
-    np.testing.assert_allclose(aop.prior, np.array([[3, 2, 1], [2, 1, 1]]) / 3, atol=1e-7)
+    np.testing.assert_allclose(aop.prior_, np.array([[3, 2, 1], [2, 1, 1]]) / 3, atol=1e-7)
     # On a frame of the grid's size the prediction is the prior itself.
-    np.testing.assert_allclose(aop.predict(frame(2, 3), None), aop.prior)
+    np.testing.assert_allclose(aop.predict(frame(2, 3), None), aop.prior_)
+    # fit(frames) learns the same from the frames' masks.
+    frames = [TrainingFrame(frame(2, 3), None, m) for m in (a, b, c)]
+    np.testing.assert_array_equal(ActionObjectPrior(size=(2, 3)).fit(frames).prior_, aop.prior_)
 
 
 def test_aop_area_resizes_masks_of_any_size():
@@ -74,16 +81,16 @@ def test_aop_area_resizes_masks_of_any_size():
     a[:2, :2] = True
     # A 2x2 mask already on the grid.
     b = np.array([[False, True], [False, False]])
-    aop = ActionObjectPrior.fit(iter([a, b]), size=(2, 2))
-    np.testing.assert_allclose(aop.prior, [[0.5, 0.5], [0.0, 0.0]], atol=1e-7)
+    aop = ActionObjectPrior(size=(2, 2)).fit_masks(iter([a, b]))
+    np.testing.assert_allclose(aop.prior_, [[0.5, 0.5], [0.0, 0.0]], atol=1e-7)
     # A 4x4 mask with one pixel in each 2x2 cell covers a quarter of every cell.
     c = np.zeros((4, 4), bool)
     c[::2, ::2] = True
-    np.testing.assert_allclose(ActionObjectPrior.fit([c], size=(2, 2)).prior, 0.25, atol=1e-7)
+    np.testing.assert_allclose(ActionObjectPrior(size=(2, 2)).fit_masks([c]).prior_, 0.25, atol=1e-7)
 
 
 def test_aop_predict_bilinear_to_frame():
-    aop = ActionObjectPrior(np.array([[0.0, 1.0]], np.float32))
+    aop = ActionObjectPrior(size=(1, 2)).load_state({"prior_": np.array([[0.0, 1.0]], np.float32)})
     out = aop.predict(frame(3, 8), None)
     assert out.shape == (3, 8)
     assert np.all(np.diff(out, axis=1) >= 0)  # rises from left to right
@@ -93,25 +100,33 @@ def test_aop_predict_bilinear_to_frame():
 
 def test_aop_validation():
     with pytest.raises(ValueError, match="empty"):
-        ActionObjectPrior.fit([])
+        ActionObjectPrior().fit_masks([])
+    with pytest.raises(ValueError, match="at least one training frame"):
+        ActionObjectPrior().fit([])
     with pytest.raises(ValueError, match=r"masks\[1\]"):
-        ActionObjectPrior.fit([np.zeros((4, 4), bool), np.zeros((4, 4), np.uint8)])
+        ActionObjectPrior().fit_masks([np.zeros((4, 4), bool), np.zeros((4, 4), np.uint8)])
     with pytest.raises(ValueError, match="size"):
-        ActionObjectPrior.fit([np.zeros((4, 4), bool)], size=(0, 4))
-    with pytest.raises(ValueError, match="prior"):
-        ActionObjectPrior(np.full((2, 2), 1.5))
+        ActionObjectPrior(size=(0, 4))
+    with pytest.raises(ValueError, match="not fitted"):
+        ActionObjectPrior().predict(frame(4, 4))
+    with pytest.raises(ValueError, match="mask"):
+        TrainingFrame(frame(4, 4), None, np.zeros((4, 5), bool))
 
 
 # --------------------------------------------------------------------------
 # Centre prior.
 
 
+def fold_frames(masks_by_activity):
+    return {a: (TrainingFrame(frame(*m.shape), None, m) for m in ms) for a, ms in masks_by_activity.items()}
+
+
 def test_aop_needs_another_activity():
-    priors = aop_fold_priors({"only": iter([np.ones((4, 4), bool)])})
+    priors = fit_folds(ActionObjectPrior, fold_frames({"only": [np.ones((4, 4), bool)]}))
     assert priors == {"only": None}
     one, two = np.zeros((4, 4), bool), np.ones((4, 4), bool)
-    priors = aop_fold_priors({"a": iter([one]), "b": iter([two, two, one])})
-    assert np.allclose(priors["a"].prior, 2 / 3) and np.allclose(priors["b"].prior, 0.0)
+    priors = fit_folds(ActionObjectPrior, fold_frames({"a": [one], "b": [two, two, one]}))
+    assert np.allclose(priors["a"].prior_, 2 / 3) and np.allclose(priors["b"].prior_, 0.0)
 
 
 def test_aop_fold_prior_is_the_mean_of_the_other_activities_masks():
@@ -119,16 +134,31 @@ def test_aop_fold_prior_is_the_mean_of_the_other_activities_masks():
     # [[1, 0], [1, 1], [0, 0]] -> [2/3, 1/3].
     left, both, none = (np.array([v], bool) for v in ([True, False], [True, True], [False, False]))
     masks = {"a": [left, left], "b": [left, both], "c": [none]}
-    priors = aop_fold_priors({k: iter(v) for k, v in masks.items()}, size=(1, 2))
-    np.testing.assert_allclose(priors["a"].prior, [[2 / 3, 1 / 3]], atol=1e-7)
-    np.testing.assert_allclose(priors["c"].prior, [[1.0, 0.25]], atol=1e-7)
-    # The same as fitting each fold on the other activities' masks directly.
+    priors = fit_folds(lambda: ActionObjectPrior(size=(1, 2)), fold_frames(masks))
+    np.testing.assert_allclose(priors["a"].prior_, [[2 / 3, 1 / 3]], atol=1e-7)
+    np.testing.assert_allclose(priors["c"].prior_, [[1.0, 0.25]], atol=1e-7)
+    # The same as fitting each fold on the other activities' masks directly; only the folds asked for.
     rng = np.random.default_rng(5)
     masks = {k: [rng.random((9, 12)) > 0.6 for _ in range(n)] for k, n in (("a", 2), ("b", 3), ("c", 1))}
-    priors = aop_fold_priors(masks, size=(3, 4))
-    for activity in masks:
+    priors = fit_folds(lambda: ActionObjectPrior(size=(3, 4)), fold_frames(masks), folds=["a", "c"])
+    assert set(priors) == {"a", "c"}
+    for activity in priors:
         others = [m for a, ms in masks.items() if a != activity for m in ms]
-        np.testing.assert_allclose(priors[activity].prior, ActionObjectPrior.fit(others, size=(3, 4)).prior, atol=1e-6)
+        np.testing.assert_allclose(priors[activity].prior_, ActionObjectPrior(size=(3, 4)).fit_masks(others).prior_, atol=1e-6)
+
+
+def test_saved_state_is_plain_data_and_round_trips(tmp_path):
+    aop = ActionObjectPrior(size=(3, 4)).fit_masks([np.eye(3, 4, dtype=bool)])
+    save_baseline(aop, tmp_path / "aop.npz")
+    with np.load(tmp_path / "aop.npz", allow_pickle=False) as data:  # no pickle anywhere
+        assert sorted(data.files) == ["meta", "state.prior_"]
+    back = load_baseline(ActionObjectPrior, tmp_path / "aop.npz")
+    assert back.size == (3, 4)
+    np.testing.assert_array_equal(back.predict(frame(6, 8)), aop.predict(frame(6, 8)))
+    with pytest.raises(ValueError, match="CenterPrior version"):
+        load_baseline(type("CenterPrior", (ActionObjectPrior,), {}), tmp_path / "aop.npz")
+    with pytest.raises(ValueError, match="not a saved baseline"):
+        load_baseline(ActionObjectPrior, b"garbage")
 
 
 def test_center_prior_peaks_at_centre():
@@ -183,21 +213,20 @@ def test_saliency_validation():
 
 
 def test_registry_and_build():
-    assert set(BASELINES) == {"aop", "center", "saliency", "gbvs", "handled"}
+    assert {"aop", "center", "saliency", "gbvs", "handled"} <= set(BASELINES)
+    assert all(cls.name and cls.version >= 1 for cls in BASELINES.values())
+    assert BASELINES["aop"].name == "AOP" and BASELINES["gbvs"].name == "GBVS"
     assert isinstance(build_baseline("center"), CenterPrior)
     assert isinstance(build_baseline("gbvs"), GraphSaliency)
     assert isinstance(build_baseline("handled"), HandledViewedObject)
     assert isinstance(build_baseline("saliency"), SpectralResidualSaliency)
-    aop = build_baseline("aop", masks=[np.ones((6, 8), bool)])
-    np.testing.assert_allclose(aop.prior, 1.0)
-    assert isinstance(BASELINES["aop"]([np.ones((6, 8), bool)], size=(3, 4)), ActionObjectPrior)
+    assert build_baseline("aop", size=(3, 4)).size == (3, 4)
+    assert is_trained("aop") and not is_trained("gbvs") and not is_trained("center")
 
 
 def test_build_rejects_unknown_and_misused():
-    with pytest.raises(ValueError, match="valid names: aop, center, gbvs, handled, saliency"):
-        build_baseline("judd")
-    with pytest.raises(ValueError, match="masks"):
-        build_baseline("aop")
+    with pytest.raises(ValueError, match=r"valid names: .*aop \(AOP\)"):
+        build_baseline("nope")
     with pytest.raises(ValueError, match="masks"):
         build_baseline("center", masks=[np.ones((2, 2), bool)])
 

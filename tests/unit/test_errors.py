@@ -21,11 +21,11 @@ from egonet.errors import EgonetError
         (lambda: metrics.score_maps([], []), "probs"),
         (lambda: metrics.count_stats(np.zeros((2, 2)), np.zeros((2, 2), bool), thresholds=0), "thresholds"),
         (lambda: baselines.build_baseline("nope"), "name"),
-        (lambda: baselines.build_baseline("aop"), "masks"),
+        (lambda: baselines.build_baseline("aop", size=(0, 1)), "size"),
         (lambda: synth.render_frame("juggling", 0), "activity"),
         (lambda: synth.render_frame("cooking", 0, width=0), "width"),
     ],
-    ids=["io", "dhg", "dhg-gray", "clicks-sigma", "clicks", "metrics", "metrics-thresholds", "baselines", "baselines-masks",
+    ids=["io", "dhg", "dhg-gray", "clicks-sigma", "clicks", "metrics", "metrics-thresholds", "baselines", "baselines-size",
          "synth", "synth-width"],
 )
 def test_public_checks_name_their_field(call, field):

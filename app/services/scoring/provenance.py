@@ -228,7 +228,8 @@ def _rows_sentence(rows: Mapping[str, int]) -> str:
         said.append(count(rows["model"], "trained model", "trained models") + " on their held-out frames")
     if rows.get("baseline"):
         said.append(count(rows["baseline"], "baseline", "baselines") + " on every labelled frame "
-                    "(the action-object prior fitted without the scored activity)")  # fmt: skip
+                    "(the learned ones fitted per fold under leave-one-activity-out: a frame is mapped by a model "
+                    "fitted on the other activities' frames only; GBVS and the references are not trained)")  # fmt: skip
     if rows.get("human"):
         said.append(count(rows["human"], "participant", "participants") + " of the human study on the frames of their trials (MF only)")
     return ("Rows: " + "; ".join(said) + ".") if said else "The report has no rows."

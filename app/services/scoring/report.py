@@ -33,9 +33,11 @@ from app.services.scoring import cache, sources
 from app.services.scoring.cells import BASELINE, FRAMES, HUMAN, MODEL
 from app.services.scoring.provenance import HumanMaps, Provenance
 from app.services.scoring.rows import Scorer, ScoringProblem, Source, build_rows, compare, frames_without_truth, without_frames_without_truth
-from app.services.scoring.sources import AOP_SIZE, BASELINE_NAMES, CENTER_SIGMA, SALIENCY, Scored, Truth
+from app.services.scoring import fitting
+from app.services.scoring.sources import Scored, Truth
 from app.services.scoring.table import Report
 from app.version import code_version
+from egonet.baselines import BASELINES, build_baseline, is_trained, params
 from egonet.clicks import DEFAULT_SIGMA, METHOD_OPTIONS, SUPERPIXEL_DEFAULTS
 from egonet.errors import EgonetError
 from egonet.metrics import (
@@ -118,6 +120,8 @@ class _Job:
     frames: int  # frames it will score, for progress (0 when unknown)
     score: Callable[[Callable[[int], None]], Scored]
     notes: list[str] = field(default_factory=list)  # said whenever the job's rows are shown
+    # When the statistics are not cached: queues the job for the worker and returns the note that says so, or None (score now).
+    defer: Callable[[], str | None] | None = None
 
 
 def _run_signature(run: TrainingRun) -> str | None:
@@ -154,18 +158,25 @@ def _run_job(run: TrainingRun, truth: Truth, thresholds: int) -> _Job:
     )
 
 
-def _baseline_job(truth: Truth, thresholds: int) -> _Job:
-    return _Job(
-        rows=[_RowSpec(f"baseline:{key}", key, name, BASELINE, "") for key, name in BASELINE_NAMES.items()],
-        cache_key={
-            "baselines": {"aop_size": AOP_SIZE, "center_sigma": CENTER_SIGMA, "saliency": SALIENCY,
-                          "gbvs": sources.GBVS, "handled": sources.HANDLED},
-            "truth": truth.fingerprint,
-            "thresholds": thresholds,
-        },
-        frames=2 * len(truth.frames),  # the AOP pass, then the scoring pass
-        score=lambda progress: sources.baseline_stats(truth, thresholds, progress),
-    )
+def _baseline_jobs(truth: Truth, thresholds: int, *, fit_in_worker: bool) -> list[_Job]:
+    """One job per baseline; a learned one's is fitted per leave-one-activity-out fold (``fitting``), in the worker when long."""
+    jobs = []
+    for key, cls in BASELINES.items():
+        trained = is_trained(key)
+        detail = "fitted per fold under leave-one-activity-out" if trained else "not trained"
+        jobs.append(
+            _Job(
+                rows=[_RowSpec(f"baseline:{key}", "", sources.baseline_name(key), BASELINE, detail)],
+                cache_key={"baseline": key, "version": cls.version, "params": params(build_baseline(key)),
+                           "hands": sources.HANDLED_HANDS if key == "handled" else None,
+                           "truth": truth.fingerprint, "thresholds": thresholds},  # fmt: skip
+                # A learned baseline reads every frame twice (its folds' fit, then its maps) unless its folds are cached.
+                frames=len(truth.frames) * (2 if trained else 1),
+                score=lambda progress, key=key: sources.baseline_stats(key, truth, thresholds, progress),
+                defer=(lambda key=key: fitting.defer_to_worker(key, truth, thresholds)) if trained and fit_in_worker else None,
+            )
+        )
+    return jobs
 
 
 def _session_over(person: Participant) -> bool:
@@ -234,6 +245,7 @@ def _jobs(
     *,
     exclude_failed_checks: bool = False,
     by_condition: bool = False,
+    fit_in_worker: bool = False,
 ) -> list[_Job]:
     """Every job of the choice, in table order: models, baselines, people."""
     runs = _choose_runs(run_ids)
@@ -241,7 +253,7 @@ def _jobs(
     truth = sources.load_truth()
     jobs = [_run_job(run, truth, thresholds) for run in runs]
     if baselines and truth.frames:
-        jobs.append(_baseline_job(truth, thresholds))
+        jobs += _baseline_jobs(truth, thresholds, fit_in_worker=fit_in_worker)
     return jobs + _participant_jobs(
         chosen_studies, truth, thresholds, notes, exclude_failed_checks=exclude_failed_checks, by_condition=by_condition
     )
@@ -261,6 +273,7 @@ def load_sources(
     exclude_failed_checks: bool = False,
     by_condition: bool = False,
     use_cache: bool = True,
+    fit_in_worker: bool = False,
     on_start: Callable[[int], None] | None = None,
     on_progress: Callable[[int], None] | None = None,
 ) -> tuple[list[Source], list[str]]:
@@ -276,10 +289,14 @@ def load_sources(
         raise ScoringProblem(str(exc), field="thresholds") from None
     notes: list[str] = []
     jobs = _jobs(
-        run_ids, study_ids, baselines, thresholds, notes, exclude_failed_checks=exclude_failed_checks, by_condition=by_condition
+        run_ids, study_ids, baselines, thresholds, notes, exclude_failed_checks=exclude_failed_checks, by_condition=by_condition,
+        fit_in_worker=fit_in_worker,
     )
     cached = [(cache.cache_path(job.cache_key), job) for job in jobs]
     cached = [(path, job, cache.read_cached(path, thresholds) if use_cache else None) for path, job in cached]
+    deferred = {id(job): job.defer() for _, job, got in cached if got is None and job.defer is not None}
+    notes += [note for note in deferred.values() if note]
+    cached = [(path, job, got) for path, job, got in cached if not deferred.get(id(job))]
     if on_start is not None:
         on_start(sum(job.frames for _, job, got in cached if got is None))
     out = []
@@ -338,6 +355,7 @@ def build_report(
     exclude_failed_checks: bool = False,
     by_condition: bool = False,
     use_cache: bool = True,
+    fit_in_worker: bool = False,
     on_start: Callable[[int], None] | None = None,
     on_progress: Callable[[int], None] | None = None,
 ) -> Report:
@@ -346,7 +364,8 @@ def build_report(
     Args:
         run_ids: Completed training runs to include; None for all of them.
         study_ids: Studies whose participants to include; None for all.
-        baselines: Include AOP, the centre prior, saliency, GBVS and the handled + viewed object.
+        baselines: Include the baselines (``egonet.baselines.BASELINES``); the learned ones
+            are fitted per leave-one-activity-out fold (``fitting``).
         thresholds: The number T of thresholds ``k / (T + 1)``.
         metric: The convention: ``"pooled"``, ``"ois-mean"``,
             ``"mean-curve"`` or ``"ods-ois"`` (``egonet.metrics.frames``;
@@ -366,6 +385,9 @@ def build_report(
             (ordered and named by condition).
         use_cache: Read statistics cached by an earlier report with the
             same inputs (they are written either way).
+        fit_in_worker: Queue learned baselines that would take longer than
+            ``BASELINE_INLINE_S`` for the worker and leave their rows out with
+            a note (the pages); else fit and score them now (the CLI, the worker).
         on_start: Called once with the number of frames to score.
         on_progress: Called with the number of frames just scored.
 
@@ -385,7 +407,7 @@ def build_report(
     found, loaded = load_sources(
         run_ids=run_ids, study_ids=study_ids, baselines=baselines, thresholds=thresholds, answered_only=answered_only,
         exclude_failed_checks=exclude_failed_checks, by_condition=by_condition, use_cache=use_cache,
-        on_start=on_start, on_progress=on_progress,
+        fit_in_worker=fit_in_worker, on_start=on_start, on_progress=on_progress,
     )
     provenance = Provenance(
         metric=metric, thresholds=thresholds, frames=frames, empty=empty, empty_frames=frames_without_truth(found),

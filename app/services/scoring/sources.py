@@ -6,9 +6,11 @@ maps, one at a time, into per-frame counts (``cache.FrameStats``):
 
 * a completed training run: its held-out predictions (``app.services.training``);
   the authors' released model, never trained on ours, holds every frame out;
-* the baselines (``egonet.baselines``) on every labelled frame: AOP fitted
-  inside each leave-one-activity-out fold, the centre prior, saliency, GBVS
-  and the handled + viewed object (its hands: the labelled tactile objects);
+* a baseline (``egonet.baselines``) on every labelled frame: a learned one
+  (AOP, Judd, FP-MCG, salObj+depth) with the model of the frame's
+  leave-one-activity-out fold, fitted without the frame's activity
+  (``fitting``); GBVS, the centre prior and saliency as they are; the
+  handled + viewed object (its hands: the labelled tactile objects);
 * a participant: the click soft masks of the frames they answered
   (``app.services.studies``), and an empty map for each trial they did not
   answer (expired, or never reached once their session is over), flagged
@@ -27,7 +29,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from app.extensions import db
-from app.models import Activity, Annotation, Frame, InstanceKind
+from app.models import Activity, Annotation, Frame, Instance, InstanceKind
 from app.models import Sequence as FrameSequence
 from app.models.studies import FrameKind, Outcome, Participant, StudyFrame, Trial
 from app.models.training import TrainingRun
@@ -35,21 +37,19 @@ from app.services import ground_truth, media, training
 from app.services import studies as studies_service
 from app.services.scoring.cache import Stats, StatsBuilder
 from egonet import io
-from egonet.baselines import CenterPrior, GraphSaliency, HandledViewedObject, SpectralResidualSaliency, aop_fold_priors
+from app.services.scoring import fitting
+from egonet.baselines import BASELINES, build_baseline, is_trained
 from egonet.metrics import count_stats
 
-# Baseline keys, names and the predictors' settings (part of the cache key).
-BASELINE_NAMES = {
-    "aop": "AOP", "center": "centre prior", "saliency": "saliency",
-    # The paper's GBVS, and its "handled + viewed object" with the hands taken from the
-    # labelled tactile objects (no hand detector is installed): an oracle for the hands.
-    "gbvs": "GBVS", "handled": "handled + viewed object (hands: labelled tactile objects)",
-}
-AOP_SIZE = (60, 80)
-CENTER_SIGMA = 0.25
-SALIENCY = {"width": 64, "blur_sigma": 2.5}
-GBVS = {"grid_width": 32, "work_width": 256}
-HANDLED = {"width": 160, "scale": 50.0, "max_area": 0.05, "near": "tactile instances"}
+# The handled row's hands are the labelled tactile objects (no hand detector is installed): an oracle for the hands.
+HANDLED_HANDS = "labelled tactile objects"
+
+
+def baseline_name(key: str) -> str:
+    """The row name of baseline ``key``: the paper's name of its method."""
+    name = BASELINES[key].name
+    return f"{name} (hands: {HANDLED_HANDS})" if key == "handled" else name
+
 
 Scored = tuple[dict[str, Stats], list[str]]
 """A source's statistics by name ("" for a single row, else the baseline's key) and its notes."""
@@ -61,16 +61,36 @@ Scored = tuple[dict[str, Stats], list[str]]
 
 @dataclass
 class Truth:
-    """The labelled frames, their ground-truth annotations and activities, and a fingerprint of them all."""
+    """The labelled frames, their ground-truth annotations and activities, and fingerprints of them.
+
+    ``entries`` holds each frame's fingerprint entry (its media, its
+    annotation's id, version, mask and update time, its instances' labels
+    and masks): a fold's training frames are fingerprinted from theirs.
+    """
 
     frames: list[Frame]
     annotations: dict[int, Annotation]
     activity: dict[int, str]  # frame id -> activity name
+    entries: dict[int, str]
     fingerprint: str
 
     def mask(self, frame_id: int) -> np.ndarray | None:
         annotation = self.annotations.get(frame_id)
         return ground_truth.mask_of(annotation) if annotation is not None else None
+
+    def by_activity(self) -> dict[str, list[Frame]]:
+        """The frames of each activity, in the frames' order."""
+        out: dict[str, list[Frame]] = defaultdict(list)
+        for frame in self.frames:
+            out[self.activity[frame.id]].append(frame)
+        return dict(out)
+
+    def digest(self, frame_ids: Iterable[int]) -> str:
+        """A fingerprint of these frames and their ground truth (a fold's training frames)."""
+        digest = hashlib.sha256()
+        for fid in sorted(frame_ids):
+            digest.update(self.entries[fid].encode())
+        return digest.hexdigest()
 
 
 def load_truth() -> Truth:
@@ -78,8 +98,16 @@ def load_truth() -> Truth:
     frames = ground_truth.labelled_frames()
     ids = [f.id for f in frames]
     annotations: dict[int, Annotation] = {}
+    instances: dict[int, list[str]] = defaultdict(list)
     for start in range(0, len(ids), 5000):  # keep IN lists well under SQLite's variable limit
-        annotations.update(ground_truth.ground_truths(ids[start : start + 5000]))
+        chunk = ground_truth.ground_truths(ids[start : start + 5000])
+        annotations.update(chunk)
+        for aid, label, path in db.session.execute(
+            db.select(Instance.annotation_id, Instance.label, Instance.mask_path)
+            .where(Instance.annotation_id.in_([a.id for a in chunk.values()]))
+            .order_by(Instance.annotation_id, Instance.position)
+        ):
+            instances[aid].append(f"{label}={path}")
     names = dict(
         db.session.execute(
             db.select(Frame.id, Activity.name)
@@ -89,11 +117,14 @@ def load_truth() -> Truth:
             .where(Frame.id.in_(db.select(Annotation.frame_id)))
         ).all()
     )
-    digest = hashlib.sha256()
-    for fid in sorted(annotations):
-        a = annotations[fid]
-        digest.update(f"{fid}:{a.id}:{a.version}:{a.mask_path}:{a.updated_at.isoformat()};".encode())
-    return Truth(frames, annotations, {f.id: names[f.id] for f in frames}, digest.hexdigest())
+    media_of = {f.id: f"{f.rgb_path}|{f.dhg_path}" for f in frames}
+    entries = {}
+    for fid, a in annotations.items():
+        entries[fid] = (f"{fid}:{media_of.get(fid)}:{a.id}:{a.version}:{a.mask_path}:{a.updated_at.isoformat()}:"
+                        f"{','.join(instances[a.id])};")  # fmt: skip
+    truth = Truth(frames, annotations, {f.id: names[f.id] for f in frames}, entries, "")
+    truth.fingerprint = truth.digest(entries)
+    return truth
 
 
 # --------------------------------------------------------------------------
@@ -189,39 +220,35 @@ def participant_stats(
     return {"": stats.build()}, notes
 
 
-def baseline_stats(truth: Truth, thresholds: int, on_progress: Callable[[int], None]) -> Scored:
-    """Score the three baselines on every labelled frame, activity by activity (one pass per frame)."""
-    by_activity: dict[str, list[Frame]] = defaultdict(list)
-    for frame in truth.frames:
-        by_activity[truth.activity[frame.id]].append(frame)
+def baseline_maps(key: str, truth: Truth, notes: list[str], on_progress: Callable[[int], None]) -> Iterator[tuple[Frame, np.ndarray]]:
+    """Baseline ``key``'s map of every labelled frame, activity by activity.
 
-    def masks_of(frames: list[Frame]) -> Iterator[np.ndarray]:
+    A learned baseline maps the frames of activity A with the model of A's
+    fold, fitted on the other activities only (``fitting``: cached, fitted
+    first when not); it is given the frame's DHG, the others only its colour.
+    """
+    trained = is_trained(key)
+    folds = fitting.fit_missing(key, truth, on_frame=lambda: on_progress(1)) if trained else {}
+    shared = None if trained else build_baseline(key)
+    for activity, frames in truth.by_activity().items():
+        predictor = folds.get(activity) if trained else shared
+        if predictor is None:
+            notes.append(f"{BASELINES[key].name}: no other activity has labelled frames to fit the fold of {activity}.")
+            continue
         for frame in frames:
-            yield truth.mask(frame.id)
-            on_progress(1)
-
-    folds = aop_fold_priors({a: masks_of(frames) for a, frames in by_activity.items()}, size=AOP_SIZE)
-    centre = CenterPrior(sigma=CENTER_SIGMA)
-    saliency = SpectralResidualSaliency(**SALIENCY)
-    gbvs = GraphSaliency(**GBVS)
-    handled = HandledViewedObject(**{k: v for k, v in HANDLED.items() if k != "near"})
-    stats = {key: StatsBuilder(thresholds) for key in BASELINE_NAMES}
-    notes = []
-    for activity, frames in by_activity.items():
-        predictors = {"aop": folds[activity], "center": centre, "saliency": saliency, "gbvs": gbvs}
-        if folds[activity] is None:
-            del predictors["aop"]
-            notes.append(f"AOP: no other activity has labelled frames to fit the prior for {activity}.")
-        for frame in frames:
-            mask = truth.mask(frame.id)
             rgb = io.read_image(media.absolute_path(frame.rgb_path))
-            maps = {key: predictor.predict(rgb, None) for key, predictor in predictors.items()}
-            maps["handled"] = handled.predict(rgb, near=_tactile_mask(truth.annotations[frame.id], rgb.shape[:2]))
-            for key, prob in maps.items():
-                counts = count_stats(prob, mask, thresholds=thresholds, name=f"prob of frame {frame.id}")
-                stats[key].add(frame.id, activity, counts)
-            on_progress(1)
-    return {key: builder.build() for key, builder in stats.items() if len(builder)}, notes
+            if key == "handled":  # its hands: the labelled tactile objects (an oracle, see HANDLED_HANDS)
+                yield frame, predictor.predict(rgb, near=_tactile_mask(truth.annotations[frame.id], rgb.shape[:2]))
+                continue
+            dhg = io.read_dhg(media.absolute_path(frame.dhg_path)) if trained and frame.dhg_path else None
+            yield frame, predictor.predict(rgb, dhg)
+
+
+def baseline_stats(key: str, truth: Truth, thresholds: int, on_progress: Callable[[int], None]) -> Scored:
+    """Score baseline ``key`` on every labelled frame (a learned one fitted per leave-one-activity-out fold)."""
+    notes: list[str] = []
+    stats, _ = _accumulate(baseline_maps(key, truth, notes, on_progress), truth, thresholds, on_progress)
+    return {"": stats.build()}, notes
 
 
 def _tactile_mask(annotation: Annotation, shape: tuple[int, int]) -> np.ndarray | None:
