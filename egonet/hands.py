@@ -46,7 +46,10 @@ import numpy as np
 from egonet.errors import EgonetError
 from egonet.saliency import check_frame
 
-__all__ = ["HandModel", "hand_features", "skin_probability"]
+__all__ = ["HAND_LABEL", "HandModel", "hand_features", "skin_probability"]
+
+HAND_LABEL = "hand"
+"""The label of an instance that outlines the wearer's hands (and forearms): the detector's training masks."""
 
 FEATURES = (
     "r", "g", "b", "hue cos", "hue sin", "saturation", "value", "L", "a", "b*",

@@ -11,6 +11,7 @@ from sqlalchemy.orm import Mapped, mapped_column, relationship
 from app.models.base import Base, UTCDateTime, enum_type, utcnow
 from app.models.frames import Frame
 from app.models.users import User
+from egonet.hands import HAND_LABEL
 
 
 class Status(enum.StrEnum):
@@ -31,17 +32,13 @@ class InstanceKind(enum.StrEnum):
     VISUAL = "visual"
 
 
-HAND_LABEL = "hand"
-"""The label of an instance that outlines the wearer's hands, not an action-object.
-
-Such instances train the hand detector of the Handled+Viewed-Obj baseline
-(``egonet.hands``) and are left out of the annotation's action-object mask
-(:func:`is_hand`); the demo ships them for every frame where hands show.
-"""
-
-
 def is_hand(label: str | None) -> bool:
-    """Whether an instance with this label outlines hands (:data:`HAND_LABEL`, any case, outer spaces ignored)."""
+    """Whether an instance with this label outlines the wearer's hands (``egonet.hands.HAND_LABEL``, any case, outer spaces ignored).
+
+    Such instances train the hand detector of the Handled+Viewed-Obj baseline
+    and are left out of the annotation's action-object mask; the demo ships
+    them for every frame where hands show.
+    """
     return label is not None and label.strip().lower() == HAND_LABEL
 
 

@@ -9,7 +9,8 @@ One module per method:
 * ``aop``: :class:`ActionObjectPrior`, the paper's AOP (learned: the mean mask);
 * ``egonet.saliency``: :class:`GraphSaliency`, the paper's GBVS (learns nothing,
   as in the paper);
-* ``handled``: :class:`HandledViewedObject`, the paper's Handled+Viewed-Obj;
+* ``handled``: :class:`HandledViewedObj`, the paper's Handled+Viewed-Obj (learned: a hand detector,
+  ``egonet.hands``), and :class:`HandledViewedObject`, its regions scored by their distance to given hands;
 * ``simple``: :class:`CenterPrior` and :class:`SpectralResidualSaliency`,
   references that are not rows of the paper.
 
@@ -30,7 +31,7 @@ from __future__ import annotations
 from typing import Any
 
 from egonet.baselines.aop import ActionObjectPrior
-from egonet.baselines.handled import HandledViewedObject
+from egonet.baselines.handled import HandledViewedObj, HandledViewedObject
 from egonet.baselines.protocol import (
     Predictor,
     Summary,
@@ -50,6 +51,7 @@ __all__ = [
     "ActionObjectPrior",
     "CenterPrior",
     "GraphSaliency",
+    "HandledViewedObj",
     "HandledViewedObject",
     "Predictor",
     "SpectralResidualSaliency",
@@ -66,7 +68,7 @@ __all__ = [
 
 BASELINES: dict[str, type] = {
     "gbvs": GraphSaliency,
-    "handled": HandledViewedObject,
+    "handled": HandledViewedObj,
     "aop": ActionObjectPrior,
     "center": CenterPrior,
     "saliency": SpectralResidualSaliency,

@@ -32,7 +32,6 @@ from egonet.baselines import BASELINES, TrainedBaseline, fit_folds, is_trained
 from tests.app.test_scoring import add_activity, frames_by_activity
 
 ROOT = Path(__file__).resolve().parents[2]
-LEAKS = {"handled": "its hands are the frame's labelled tactile objects until the hand detector of issue 34 (point 6) lands"}
 
 
 def maps_of(key: str) -> dict[int, np.ndarray]:
@@ -51,12 +50,10 @@ def rewrite_truth(frame_id: int, mask: np.ndarray) -> None:
     db.session.commit()
 
 
-@pytest.mark.parametrize(
-    "key", [pytest.param(k, marks=pytest.mark.xfail(reason=LEAKS[k], strict=True)) if k in LEAKS else k for k in BASELINES]
-)
+@pytest.mark.parametrize("key", list(BASELINES))
 def test_a_scored_frames_own_masks_never_change_its_map(ctx, key):
     for seed, name in enumerate(("cooking", "hotel", "desk work")):
-        add_activity(name, seed=seed)
+        add_activity(name, seed=seed, hands=True)  # hands labelled: Handled+Viewed-Obj's detector learns from them
     frames = frames_by_activity()
     before = maps_of(key)
     scored = frames["cooking"][1]
@@ -179,3 +176,18 @@ def test_the_docs_example_of_a_new_baseline_is_one_module_and_one_registry_line(
     row = next(r for r in report.rows if r.key == "baseline:brightness")
     assert row.name == "brightness" and row.detail == "fitted per fold under leave-one-activity-out"
     assert set(row.cells) == {"cooking", "hotel"} and all(c.n_frames == 3 for c in row.cells.values())
+
+
+def test_the_handled_rows_name_says_where_each_folds_hands_come_from(ctx):
+    add_activity("cooking", seed=0, hands=True)
+    add_activity("hotel", seed=1, hands=True)
+    add_activity("desk work", seed=2)  # no hand labelled here
+    truth = scoring_sources.load_truth()
+    # min_frames is 5: the fold of desk work learns from 6 labelled hands, the two others have 3 (skin colour).
+    assert scoring_sources.baseline_name("handled", truth) == (
+        "Handled+Viewed-Obj (hands: learned, 6 frames a fold; skin colour in 2 folds)")
+    folds = fitting.fit_missing("handled", truth)
+    assert {a: m.hands for a, m in folds.items()} == {
+        "cooking": "skin colour", "hotel": "skin colour", "desk work": "learned, 6 frames"}
+    report = scoring.build_report(run_ids=[], study_ids=[])
+    assert "Handled+Viewed-Obj (hands: learned, 6 frames a fold; skin colour in 2 folds)" in [r.name for r in report.rows]

@@ -9,6 +9,7 @@ from egonet.baselines import (
     ActionObjectPrior,
     CenterPrior,
     GraphSaliency,
+    HandledViewedObj,
     HandledViewedObject,
     Predictor,
     SpectralResidualSaliency,
@@ -218,7 +219,7 @@ def test_registry_and_build():
     assert BASELINES["aop"].name == "AOP" and BASELINES["gbvs"].name == "GBVS"
     assert isinstance(build_baseline("center"), CenterPrior)
     assert isinstance(build_baseline("gbvs"), GraphSaliency)
-    assert isinstance(build_baseline("handled"), HandledViewedObject)
+    assert isinstance(build_baseline("handled"), HandledViewedObj) and is_trained("handled")
     assert isinstance(build_baseline("saliency"), SpectralResidualSaliency)
     assert build_baseline("aop", size=(3, 4)).size == (3, 4)
     assert is_trained("aop") and not is_trained("gbvs") and not is_trained("center")
