@@ -16,7 +16,7 @@ import cv2
 import numpy as np
 
 from egonet.baselines.protocol import Summary, TrainedBaseline, TrainingFrame
-from egonet.baselines.simple import check_positive
+from egonet.baselines.simple import CenterPrior, check_positive
 from egonet.errors import EgonetError
 from egonet.hands import HAND_LABEL, HandModel
 from egonet.saliency import check_frame as _check_frame
@@ -135,12 +135,12 @@ class HandledViewedObj(TrainedBaseline):
     center". Here the hands come from :class:`egonet.hands.HandModel`, a
     pixel-level hand detector after Li & Kitani (CVPR 2013) fitted on the
     training activities' frames whose instances are labelled ``hand`` (each
-    fold its own; never the scored frame's labels). Pixels it gives a
-    probability of at least ``hand_threshold`` are the hands, once blobs
-    smaller than ``min_hand_area`` of the frame are dropped (specks of
-    skin-coloured wood or food); the objects are :class:`HandledViewedObject`'s
-    regions, each scored by its distance to the hands (a region mostly made
-    of hand pixels is no object), or to the centre when no hand is found.
+    fold its own; never the scored frame's labels); :meth:`detect_hands`
+    keeps its confident blobs that enter from the frame's edge. The objects
+    are :class:`HandledViewedObject`'s regions: with hands in view, those
+    nearest the hands' tips rank first and those nearest the centre next (a
+    region mostly made of hand pixels is no object); without, those nearest
+    the centre (:meth:`predict`).
 
     Without hand labels (fewer than ``min_frames`` training frames with a
     ``hand`` instance) the detector is the skin-colour prior
@@ -148,10 +148,12 @@ class HandledViewedObj(TrainedBaseline):
     score table's row name repeats it.
 
     What is faithful: objects near the detected hands, else near the centre;
-    a learned, pixel-level hand detector. What stands in: the object regions
-    (Felzenszwalb segments, where the paper does not say which object
-    proposals it used), the detector's classifier and features (see
-    :mod:`egonet.hands`), and the distance fall-off ``sigma``.
+    a learned, pixel-level hand detector. What stands in (the paper gives no
+    detail): the object regions (Felzenszwalb segments), the detector's
+    classifier and features (see :mod:`egonet.hands`), the blobs kept and
+    their tips, the distance fall-off ``sigma``, viewed objects ranked below
+    handled ones (:data:`VIEWED_WEIGHT`) rather than left out, and the floor
+    (:data:`FLOOR`).
 
     Args:
         width, scale, min_area, max_area, sigma: The object regions and their
@@ -206,15 +208,56 @@ class HandledViewedObj(TrainedBaseline):
         return self
 
     def detect_hands(self, rgb: np.ndarray, dhg: np.ndarray | None = None) -> np.ndarray:
-        """The detected hands, bool ``(H, W)``: the detector's probability thresholded, small blobs dropped."""
+        """The detected hands, bool ``(H, W)``.
+
+        The detector's probability from ``hand_threshold`` on, in blobs of at
+        least ``min_hand_area`` of the frame that reach the bottom, left or
+        right edge: in a first-person view the arms enter from there, and a
+        skin-coloured speck in the middle of a table is no hand.
+        """
         self.check_fitted()
         hands = self._detector.predict(rgb, dhg) >= self.hand_threshold
+        h, w = hands.shape
         n, labels, stats, _ = cv2.connectedComponentsWithStats(hands.astype(np.uint8), connectivity=8)
-        big = stats[:, cv2.CC_STAT_AREA] >= self.min_hand_area * hands.size
-        big[0] = False
-        return big[labels]
+        x, y, bw, bh, area = (stats[:, i] for i in range(5))
+        keep = (area >= self.min_hand_area * hands.size) & ((y + bh >= h) | (x == 0) | (x + bw >= w))
+        keep[0] = False
+        return keep[labels]
 
     def predict(self, rgb: np.ndarray, dhg: np.ndarray | None = None) -> np.ndarray:
-        """Object regions scored by their distance to the detected hands (else the centre), float32 ``(H, W)``."""
+        """Handled objects first, then viewed ones, float32 ``(H, W)`` in [0, 1].
+
+        With hands in view, each object region scores the larger of its score
+        by distance to the hands' tips (each hand blob's top quarter of rows:
+        where the fingers are when the arm comes up from the frame's edge)
+        and half its score by distance to the centre (a viewed object ranks
+        below a handled one); without hands, its score by distance to the
+        centre. Every pixel keeps at least ``FLOOR`` times a centre Gaussian
+        (:class:`CenterPrior`), so that the precision-recall curve reaches full
+        recall instead of stopping at the regions' edge.
+        """
+        h, w = _check_frame(rgb, dhg)
         hands = self.detect_hands(rgb, dhg)
-        return self._objects.predict(rgb, None, near=hands, exclude=hands)
+        viewed = self._objects.predict(rgb, None)
+        out = viewed
+        if hands.any():
+            handled = self._objects.predict(rgb, None, near=_tips(hands), exclude=hands)
+            out = np.maximum(handled, VIEWED_WEIGHT * viewed)
+        return np.maximum(out, FLOOR * CenterPrior().predict(rgb, None)).astype(np.float32)
+
+
+VIEWED_WEIGHT = 0.5
+"""How a viewed object (near the centre) ranks against a handled one (near the hands), when hands are in view."""
+FLOOR = 0.02
+"""The floor of :meth:`HandledViewedObj.predict`, a fraction of the centre prior."""
+
+
+def _tips(hands: np.ndarray) -> np.ndarray:
+    """Each hand blob's pixels in its top quarter of rows (its fingers, the arm entering from below)."""
+    n, labels = cv2.connectedComponents(hands.astype(np.uint8), connectivity=8)
+    out = np.zeros_like(hands)
+    for i in range(1, n):
+        ys, xs = np.nonzero(labels == i)
+        top = ys <= np.quantile(ys, 0.25)
+        out[ys[top], xs[top]] = True
+    return out
