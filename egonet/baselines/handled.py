@@ -166,7 +166,9 @@ class HandledViewedObj(TrainedBaseline):
 
     name = "Handled+Viewed-Obj"
     version = 1
-    fit_seconds_per_frame = 0.02
+    # Measured on the demo (280 frames, 320x240, 7 folds; docs/benchmarks.md): 73 ms and 42 ms CPU a frame.
+    fit_seconds_per_frame = 0.08
+    predict_seconds_per_frame = 0.05
 
     def __init__(
         self, *, width: int = 160, scale: float = 50.0, min_area: float = 0.002, max_area: float = 0.05, sigma: float = 0.1,
