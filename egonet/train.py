@@ -49,7 +49,6 @@ format's keys it holds the optimiser and RNG state.
 
 from __future__ import annotations
 
-import inspect
 import json
 import math
 import os
@@ -72,7 +71,7 @@ from egonet.data import FrameDataset, Sample, resize_probability
 from egonet.errors import EgonetError
 from egonet.init import initialise
 from egonet.metrics import ScoreAccumulator
-from egonet.network.builders import MODELS, build_model, saved_options
+from egonet.network.builders import build_model, learns_classes, saved_options
 from egonet.network.model import EgoNetModel, action_object_probability
 
 __all__ = [
@@ -442,7 +441,7 @@ def fit(
     """
     device = resolve_device(config.device)
     rank, world_size = setup_distributed(device)
-    if "classes" in inspect.signature(MODELS[config.model]).parameters:
+    if learns_classes(config.model):
         # Object-class segmentation (DeepLab-Obj): the classes the fold's *training* frames show, so
         # nothing of the held-out activity (its instances of other classes are background there).
         classes = start["model"]["options"]["classes"] if start is not None else train_set.class_names()

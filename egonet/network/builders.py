@@ -28,7 +28,7 @@ from egonet.network.streams import (RELEASED_BGR_MEAN, RELEASED_DHG_FLIPPED_MEAN
 
 __all__ = ["MODELS", "build_deeplab_dhg", "build_deeplab_obj", "build_deeplab_rgb", "build_egonet", "build_egonet_dhg",
            "build_egonet_lite", "build_egonet_rgb", "build_model", "build_no_coords", "build_no_embedding",
-           "build_single_stream", "saved_options"]
+           "build_single_stream", "learns_classes", "saved_options"]
 
 #: What a checkpoint saved before these options existed was trained with.
 LEGACY_ORDERS = {"coord_order": "cols-first", "dhg_order": "depth-height-gray"}
@@ -393,6 +393,16 @@ def build_model(name: str, **options: object) -> EgoNetModel:
             field=unknown[0],
         )
     return builder(**options)
+
+
+def learns_classes(name: str) -> bool:
+    """Whether variant ``name`` segments object classes (DeepLab-Obj): its builder takes ``classes``.
+
+    Example:
+        >>> learns_classes("deeplab-obj"), learns_classes("egonet")
+        (True, False)
+    """
+    return name in MODELS and "classes" in inspect.signature(MODELS[name]).parameters
 
 
 def saved_options(name: str, options: Mapping[str, object]) -> dict[str, object]:

@@ -22,7 +22,7 @@ import numpy as np
 import pytest
 
 from app.extensions import db
-from app.models import Annotation
+from app.models import Annotation, is_hand
 from app.services import ground_truth, media
 from app.services import scoring
 from app.services.scoring import fitting
@@ -42,12 +42,17 @@ def maps_of(key: str) -> dict[int, np.ndarray]:
 
 
 def rewrite_truth(frame_id: int, mask: np.ndarray) -> None:
-    """Give a frame's ground truth a new action-object mask, and every instance of it the same new mask."""
+    """Give a frame's ground truth a new action-object mask, and every instance of it the same new mask and swapped labels.
+
+    The labels swap: a hand becomes a cup and an object a hand, so the
+    frame's answers for Handled+Viewed-Obj's hand detector change too.
+    """
     annotation = ground_truth.ground_truths([frame_id])[frame_id]
     path = media.store(egonet_io.encode_png(mask.astype(np.uint8) * 255), ".png")
     annotation.mask_path = path
     for instance in annotation.instances:
         instance.mask_path = path
+        instance.label = "cup" if is_hand(instance.label) else "hand"
     annotation.review_comment = "redrawn"
     db.session.commit()
 

@@ -226,6 +226,8 @@ def _plan(run: TrainingRun, config):
     """The run's samples, the folds still to train, and the checkpoint to continue (if any)."""
     from egonet.train import make_folds
 
+    from egonet.network.builders import learns_classes
+
     samples = _samples(run.config.get("activity_ids"), classes=learns_classes(config.model))
     resume_id = run.config.get("resume_checkpoint")
     if resume_id is not None:
@@ -235,16 +237,7 @@ def _plan(run: TrainingRun, config):
     return samples, [f for f in folds if f.name not in finished], None
 
 
-def learns_classes(model: str) -> bool:
-    """Whether the model segments object classes (DeepLab-Obj): its builder takes ``classes``."""
-    import inspect
-
-    from egonet.network.builders import MODELS
-
-    return "classes" in inspect.signature(MODELS[model]).parameters
-
-
-def class_of(label: str | None) -> str:
+def _class_of(label: str | None) -> str:
     """An instance's object class for DeepLab-Obj: its label in lower case, "object" when it has none."""
     return " ".join((label or "").split()).lower() or "object"
 
@@ -253,7 +246,7 @@ def _samples(activity_ids: list[int] | None, *, classes: bool = False) -> list:
     """The frames with ground truth as ``egonet.data.Sample`` (keyed by frame id, grouped by activity).
 
     With ``classes``, each sample carries its action-objects' instances as
-    ``(class, mask path)`` (:func:`class_of`; hands are no object class).
+    ``(class, mask path)`` (:func:`_class_of`; hands are no object class).
     """
     from egonet.data import Sample
 
@@ -271,7 +264,7 @@ def _samples(activity_ids: list[int] | None, *, classes: bool = False) -> list:
                 mask=media.absolute_path(annotation.mask_path) if annotation.mask_path else None,
                 group=frame.sequence.activity.name,
                 key=frame.id,
-                instances=tuple((class_of(i.label), media.absolute_path(i.mask_path))
+                instances=tuple((_class_of(i.label), media.absolute_path(i.mask_path))
                                 for i in annotation.instances if not is_hand(i.label)) if classes else (),
             )
         )
