@@ -46,7 +46,7 @@ from egonet.errors import EgonetError
 from egonet.io import check_rgb
 
 __all__ = ["DEFAULT_SIGMA", "METHOD_OPTIONS", "SUPERPIXEL_DEFAULTS", "SUPERPIXEL_METHODS", "MaskMean", "SuperpixelDefaults",
-           "boundary_strength", "click_gaussian", "project_to_regions", "soft_mask", "superpixels"]
+           "boundary_strength", "click_gaussian", "project_to_regions", "region_hierarchy", "soft_mask", "superpixels"]
 
 DEFAULT_SIGMA = 60.0
 """The paper's click width: standard deviation in native-resolution pixels."""
@@ -233,12 +233,43 @@ def boundary_strength(image: np.ndarray) -> np.ndarray:
 
 def _hierarchical(work: np.ndarray, *, fine_regions: int, level: float) -> np.ndarray:
     """Fine watershed regions of the boundary map, merged weakest shared boundary first up to ``level``."""
+    return region_hierarchy(work, levels=(level,), fine_regions=fine_regions)[0]
+
+
+def region_hierarchy(image: np.ndarray, *, levels: Sequence[float], fine_regions: int = SUPERPIXEL_DEFAULTS.fine_regions,
+                     strength: np.ndarray | None = None) -> list[np.ndarray]:
+    """The hierarchy of the ``"hierarchical"`` superpixels, cut at several levels in one pass.
+
+    Fine watershed regions of the boundary map (:func:`boundary_strength`)
+    are merged, weakest shared boundary first, up to each level in turn
+    (increasing): every level's regions are unions of the previous level's,
+    as MCG's hierarchy is. The region proposals of the FP-MCG and
+    salObj+depth baselines are these regions (``egonet.baselines.regions``).
+
+    Args:
+        image: uint8 (H, W, 3), RGB, at the working resolution (no resizing here).
+        levels: Merge thresholds, increasing, in units of the frame's
+            99th-percentile boundary strength (as ``superpixels``' ``level``).
+        fine_regions: Watershed regions before merging.
+        strength: The boundary map of ``image`` if the caller has it already.
+
+    Returns:
+        One label map per level, int32 (H, W) each (labels need not be contiguous).
+
+    Example:
+        >>> img = np.zeros((20, 20, 3), np.uint8); img[:, 10:] = 200
+        >>> fine, coarse = region_hierarchy(img, levels=(0.1, 5.0), fine_regions=8)
+        >>> len(np.unique(fine)) >= len(np.unique(coarse))
+        True
+    """
     from skimage import graph
     from skimage.segmentation import watershed
 
-    strength = boundary_strength(work)
-    fine = watershed(strength, markers=int(fine_regions))
-    rag = graph.rag_boundary(fine, strength)
+    if list(levels) != sorted(levels) or not len(levels):
+        raise EgonetError(f"levels must be increasing and not empty, got {levels!r}", field="levels")
+    if strength is None:
+        strength = boundary_strength(image)
+    labels = watershed(strength, markers=int(fine_regions))
 
     def keep_nothing(rag, src, dst):  # the merged node needs no attributes of its own
         pass
@@ -249,8 +280,14 @@ def _hierarchical(work: np.ndarray, *, fine_regions: int, level: float) -> np.nd
         count = sum(e["count"] for e in edges)
         return {"count": count, "weight": sum(e["weight"] * e["count"] for e in edges) / max(count, 1)}
 
-    return graph.merge_hierarchical(fine, rag, thresh=float(level), rag_copy=False, in_place_merge=True,
-                                    merge_func=keep_nothing, weight_func=merged_weight)
+    out = []
+    for level in levels:
+        # A new graph per level: its boundary weights are again the mean strength along each boundary.
+        rag = graph.rag_boundary(labels, strength)
+        labels = graph.merge_hierarchical(labels, rag, thresh=float(level), rag_copy=False, in_place_merge=True,
+                                          merge_func=keep_nothing, weight_func=merged_weight)
+        out.append(np.asarray(labels, dtype=np.int32))
+    return out
 
 
 _SEGMENTERS = {"hierarchical": _hierarchical, "slic": _slic, "felzenszwalb": _felzenszwalb}

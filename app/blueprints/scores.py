@@ -113,6 +113,8 @@ def index():
         chosen_runs=set(query["runs"]),
         chosen_studies=set(query["studies"]),
         baselines=choice["baselines"],
+        baseline_names=[name for name, _ in scoring.baseline_rows()],
+        learned_names=[name for name, learned in scoring.baseline_rows() if learned],
         view=view,
         query=query,
         metrics=scoring.METRIC_TITLES,

@@ -34,7 +34,9 @@ REPORT_OPTIONS = (
     click.option("--runs", callback=_ids, help="Training run ids, comma-separated ('' for none) [default: every completed run]."),
     click.option("--studies", callback=_ids, help="Study ids, comma-separated ('' for none) [default: every study]."),
     click.option("--baselines/--no-baselines", default=True, show_default=True,
-                 help="Include the baselines (AOP, centre prior, saliency, GBVS, handled + viewed object)."),
+                 help="Include the baselines: Table 2's Judd, GBVS, Handled+Viewed-Obj, AOP, FP-MCG and salObj+depth "
+                      "(the learned ones fitted per leave-one-activity-out fold, here and now) and the centre prior "
+                      "and saliency."),
     click.option("--metric", type=click.Choice([*METRICS, *METRIC_ALIASES]), default="pooled", show_default=True, callback=_metric,
                  help="pooled: counts summed over an activity's frames; ois-mean: mean of each frame's best F; mean-curve: "
                       "best F of the precision-recall curve averaged over frames; ods-ois: BSDS ODS, OIS and AP "
@@ -82,8 +84,9 @@ def score_command(fmt, compare, **options):
 
     Rows are the completed training runs (held-out frames; runs that differ
     only in their seed also as one row with the mean and standard deviation),
-    the baselines (every labelled frame; AOP fitted per leave-one-activity-out
-    fold) and each participant of the studies (the frames of their trials; MF
+    the baselines (every labelled frame; the learned ones, Judd, AOP, FP-MCG
+    and salObj+depth, fitted per leave-one-activity-out fold: fitting them
+    takes a while the first time, then they are cached) and each participant of the studies (the frames of their trials; MF
     only). Every cell has its number of frames and a 95% bootstrap interval;
     every format says how the numbers were made (convention, thresholds,
     frames without action-object pixels, bootstrap, code version). The mean

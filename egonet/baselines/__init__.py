@@ -31,7 +31,9 @@ from __future__ import annotations
 from typing import Any
 
 from egonet.baselines.aop import ActionObjectPrior
+from egonet.baselines.fpmcg import FirstPersonMCG
 from egonet.baselines.handled import HandledViewedObj, HandledViewedObject
+from egonet.baselines.judd import Judd
 from egonet.baselines.protocol import (
     Predictor,
     Summary,
@@ -42,6 +44,7 @@ from egonet.baselines.protocol import (
     params,
     save_baseline,
 )
+from egonet.baselines.salobj import SalientObjectDepth
 from egonet.baselines.simple import CenterPrior, SpectralResidualSaliency
 from egonet.errors import EgonetError
 from egonet.saliency import GraphSaliency
@@ -50,10 +53,13 @@ __all__ = [
     "BASELINES",
     "ActionObjectPrior",
     "CenterPrior",
+    "FirstPersonMCG",
     "GraphSaliency",
     "HandledViewedObj",
     "HandledViewedObject",
+    "Judd",
     "Predictor",
+    "SalientObjectDepth",
     "SpectralResidualSaliency",
     "Summary",
     "TrainedBaseline",
@@ -67,9 +73,12 @@ __all__ = [
 ]
 
 BASELINES: dict[str, type] = {
+    "judd": Judd,
     "gbvs": GraphSaliency,
     "handled": HandledViewedObj,
     "aop": ActionObjectPrior,
+    "fpmcg": FirstPersonMCG,
+    "salobj": SalientObjectDepth,
     "center": CenterPrior,
     "saliency": SpectralResidualSaliency,
 }

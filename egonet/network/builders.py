@@ -26,7 +26,7 @@ from egonet.network.model import (COORD_ORDERS, DHG_ORDERS, CoordConvention, Coo
 from egonet.network.streams import (RELEASED_BGR_MEAN, RELEASED_DHG_FLIPPED_MEAN, InputNormalization, VGGDeepLabStream,
                                     _check_width_divisor)
 
-__all__ = ["MODELS", "build_deeplab_dhg", "build_deeplab_obj", "build_deeplab_rgb", "build_egonet", "build_egonet_dhg",
+__all__ = ["MODELS", "PAPER_NAMES", "build_deeplab_dhg", "build_deeplab_obj", "build_deeplab_rgb", "build_egonet", "build_egonet_dhg",
            "build_egonet_lite", "build_egonet_rgb", "build_model", "build_no_coords", "build_no_embedding",
            "build_single_stream", "learns_classes", "saved_options"]
 
@@ -433,3 +433,9 @@ def _check_dropout(dropout: object) -> float:
     if isinstance(dropout, bool) or not isinstance(dropout, (int, float)) or not 0.0 <= dropout < 1.0:
         raise EgonetError(f"dropout must be a number in [0, 1), got {dropout!r}", field="dropout")
     return float(dropout)
+
+
+#: The paper's names of the variants that are rows of its Table 2 (the score table shows a run of
+#: one of these as "<paper name> (run N)"; other variants keep their own name).
+PAPER_NAMES: dict[str, str] = {"egonet": "EgoNet", "deeplab-rgb": "DeepLab-RGB", "deeplab-dhg": "DeepLab-DHG",
+                               "deeplab-obj": "DeepLab-Obj"}

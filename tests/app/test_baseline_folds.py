@@ -23,7 +23,9 @@ import pytest
 
 from app.extensions import db
 from app.models import Annotation, is_hand
+from app.queue import current_huey
 from app.services import ground_truth, media
+from app.services.demo import create_demo
 from app.services import scoring
 from app.services.scoring import fitting
 from app.services.demo import create_demo
@@ -130,8 +132,6 @@ def test_a_long_fit_goes_to_the_worker_and_its_rows_appear_when_it_is_done(app, 
     again = admin_client.get("/scores/").get_data(as_text=True)  # queued once, not once per view
     assert "being fitted per fold" in again
     with app.app_context():
-        from app.queue import current_huey
-
         assert current_huey().pending_count() == 1
 
     env = dict(
@@ -212,3 +212,30 @@ def test_the_handled_row_with_learned_hands_beats_a_random_map_on_the_demo(ctx):
     rng = np.random.default_rng(0)
     chance = score_maps([rng.random(m.shape).astype(np.float32) for m in masks], masks)
     assert ours.max_f > chance.max_f + 0.05 and ours.ap > chance.ap + 0.03, (ours, chance)  # measured: +0.074, +0.049
+
+
+@pytest.mark.slow
+def test_every_baseline_beats_a_random_map_on_the_demo(ctx):
+    create_demo(frames_per_activity=6, unlabelled_fraction=0, width=160, height=120)
+    report = scoring.build_report(run_ids=[], study_ids=[], resamples=0)
+    truth = scoring_sources.load_truth()
+    masks = [truth.mask(frame.id) for frame in truth.frames]
+    rng = np.random.default_rng(0)
+    chance = score_maps([rng.random(m.shape).astype(np.float32) for m in masks], masks)  # pooled, as the rows' "overall"
+    assert [r.key for r in report.rows] == [f"baseline:{key}" for key in BASELINES]
+    for r in report.rows:
+        assert r.overall.n_frames == len(masks) == 42
+        assert r.overall.max_f > chance.max_f or r.overall.ap > chance.ap, (r.name, r.overall.max_f, r.overall.ap, chance)
+
+
+def test_a_failed_worker_fit_is_said_on_the_page_and_not_queued_again(app, admin_client):
+    app.config["BASELINE_INLINE_S"] = 0.0
+    with app.app_context():
+        for seed, name in enumerate(("cooking", "hotel")):
+            add_activity(name, seed=seed)
+        fitting.worker_done(scoring_sources.load_truth(), 99, "ValueError: a mask of another size")
+    page = admin_client.get("/scores/").get_data(as_text=True)
+    assert "AOP: fitting in the worker failed (ValueError: a mask of another size)" in page
+    assert 'data-row="baseline:aop"' not in page and 'data-row="baseline:gbvs"' in page
+    with app.app_context():
+        assert current_huey().pending_count() == 0

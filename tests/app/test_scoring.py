@@ -22,13 +22,22 @@ from app.services.scoring import cache as scoring_cache
 from app.services.scoring import sources as scoring_sources
 from egonet import clicks as egonet_clicks
 from egonet import io as egonet_io
-from egonet.baselines import BASELINES, ActionObjectPrior, CenterPrior, GraphSaliency, HandledViewedObj, SpectralResidualSaliency
+from egonet.baselines import (
+    BASELINES,
+    ActionObjectPrior,
+    CenterPrior,
+    GraphSaliency,
+    HandledViewedObj,
+    SpectralResidualSaliency,
+    TrainingFrame,
+)
 from egonet.metrics import count_stats, score_maps
 from tests.app.access.studies import build_study
 
 SIZE = (48, 64)
 HANDLED_ROW = "Handled+Viewed-Obj (hands: skin colour)"  # these frames have no hand instances
-BASELINE_ROWS = ["GBVS", HANDLED_ROW, "AOP", "centre prior", "saliency"]  # the paper's Table 2 order, then the references
+# The paper's Table 2 order, then the references.
+BASELINE_ROWS = ["Judd", "GBVS", HANDLED_ROW, "AOP", "FP-MCG", "salObj+depth", "centre prior", "saliency"]
 # Each activity's action-object sits somewhere else, so a prior fitted with
 # or without the tested activity's own masks gives different scores.
 BOXES = {"cooking": (slice(5, 20), slice(5, 25)), "hotel": (slice(25, 45), slice(35, 60)), "desk work": (slice(15, 35), slice(20, 45))}
@@ -242,20 +251,24 @@ def test_baselines_match_a_direct_computation_and_aop_follows_the_fold_rule(ctx)
         add_activity(name, seed=seed)
     report = scoring.build_report(run_ids=[], study_ids=[], baselines=True)
     assert [r.name for r in report.rows] == BASELINE_ROWS
-    assert {r.detail for r in report.rows if r.name == "AOP"} == {"fitted per fold under leave-one-activity-out"}
+    learned = {r.name for r in report.rows if r.detail == "fitted per fold under leave-one-activity-out"}
+    assert learned == {"Judd", HANDLED_ROW, "AOP", "FP-MCG", "salObj+depth"}
     assert report.activities == sorted(BOXES)
 
     frames = frames_by_activity()
     masks = {a: [truth_mask(f) for f in fs] for a, fs in frames.items()}
     rgbs = {a: [rgb_of(f) for f in fs] for a, fs in frames.items()}
-    aop = row(report, "AOP")
+    training = {a: [TrainingFrame(rgb, None, m) for rgb, m in zip(rgbs[a], masks[a])] for a in frames}
+    for key in ("judd", "aop", "fpmcg", "salobj"):
+        got = row(report, BASELINES[key].name)
+        for activity in frames:
+            # The fold's model: fitted on the *other* activities' labelled frames only.
+            model = BASELINES[key]().fit([f for a, fs in training.items() if a != activity for f in fs])
+            expected = score_maps([model.predict(rgb) for rgb in rgbs[activity]], masks[activity])
+            assert_cell(got.cells[activity], expected, 3)
     for activity in frames:
-        # The fold's prior: the mean mask of the *other* activities' labelled frames.
-        others = [m for a, ms in masks.items() if a != activity for m in ms]
-        prior = ActionObjectPrior().fit_masks(others)
-        expected = score_maps([prior.predict(rgb) for rgb in rgbs[activity]], masks[activity])
-        assert_cell(aop.cells[activity], expected, 3)
         # A prior that has seen the tested activity scores differently: the fold rule matters here.
+        expected = row(report, "AOP").cells[activity]
         leaky = ActionObjectPrior().fit_masks([m for ms in masks.values() for m in ms])
         assert score_maps([leaky.predict(rgb) for rgb in rgbs[activity]], masks[activity]).ap != pytest.approx(expected.ap, abs=1e-3)
 
@@ -281,12 +294,12 @@ def test_baselines_match_a_direct_computation_and_aop_follows_the_fold_rule(ctx)
         assert lo < got.mean.max_f < hi
 
 
-def test_with_one_activity_there_is_no_learned_baseline(ctx):
+def test_with_one_activity_there_are_no_learned_baselines(ctx):
     add_activity("cooking")
     report = scoring.build_report(run_ids=[], study_ids=[])
-    assert [r.name for r in report.rows] == [name for name in BASELINE_ROWS if name not in ("AOP", HANDLED_ROW)]
-    assert sorted(report.notes) == [f"{name}: no other activity has labelled frames to fit the fold of cooking."
-                                     for name in ("AOP", "Handled+Viewed-Obj")]
+    learned = ("Judd", "Handled+Viewed-Obj", "AOP", "FP-MCG", "salObj+depth")  # the registry's order
+    assert [r.name for r in report.rows] == [name for name in BASELINE_ROWS if name not in (*learned, HANDLED_ROW)]
+    assert report.notes == [f"{name}: no other activity has labelled frames to fit the fold of cooking." for name in learned]
 
 
 def test_frames_without_an_action_object_follow_the_chosen_policy_and_are_counted(ctx):
@@ -626,3 +639,17 @@ def test_an_unreadable_or_old_cache_file_is_scored_again(ctx, app):
         assert path.read_bytes()[:2] == b"PK"  # rewritten
     # Statistics of another shape (another number of thresholds) are not used either.
     assert scoring_cache.read_cached(path, 99) is not None and scoring_cache.read_cached(path, 9) is None
+
+
+def test_rows_carry_the_papers_names(ctx):
+    add_activity("cooking", seed=1)
+    add_activity("hotel", seed=2)
+    runs = {}
+    for model in ("egonet", "deeplab-rgb", "deeplab-dhg", "egonet-lite"):
+        runs[model] = make_run(model, held_out=["cooking", "hotel"])
+        runs[model].model_name = model
+    db.session.commit()
+    names = [r.name for r in scoring.build_report(study_ids=[], resamples=0).rows]
+    assert names == [f"egonet-lite (run {runs['egonet-lite'].id})", f"DeepLab-DHG (run {runs['deeplab-dhg'].id})",
+                     f"DeepLab-RGB (run {runs['deeplab-rgb'].id})", f"EgoNet (run {runs['egonet'].id})",
+                     *BASELINE_ROWS]  # newest run first  # fmt: skip

@@ -11,6 +11,7 @@ import pytest
 from app.extensions import db
 from app.models.studies import Participant
 from app.services import scoring, studies
+from egonet.baselines import BASELINES
 from tests.app.access.studies import build_study
 from tests.app.test_scoring import BASELINE_ROWS, add_activity, answer, make_run
 
@@ -239,7 +240,7 @@ def test_score_command_prints_each_format_and_view(ctx, runner, tmp_path):
     args = ["egonet", "score", "--format", "json", "--studies", "", "--thresholds", "19", "--metric", "ods-ois", "--frames", "each", "--no-cache"]
     data = json.loads(runner.invoke(args=args).stdout)
     assert (data["frames"], data["metric"], data["thresholds"]) == ("each", "ods-ois", 19)
-    assert [r["key"] for r in data["rows"]] == ["baseline:gbvs", "baseline:handled", "baseline:aop", "baseline:center", "baseline:saliency"]
+    assert [r["key"] for r in data["rows"]] == [f"baseline:{key}" for key in BASELINES]
     assert set(data["rows"][0]["cells"]["cooking"]) >= {"max_f", "max_f_ci", "ois", "ois_ci", "ap", "ap_ci", "n_frames"}
 
     data = json.loads(runner.invoke(args=["egonet", "score", "--format", "json", "--resamples", "0", "--answered-only"]).stdout)
@@ -310,7 +311,7 @@ def test_report_command_writes_the_facts_or_a_methods_paragraph(ctx, runner, tmp
     assert f"({sum(frames.values())} frames: cooking {frames['cooking']}, hotel {frames['hotel']})" in text
     assert "T = 99 thresholds t_k = k/100" in text and "Convention: Pooled: max F and AP of the pixel counts" in text
     assert "bias-corrected and accelerated (BCa) bootstrap intervals over frames" in text and "B = 2000 resamples (seed 4)" in text
-    assert "reported as p < 0.0005" in text and "Rows: 5 baselines on every labelled frame" in text and "1 participant of the human study" in text
+    assert "reported as p < 0.0005" in text and "Rows: 8 baselines on every labelled frame (the learned ones fitted per fold under leave-one-activity-out" in text and "1 participant of the human study" in text
     assert "each click is a Gaussian (click Gaussians of sigma 6 px" in text and f"computed with {code_version()}." in text
     assert "@inproceedings{bertasius2017egonet," in text and "title     = {First-Person Action-Object Detection with {EgoNet}}," in text
     assert "author    = {Gedas Bertasius and Hyun Soo Park and Stella X. Yu and Jianbo Shi}" in text and "year      = {2017}" in text
@@ -407,7 +408,7 @@ def test_figures_and_per_image_scores(app, admin_client):
     assert [int(m) for m in re.findall(r'<tr data-frame="(\d+)"', html)] == order
     with admin_client.get("/scores/frames.csv?activity=hotel") as response:
         rows = list(csv.reader(io.StringIO(response.get_data(as_text=True))))
-        assert rows[0][:6] == ["frame_id", "frame", "activity", "action-object pixels", "empty frames policy", "baseline:gbvs best F"]
+        assert rows[0][:6] == ["frame_id", "frame", "activity", "action-object pixels", "empty frames policy", "baseline:judd best F"]
         assert len(rows) == 4 and rows[1][3:5] == ["1", "leave-out"]
         assert 'filename="per-frame-hotel.csv"' in response.headers["Content-Disposition"]
 

@@ -8,10 +8,13 @@ from egonet.baselines import (
     BASELINES,
     ActionObjectPrior,
     CenterPrior,
+    FirstPersonMCG,
     GraphSaliency,
     HandledViewedObj,
     HandledViewedObject,
+    Judd,
     Predictor,
+    SalientObjectDepth,
     SpectralResidualSaliency,
     TrainingFrame,
     build_baseline,
@@ -20,6 +23,11 @@ from egonet.baselines import (
     load_baseline,
     save_baseline,
 )
+from egonet.baselines.fpmcg import FEATURES as FPMCG_FEATURES
+from egonet.baselines.judd import FEATURES as JUDD_FEATURES
+from egonet.baselines.judd import judd_features
+from egonet.baselines.regions import Proposals, forest_predict, forest_state
+from egonet.baselines.salobj import FEATURES as SALOBJ_FEATURES
 
 
 def frame(h=48, w=64, value=90):
@@ -377,3 +385,122 @@ def test_handled_viewed_checks_its_masks():
         HandledViewedObject().predict(two_objects(), near=np.zeros((4, 4), bool))
     with pytest.raises(ValueError, match="max_area"):
         HandledViewedObject(min_area=0.5, max_area=0.1)
+
+
+# --------------------------------------------------------------------------
+# The learned baselines of Table 2: Judd, FP-MCG, salObj+depth, and the protocol they share.
+
+
+def square_frames(n=4, size=(48, 64), seed=0, dhg=False):
+    """Frames of a grey, mildly noisy room with a blue square (the action-object) somewhere, and a red distractor strip."""
+    rng = np.random.default_rng(seed)
+    out = []
+    for _ in range(n):
+        rgb = np.clip(rng.normal(170, 6, (*size, 3)), 0, 255).astype(np.uint8)
+        r, c = rng.integers(4, size[0] - 20), rng.integers(4, size[1] - 20)
+        mask = np.zeros(size, bool)
+        mask[r : r + 14, c : c + 14] = True
+        rgb[mask] = (30, 40, 200)
+        rgb[size[0] - 4 :, :] = (200, 40, 40)
+        d = None
+        if dhg:
+            d = np.zeros((*size, 3), np.uint8)
+            d[..., 2] = np.where(mask, 40, 120)  # the object is nearer
+            d[..., 1] = np.where(mask, 110, 30)  # and higher above the floor
+        out.append(TrainingFrame(rgb, d, mask))
+    return out
+
+
+LEARNED = {"judd": Judd(work_width=64), "fpmcg": FirstPersonMCG(work_width=64, trees=8), "salobj": SalientObjectDepth(work_width=64, trees=8)}
+
+
+@pytest.mark.parametrize("key", sorted(LEARNED))
+def test_each_learned_baseline_finds_the_kind_of_object_it_was_trained_on(key, tmp_path):
+    train, test = square_frames(6, seed=1, dhg=True), square_frames(2, seed=2, dhg=True)
+    model = type(LEARNED[key])(**LEARNED[key].params()).fit(train)
+    for frame in test:
+        p = model.predict(frame.rgb, frame.dhg)
+        assert p.shape == frame.mask.shape and p.dtype == np.float32 and 0 <= p.min() and p.max() <= 1
+        assert p[frame.mask].mean() > p[~frame.mask].mean() + 0.3, key  # the object, not the room or the red strip
+    # What was fitted is plain data, and comes back the same.
+    save_baseline(model, tmp_path / f"{key}.npz")
+    back = load_baseline(type(model), tmp_path / f"{key}.npz")
+    for frame in test:
+        np.testing.assert_array_equal(back.predict(frame.rgb, frame.dhg), model.predict(frame.rgb, frame.dhg))
+    with pytest.raises(ValueError, match="not fitted"):
+        type(model)().predict(test[0].rgb)
+
+
+def test_the_forest_is_kept_as_arrays_that_predict_as_scikit_learn_does():
+    from sklearn.ensemble import RandomForestRegressor
+    from sklearn.tree import DecisionTreeRegressor
+
+    rng = np.random.default_rng(0)
+    x = rng.normal(size=(300, 5)).astype(np.float32)
+    y = np.sin(x[:, 0]) + x[:, 1] ** 2 + rng.normal(0, 0.1, 300)
+    test = rng.normal(size=(100, 5)).astype(np.float32)
+    for model in (RandomForestRegressor(n_estimators=7, max_depth=6, random_state=0).fit(x, y), DecisionTreeRegressor(max_depth=4).fit(x, y)):
+        np.testing.assert_allclose(forest_predict(forest_state(model), test), model.predict(test), rtol=0, atol=1e-12)
+    # By hand: one stump, x <= 0.5 goes left (value 1), else right (value 3); two stumps average.
+    stump = {"left": np.array([1, -1, -1, 4, -1, -1]), "right": np.array([2, -1, -1, 5, -1, -1]),
+             "feature": np.array([0, 0, 0, 1, 0, 0]), "threshold": np.array([0.5, 0, 0, 0.0, 0, 0]),
+             "value": np.array([0, 1.0, 3.0, 0, 10.0, 20.0]), "roots": np.array([0, 3])}  # fmt: skip
+    assert forest_predict(stump, np.array([[0.5, -1.0], [0.6, 1.0]])).tolist() == [5.5, 11.5]
+
+
+def test_proposal_statistics_by_hand():
+    # Two levels on a 2x4 grid: level 0 has regions 0 | 1 | 2 (columns 0, 1, 2-3), level 1 merges 1 and 2.
+    fine = np.array([[0, 1, 2, 2], [0, 1, 2, 2]], np.int32)
+    coarse = np.array([[0, 1, 1, 1], [0, 1, 1, 1]], np.int32)
+    values = np.array([[1.0, 2.0, 3.0, 5.0], [1.0, 4.0, np.nan, 5.0]])
+    props = Proposals([fine, coarse], np.array([0, 3]), np.zeros((2, 4)), np.zeros((2, 4, 3), np.uint8), None, None)
+    assert props.n == 5
+    np.testing.assert_array_equal(props.area(), [2, 2, 4, 2, 6])
+    np.testing.assert_allclose(props.mean(values), [1, 3, 13 / 3, 1, 19 / 5])
+    np.testing.assert_allclose(props.median(values), [1, 3, 5, 1, 4])
+    # Neighbours in the same level, weighted by shared border: fine region 1 touches 0 and 2 along 2 pixels each.
+    np.testing.assert_allclose(props.surround(np.array([10.0, 20, 30, 40, 50])), [20, 20, 20, 50, 40])
+    shape = props.shape()  # area share, centroid x and y, bbox width and height, fill
+    np.testing.assert_allclose(shape[2], [4 / 8, 2.5 / 4, 0.5 / 2, 2 / 4, 2 / 2, 1.0])
+    np.testing.assert_allclose(props.spread(np.array([0.1, 0.9, 0.2, 0.3, 0.4])), [[0.3, 0.9, 0.4, 0.4]] * 2)
+
+
+def test_judd_features_by_hand():
+    rgb = np.zeros((40, 40, 3), np.uint8)
+    rgb[:, 30:] = (255, 0, 0)  # a quarter of the frame is red, the rest black
+    f = judd_features(rgb, work_width=40)
+    assert f.shape == (40, 40, len(JUDD_FEATURES))
+    col = {name: f[..., i] for i, name in enumerate(JUDD_FEATURES)}
+    np.testing.assert_allclose(col["red"][0, 35], 1.0) and np.testing.assert_allclose(col["red"][0, 5], 0.0)
+    np.testing.assert_allclose(col["colour rarity median 1"][0, 35], -np.log(0.25 + 1e-6), rtol=1e-5)
+    np.testing.assert_allclose(col["colour rarity median 1"][0, 5], -np.log(0.75 + 1e-6), rtol=1e-5)
+    np.testing.assert_allclose(col["row y"][:, 0], (np.arange(40) + 0.5) / 40, rtol=1e-6)
+    assert col["distance to centre"][19:21, 19:21].max() < 0.05 and col["distance to centre"][0, 0] > 0.9
+    assert not col["faces"].any()  # no face in a flat frame
+
+
+def test_judd_draws_its_samples_inside_and_outside_the_mask():
+    frame = square_frames(1)[0]
+    summary = Judd(work_width=64, samples=10).summarize(frame)
+    assert summary["x"].shape == (20, len(JUDD_FEATURES)) and summary["y"].sum() == 10
+    assert (summary["x"][summary["y"], JUDD_FEATURES.index("blue")] > 0.7).all()  # the square's pixels are blue
+    with pytest.raises(ValueError, match="inside and outside"):
+        Judd().fit_summaries([{"x": summary["x"][summary["y"]], "y": summary["y"][summary["y"]]}])
+
+
+def test_region_regressors_learn_the_overlap_of_each_proposal():
+    frame = square_frames(1)[0]
+    summary = FirstPersonMCG(work_width=64).summarize(frame)
+    assert summary["x"].shape[1] == len(FPMCG_FEATURES) and np.isnan(summary["x"][:, -2:]).all()  # no DHG: no depth
+    assert summary["y"].max() > 0.95  # the flat square is a region of the hierarchy (up to a pixel of its blurred edge)
+    assert 0 <= summary["y"].min()
+    with_depth = SalientObjectDepth(work_width=64).summarize(square_frames(1, dhg=True)[0])
+    assert with_depth["x"].shape[1] == len(SALOBJ_FEATURES) and np.isfinite(with_depth["x"][:, -3:]).all()
+
+
+def test_learned_baselines_check_their_settings():
+    for bad, field in ((lambda: Judd(samples=0), "samples"), (lambda: Judd(C=0), "C"), (lambda: FirstPersonMCG(levels=(0.5, 0.2)), "levels"),
+                       (lambda: SalientObjectDepth(trees=0), "trees"), (lambda: FirstPersonMCG(work_width=True), "work_width")):  # fmt: skip
+        with pytest.raises(ValueError) as info:
+            bad()
+        assert info.value.field == field

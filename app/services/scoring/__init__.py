@@ -5,11 +5,12 @@ Rows, in this order:
 * **models**: each completed training run (``app.services.training``),
   scored on its held-out predictions only (the activity left out in each
   leave-one-activity-out fold, or the test split of a single split);
-* **baselines** (``egonet.baselines``), scored on every labelled frame:
-  the Action-Object Prior "AOP", fitted inside each leave-one-activity-out
-  fold (the frames of activity A are scored with the mean ground-truth mask
-  of the labelled frames of every *other* activity), the "centre prior" and
-  bottom-up "saliency" (spectral residual);
+* **baselines** (``egonet.baselines``), scored on every labelled frame,
+  with the paper's names (Judd, GBVS, Handled+Viewed-Obj, AOP, FP-MCG,
+  salObj+depth; then the "centre prior" and "saliency" references); the
+  learned ones are fitted per leave-one-activity-out fold (the frames of
+  activity A are mapped by a model fitted on the labelled frames of every
+  *other* activity; ``fitting``), in the worker when that takes long;
 * **people**: each participant of the chosen studies, scored on exactly the
   frames they saw and answered, their click soft masks against the same
   ground truth; MF only, as in the paper (AP says little about near-binary
@@ -45,6 +46,7 @@ The package, one module per concern:
 
 * ``report``: :func:`build_report`, what to score and the jobs that fill the rows;
 * ``sources``: ground truth and each source's per-frame counts;
+* ``fitting``: the learned baselines' folds, fitted and cached (or queued for the worker);
 * ``cache``: the per-frame counts on disk;
 * ``rows``: frames per row (shared or each), seed groups, intervals, paired comparisons;
 * ``cells``: the table's labels, cells, curves, rows and paired differences;
@@ -59,6 +61,7 @@ The package, one module per concern:
 from app.services.scoring.perframe import FrameTable, frame_table
 from app.services.scoring.plots import PLOT_MARGIN, Plot, PlotLine, default_plot_rows, pr_figure, pr_plot
 from app.services.scoring.report import available_runs, available_studies, build_report, load_sources
+from app.services.scoring.sources import baseline_rows
 from app.services.scoring.rows import ScoringProblem
 from app.services.scoring.cells import (
     ALL,
@@ -99,6 +102,7 @@ __all__ = [
     "ScoringProblem",
     "available_runs",
     "available_studies",
+    "baseline_rows",
     "build_report",
     "default_plot_rows",
     "definition",

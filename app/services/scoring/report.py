@@ -146,7 +146,7 @@ def _run_job(run: TrainingRun, truth: Truth, thresholds: int) -> _Job:
         MODEL,
         f"{run.name}, {run.folds} folds, seed {run.seed}",
         signature=_run_signature(run),
-        label=run.model_name,
+        label=sources.model_label(run),
         seed=run.seed,
     )
     return _Job(

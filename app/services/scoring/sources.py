@@ -39,11 +39,17 @@ from egonet import io
 from app.services.scoring import fitting
 from egonet.baselines import BASELINES, build_baseline, is_trained
 from egonet.metrics import count_stats
+from egonet.network.builders import PAPER_NAMES
 
-def baseline_name(key: str, truth: Truth) -> str:
-    """The row name of baseline ``key``: the paper's name of its method; Handled+Viewed-Obj's says where its hands come from."""
+def baseline_rows() -> list[tuple[str, bool]]:
+    """Every baseline's name (the paper's name of its method) and whether it is learned (fitted per fold), in the table's order."""
+    return [(baseline_name(key), is_trained(key)) for key in BASELINES]
+
+
+def baseline_name(key: str, truth: Truth | None = None) -> str:
+    """The row name of baseline ``key``: the paper's name of its method; with ``truth``, Handled+Viewed-Obj's says where its hands come from."""
     name = BASELINES[key].name
-    return f"{name} (hands: {_hands_of(truth, build_baseline(key).min_frames)})" if key == "handled" else name
+    return f"{name} (hands: {_hands_of(truth, build_baseline(key).min_frames)})" if key == "handled" and truth else name
 
 
 def _hands_of(truth: Truth, min_frames: int) -> str:
@@ -164,6 +170,11 @@ def _accumulate(
     return stats, missing
 
 
+def model_label(run: TrainingRun) -> str:
+    """A run's model as the paper names it (EgoNet, DeepLab-RGB, DeepLab-DHG), else the variant's own name."""
+    return PAPER_NAMES.get(run.model_name, run.model_name)
+
+
 def run_row_name(run: TrainingRun) -> str:
     """A run's row: its model, or "released model" for the authors' weights (scored on every frame it predicted).
 
@@ -175,8 +186,8 @@ def run_row_name(run: TrainingRun) -> str:
     counts = sorted({c.metrics["classes"] for c in run.checkpoints if "classes" in (c.metrics or {})})
     if counts:
         n = str(counts[0]) if len(counts) == 1 else f"{counts[0]}-{counts[-1]}"
-        return f"DeepLab-Obj, {n} classes (run {run.id})"
-    return f"{run.model_name} (run {run.id})"
+        return f"{model_label(run)}, {n} classes (run {run.id})"
+    return f"{model_label(run)} (run {run.id})"
 
 
 def run_stats(run: TrainingRun, truth: Truth, thresholds: int, on_progress: Callable[[int], None]) -> Scored:
