@@ -84,8 +84,8 @@ class HandledViewedObject:
         Args:
             rgb: uint8 ``(H, W, 3)``.
             dhg: Ignored; may be None.
-            near: bool ``(H, W)``: the hands (a detector's), or the handled
-                objects (labelled tactile objects); None or empty: the centre.
+            near: bool ``(H, W)``: the hands (a detector's, :class:`HandledViewedObj`);
+                None or empty: the centre.
             exclude: bool ``(H, W)`` of pixels that are no object (the hands
                 themselves): a region at least half inside it is dropped.
 
