@@ -335,10 +335,10 @@ def test_handled_viewed_prefers_the_object_nearest_the_hands_and_skips_the_hands
     p = HandledViewedObject().predict(rgb, near=hand, exclude=hand)
     assert p[12, 12] > 0.9 and p[12, 12] > p[48, 64]
     assert p[25, 10] == 0.0  # the hand itself is not the object
-    # The labelled tactile object as "near" (no detector): that object wins.
-    tactile = np.zeros_like(hand)
-    tactile[40:56, 56:72] = True
-    assert HandledViewedObject().predict(rgb, near=tactile)[48, 64] == pytest.approx(1.0)
+    # Whatever mask is "near" (here the centre object itself): that object wins.
+    held = np.zeros_like(hand)
+    held[40:56, 56:72] = True
+    assert HandledViewedObject().predict(rgb, near=held)[48, 64] == pytest.approx(1.0)
 
 
 def hand_frame(corner: int):
