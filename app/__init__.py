@@ -145,6 +145,9 @@ def _default_config(instance: Path) -> dict:
         REMEMBER_COOKIE_HTTPONLY=True,
         REMEMBER_COOKIE_SAMESITE="Lax",
         FRAMES_PER_PAGE=120,
+        # Object classes: the label field completes from the project's list
+        # (flask egonet classes); True refuses a label outside it (docs/labelling.md).
+        LABEL_CLASSES_STRICT=False,
         # What one request may cost: imported frames (and so GrabCut's) are at
         # most MAX_FRAME_SIDE pixels a side; a stroke has at most so many
         # points and so wide a brush (the labelling page's largest are 4000

@@ -1,4 +1,4 @@
-"""Time per training iteration on the CPU: egonet-lite and the faithful EgoNet.
+"""Time per training iteration on the CPU: egonet-lite, the faithful EgoNet and DeepLab-Obj.
 
 Usage::
 
@@ -9,7 +9,9 @@ One iteration is what ``egonet.train.train_one_epoch`` does per batch:
 forward in train mode, per-pixel cross-entropy (mean), backward, an SGD step
 (momentum 0.9, weight decay 5e-4). Each model trains at its own size and
 batch: egonet-lite at the demo's training size (320x240, batch 2 by
-default), the faithful model at the released input size (641x481, batch 1).
+default), the faithful model at the released input size (641x481, batch 1),
+DeepLab-Obj with the paper's 41 classes at the demo's size (batch 2; its
+iteration is DeepLab-RGB's but for fc10's 42 outputs).
 Inputs are random (the time does not depend on them); one warm-up iteration
 is not timed; the median and the best are printed, per iteration and per
 frame. Run it when the CPU is otherwise idle.
@@ -30,13 +32,13 @@ from egonet.checkpoint import DEFAULT_LR
 from egonet.network.builders import build_model
 
 
-def iteration_times(name: str, *, runs: int, batch: int, height: int, width: int) -> list[float]:
-    """Seconds per training iteration of ``name`` on random ``(batch, 3, height, width)`` frames."""
+def iteration_times(name: str, *, runs: int, batch: int, height: int, width: int, classes: int = 0) -> list[float]:
+    """Seconds per training iteration of ``name`` on random ``(batch, 3, height, width)`` frames (``classes``: DeepLab-Obj's)."""
     torch.manual_seed(0)
-    model = build_model(name).train()
+    model = build_model(name, **({"classes": [f"class {k}" for k in range(classes)]} if classes else {})).train()
     optimizer = torch.optim.SGD(model.parameters(), lr=DEFAULT_LR[name], momentum=0.9, weight_decay=5e-4)
     rgb, dhg = torch.rand(batch, 3, height, width), torch.rand(batch, 3, height, width)
-    target = (torch.rand(batch, height, width) < 0.1).long()
+    target = (torch.rand(batch, height, width) * (classes or 1) * 10).long().clamp(max=classes or 1)  # ~10 % foreground
     times = []
     for i in range(runs + 1):
         start = time.perf_counter()
@@ -58,6 +60,7 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument("--egonet-runs", type=int, default=3, help="0 skips the faithful model")
     parser.add_argument("--egonet-batch", type=int, default=1)
     parser.add_argument("--egonet-size", default="641x481", help="WIDTHxHEIGHT (default 641x481)")
+    parser.add_argument("--obj-runs", type=int, default=2, help="DeepLab-Obj iterations (0 skips it)")
     args = parser.parse_args(argv)
     if args.threads < 1 or args.lite_runs < 1 or args.egonet_runs < 0:
         parser.error("--threads and --lite-runs must be >= 1, --egonet-runs >= 0")
@@ -72,11 +75,13 @@ def main(argv: list[str] | None = None) -> int:
     torch.set_num_threads(args.threads)
     print(f"torch {torch.__version__}, {platform.processor() or platform.machine()}, {torch.get_num_threads()} threads, "
           "train mode, SGD step included")
-    plan = [("egonet-lite", args.lite_runs, args.lite_batch, size(args.lite_size, "--lite-size"))]
+    plan = [("egonet-lite", args.lite_runs, args.lite_batch, size(args.lite_size, "--lite-size"), 0)]
     if args.egonet_runs:
-        plan.append(("egonet", args.egonet_runs, args.egonet_batch, size(args.egonet_size, "--egonet-size")))
-    for name, runs, batch, (height, width) in plan:
-        times = iteration_times(name, runs=runs, batch=batch, height=height, width=width)
+        plan.append(("egonet", args.egonet_runs, args.egonet_batch, size(args.egonet_size, "--egonet-size"), 0))
+    if args.obj_runs:
+        plan.append(("deeplab-obj", args.obj_runs, args.lite_batch, size(args.lite_size, "--lite-size"), 41))
+    for name, runs, batch, (height, width), classes in plan:
+        times = iteration_times(name, runs=runs, batch=batch, height=height, width=width, classes=classes)
         median = statistics.median(times)
         print(f"{name:12s} {width}x{height} batch {batch}: median {median:7.2f} s/iteration, "
               f"{median / batch:7.2f} s/frame, best {min(times):7.2f} s  ({runs} runs)")

@@ -69,6 +69,10 @@ class Sample:
             ``None`` means the frame has no action-object (all false).
         group: The frame's activity; leave-one-activity-out splits on it.
         key: The caller's name for the frame (a database id, a file name).
+        instances: The labelled objects as ``(class name, mask)`` pairs, each
+            mask a bool ``(H, W)`` array or a PNG's path, painted in order
+            (a later one wins where two overlap): the targets of object-class
+            segmentation (DeepLab-Obj, :meth:`FrameDataset.with_classes`).
     """
 
     rgb: Source
@@ -76,6 +80,7 @@ class Sample:
     mask: Source | None
     group: str = ""
     key: int | str | None = None
+    instances: tuple[tuple[str, Source], ...] = ()
 
 
 @dataclass(frozen=True)
@@ -170,8 +175,9 @@ class FrameDataset(Dataset):
     """Samples at a fixed training size, optionally augmented.
 
     Items are dicts of ``rgb`` and ``dhg`` float32 ``(3, H, W)`` in ``[0, 1]``,
-    ``mask`` int64 ``(H, W)`` (0 background, 1 action-object) and ``index``
-    (the item's position in this dataset).
+    ``mask`` int64 ``(H, W)`` (0 background, 1 action-object; with
+    :meth:`with_classes`, 0 background and ``k`` the ``k``-th class's
+    instances) and ``index`` (the item's position in this dataset).
 
     Args:
         samples: The frames.
@@ -208,7 +214,9 @@ class FrameDataset(Dataset):
         self.seed = int(seed)
         self.epoch = 0
         self._cache: dict[int, tuple[np.ndarray, np.ndarray, np.ndarray]] | None = {} if cache else None
+        self._instance_cache: dict[int, np.ndarray] | None = {} if cache else None
         self._positions = list(range(len(samples)))  # positions in the shared cache
+        self.classes: tuple[str, ...] | None = None
 
     def __len__(self) -> int:
         return len(self._positions)
@@ -226,6 +234,20 @@ class FrameDataset(Dataset):
         out = copy.copy(self)  # shallow: the samples list and the cache dict are shared
         out._positions = [self._positions[i] for i in indices]
         out.augment = augment
+        return out
+
+    def class_names(self) -> list[str]:
+        """The class names of every item's instances, sorted (each once)."""
+        return sorted({name for i in range(len(self)) for name, _ in self.sample(i).instances})
+
+    def with_classes(self, classes: Sequence[str]) -> FrameDataset:
+        """The same items whose ``mask`` is the object-class map: 0 background, ``k`` an instance of ``classes[k - 1]``.
+
+        An instance of a class not in ``classes`` (one only held-out frames
+        have) is background.
+        """
+        out = copy.copy(self)
+        out.classes = tuple(classes)
         return out
 
     def set_epoch(self, epoch: int) -> None:
@@ -258,8 +280,38 @@ class FrameDataset(Dataset):
                 return mask
         return load_sample(sample)[2]  # no mask (all false at the frame's size), or one to check
 
+    def instance_map(self, index: int) -> np.ndarray:
+        """uint8 ``(H, W)`` at the training size: 0 nowhere, ``i + 1`` where instance ``i`` of the sample is painted."""
+        position = self._positions[index]
+        if self._instance_cache is not None and position in self._instance_cache:
+            return self._instance_cache[position]
+        sample = self.samples[position]
+        if len(sample.instances) > 255:
+            raise EgonetError(f"sample {sample.key!r}: at most 255 instances, got {len(sample.instances)}", field="instances")
+        shape = self.base(index)[2].shape
+        out = np.zeros(shape, np.uint8)
+        for i, (_, source) in enumerate(sample.instances):
+            mask = _read(source, io.read_mask)
+            if not isinstance(mask, np.ndarray) or mask.dtype != np.bool_ or mask.ndim != 2:
+                raise EgonetError(f"sample {sample.key!r}: instances[{i}] must be a bool (H, W) mask, got {_describe(mask)}",
+                                  field="instances")  # fmt: skip
+            out[resize_frame(mask, shape, nearest=True)] = i + 1
+        if self._instance_cache is not None:
+            self._instance_cache[position] = out
+        return out
+
+    def target(self, index: int) -> np.ndarray:
+        """Item ``index``'s target at the training size: the bool mask, or with classes the uint8 class map."""
+        mask = self.base(index)[2]
+        if self.classes is None:
+            return mask
+        number = {name: k + 1 for k, name in enumerate(self.classes)}
+        lut = np.array([0] + [number.get(name, 0) for name, _ in self.sample(index).instances], np.uint8)
+        return lut[self.instance_map(index)]
+
     def __getitem__(self, index: int) -> dict[str, torch.Tensor | int]:
-        rgb, dhg, mask = self.base(index)
+        rgb, dhg, _ = self.base(index)
+        mask = self.target(index)
         if self.augment is not None:
             rng = np.random.default_rng([self.seed, self.epoch, self._positions[index]])
             rgb, dhg, mask = augment_frame(rgb, dhg, mask, self.augment, rng)
@@ -279,7 +331,7 @@ def augment_frame(
     Args:
         rgb: uint8 ``(H, W, 3)``.
         dhg: uint8 ``(H, W, 3)``.
-        mask: bool ``(H, W)``.
+        mask: bool or uint8 (class map) ``(H, W)``.
         augment: What to draw.
         rng: The draws' source.
 
@@ -301,7 +353,7 @@ def augment_frame(
     warp = {"dsize": (width, height), "borderMode": cv2.BORDER_REFLECT_101}
     rgb = cv2.warpAffine(rgb, matrix, flags=flags | cv2.INTER_LINEAR, **warp)
     dhg = cv2.warpAffine(dhg, matrix, flags=flags | cv2.INTER_LINEAR, **warp)
-    mask = cv2.warpAffine(mask.astype(np.uint8), matrix, flags=flags | cv2.INTER_NEAREST, **warp).astype(bool)
+    mask = cv2.warpAffine(mask.astype(np.uint8), matrix, flags=flags | cv2.INTER_NEAREST, **warp).astype(mask.dtype)
     rgb = _photometric(rgb, augment, rng)
     return rgb, dhg, mask
 

@@ -55,7 +55,7 @@ import os
 import re
 import time
 from collections.abc import Callable, Iterator, Mapping, Sequence
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 from pathlib import Path
 
 import numpy as np
@@ -71,8 +71,8 @@ from egonet.data import FrameDataset, Sample, resize_probability
 from egonet.errors import EgonetError
 from egonet.init import initialise
 from egonet.metrics import ScoreAccumulator
-from egonet.network.builders import build_model, saved_options
-from egonet.network.model import EgoNetModel
+from egonet.network.builders import build_model, learns_classes, saved_options
+from egonet.network.model import EgoNetModel, action_object_probability
 
 __all__ = [
     "Fold",
@@ -357,7 +357,7 @@ def evaluate(
         logits = model(rgb, dhg).float()
         total += float(F.cross_entropy(logits, target, reduction="sum")) / target[0].numel()
         frames += len(items)
-        probabilities = logits.softmax(dim=1)[:, 1].cpu().numpy()
+        probabilities = action_object_probability(logits).cpu().numpy()
         for item, probability in zip(items, probabilities, strict=True):
             mask = dataset.native_mask(item["index"])
             probability = resize_probability(probability, mask.shape)
@@ -441,6 +441,12 @@ def fit(
     """
     device = resolve_device(config.device)
     rank, world_size = setup_distributed(device)
+    if learns_classes(config.model):
+        # Object-class segmentation (DeepLab-Obj): the classes the fold's *training* frames show, so
+        # nothing of the held-out activity (its instances of other classes are background there).
+        classes = start["model"]["options"]["classes"] if start is not None else train_set.class_names()
+        config = replace(config, model_options={**config.model_options, "classes": list(classes)})
+        train_set, test_set = train_set.with_classes(classes), test_set.with_classes(classes)
     model = _initial_model(config, device=device, world_size=world_size, start=start)
     optimizer = torch.optim.SGD(
         model.parameters(), lr=config.learning_rate, momentum=config.momentum, weight_decay=config.weight_decay
@@ -535,6 +541,8 @@ class _FoldRun:
         train_loss = self.history[-1]["train_loss"] if self.history else None
         self.metrics = {**final, "train_loss": train_loss, "epochs": self.epoch, "train_frames": len(train_set),
                         "test_frames": len(test_set)}
+        if "classes" in self.model.config.options:  # an object-class model: how many it learned
+            self.metrics["classes"] = len(self.model.config.options["classes"])
         self.save(complete=True)
 
     def save(self, *, complete: bool) -> None:

@@ -23,11 +23,12 @@ from app.blueprints import exports
 from app.blueprints.frames import media_urls
 from app.errors import Problem
 from app.extensions import db
-from app.models import Annotation, Frame, InstanceKind, Role, Status
+from app.models import HAND_LABEL, Annotation, Frame, InstanceKind, Role, Status
 from app.security import roles
 from app.services import exchange
 from app.services import frames as frames_service
 from app.services import labelling, media
+from app.services.labelling import classes
 from app.validation import MIB, Bool, Float, Int, List, Obj, Str, json_body, query_int, read_body, takes_json
 from egonet import io as egonet_io
 
@@ -117,6 +118,8 @@ def page_config(frame: Frame, *, mode: str, annotation: Annotation | None = None
     config = {
         "mode": mode,
         "history_max_bytes": labelling.MAX_HISTORY_BYTES,
+        # The label field completes from these (a datalist); strict: a name outside them is refused on save.
+        "classes": {"names": classes.class_names(), "hand": HAND_LABEL, "strict": current_app.config["LABEL_CLASSES_STRICT"]},
         "frame": {"id": frame.id, "width": frame.width, "height": frame.height, **media_urls(frame)},
         "urls": {
             "grabcut": {
@@ -154,6 +157,38 @@ def page_config(frame: Frame, *, mode: str, annotation: Annotation | None = None
             next_review=url_for("label.next_review", after=annotation.id),
         )
     return config
+
+
+@bp.get("/label/classes")
+@roles(Role.ADMIN)
+def class_list():
+    """The project's object classes: the names the label field completes from (admins manage them)."""
+    return render_template("label/classes.html", names=classes.class_names(), strict=current_app.config["LABEL_CLASSES_STRICT"],
+                           hand=HAND_LABEL)
+
+
+@bp.post("/label/classes")
+@roles(Role.ADMIN)
+def add_classes():
+    """Add the names typed in the form's ``names`` field, one a line or separated by commas."""
+    text = request.form.get("names", "")
+    if len(text) > 20_000:
+        raise Problem("names: at most 20,000 characters at once", field="names", status=413)
+    names = [n for line in text.splitlines() for n in line.split(",") if n.strip()]
+    if not names:
+        raise Problem("names: type at least one class name", field="names")
+    added = classes.add_classes(names)
+    flash(f"Added {len(added)} of {len(names)} classes." + (f" ({len(names) - len(added)} were in the list already.)" if len(added) < len(names) else ""))
+    return redirect(url_for("label.class_list"))
+
+
+@bp.post("/label/classes/remove")
+@roles(Role.ADMIN)
+def remove_class():
+    name = request.form.get("name", "")
+    classes.remove_class(name)
+    flash(f"Removed {name.strip()!r}; labels already saved keep it.")
+    return redirect(url_for("label.class_list"))
 
 
 @bp.get("/label/frames/<int:frame_id>")

@@ -114,3 +114,37 @@ def suggest_command(source, run_id, frames, activities, username, device, queue)
         click.echo(f"frame {frame_id}: skipped, {why}")
     click.echo(f"{what}: {report.proposals} proposals on {len(report.suggestions)} frames for {user.username}, "
                f"{len(report.skipped)} frames skipped")
+
+
+@bp.cli.group("classes")
+def classes_group():
+    """The project's object classes: the names the labelling page's label field completes from."""
+
+
+@classes_group.command("list")
+def classes_list_command():
+    """Print the class names, one a line (alphabetical)."""
+    from app.services.labelling.classes import class_names
+
+    for name in class_names():
+        click.echo(name)
+
+
+@classes_group.command("add")
+@click.argument("names", nargs=-1, required=True)
+def classes_add_command(names):
+    """Add class names (a name already in the list, in any case, is left as it is)."""
+    from app.services.labelling.classes import add_classes
+
+    added = add_classes(names)
+    click.echo(f"added {len(added)} of {len(names)}: {', '.join(added) or 'none new'}")
+
+
+@classes_group.command("remove")
+@click.argument("name")
+def classes_remove_command(name):
+    """Take a class name off the list (saved labels keep it)."""
+    from app.services.labelling.classes import remove_class
+
+    remove_class(name)
+    click.echo(f"removed {name.strip()}")

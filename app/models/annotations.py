@@ -11,6 +11,7 @@ from sqlalchemy.orm import Mapped, mapped_column, relationship
 from app.models.base import Base, UTCDateTime, enum_type, utcnow
 from app.models.frames import Frame
 from app.models.users import User
+from egonet.hands import HAND_LABEL
 
 
 class Status(enum.StrEnum):
@@ -29,6 +30,30 @@ FINISHED = (Status.DONE, Status.REVIEWED)
 class InstanceKind(enum.StrEnum):
     TACTILE = "tactile"
     VISUAL = "visual"
+
+
+def is_hand(label: str | None) -> bool:
+    """Whether an instance with this label outlines the wearer's hands (``egonet.hands.HAND_LABEL``, any case, outer spaces ignored).
+
+    Such instances train the hand detector of the Handled+Viewed-Obj baseline
+    and are left out of the annotation's action-object mask; the demo ships
+    them for every frame where hands show.
+    """
+    return label is not None and label.strip().lower() == HAND_LABEL
+
+
+class ObjectClass(Base):
+    """A name in the project-wide list of object classes the labelling page's label field completes from.
+
+    Whether a label outside the list is refused is the ``LABEL_CLASSES_STRICT``
+    setting (``app.services.labelling.classes``).
+    """
+
+    __tablename__ = "object_class"
+
+    id: Mapped[int] = mapped_column(primary_key=True)
+    name: Mapped[str] = mapped_column(String(120), unique=True)
+    created_at: Mapped[datetime] = mapped_column(UTCDateTime(), default=utcnow)
 
 
 class Annotation(Base):

@@ -47,7 +47,10 @@ def create_demo(
     """Render and import the demo frames of every activity.
 
     Each frame's ground-truth mask becomes a reviewed annotation by the
-    "demo" author, except for the last ``unlabelled_count(frames_per_activity,
+    "demo" author (its action-object, labelled with the object's class, and
+    the renderer's hands and arms as an instance labelled ``hand``, which is
+    no part of the action-object mask but trains the hand detector of
+    Handled+Viewed-Obj), except for the last ``unlabelled_count(frames_per_activity,
     unlabelled_fraction)`` frames of each activity, which get none: a new
     user finds them as one block at the end of each activity's grid (and the
     first of them right after the labelled ones in "next unlabelled"), as in a
@@ -86,9 +89,10 @@ def create_demo(
         for f in synth.render_activity(activity, frames_per_activity, seed=seed, width=width, height=height):
             name = f"{activity.replace(' ', '-')}-{seed}-{f.index:04d}"
             dhg = encode_dhg(f.depth_m, f.height_m, cv2.cvtColor(f.rgb, cv2.COLOR_RGB2GRAY))
-            mask = f.mask if f.index < first_unlabelled else None
+            labelled = f.index < first_unlabelled
             yield FrameItem(
-                name, f.index, f"demo {name}", rgb=f.rgb, depth_m=f.depth_m, dhg=dhg, K=f.K, mask=mask, meta=dict(f.meta)
+                name, f.index, f"demo {name}", rgb=f.rgb, depth_m=f.depth_m, dhg=dhg, K=f.K, mask=f.mask if labelled else None,
+                meta=dict(f.meta), hands=f.hands if labelled else None,
             )
 
     return [

@@ -31,7 +31,7 @@ from sqlalchemy.exc import IntegrityError
 
 from app.errors import Problem
 from app.extensions import db
-from app.models import Activity, Annotation, Frame, Instance, Role, Sequence, Status, User
+from app.models import HAND_LABEL, Activity, Annotation, Frame, Instance, Role, Sequence, Status, User
 from app.services import media
 from egonet import io
 
@@ -71,6 +71,7 @@ class FrameItem:
     K: np.ndarray | None = None
     mask: np.ndarray | None = None
     meta: dict = field(default_factory=dict)
+    hands: np.ndarray | None = None  # bool (H, W): stored with the mask as an instance labelled "hand"
 
 
 @dataclass
@@ -378,6 +379,8 @@ def _add_frame(seq: Sequence, item: FrameItem, known: set[str], written: list[Pa
         frame.dhg_path = media.store(io.encode_png(dhg), ".png", written=written)
     if item.mask is not None:
         _check_size(item.mask, rgb, f"mask for {item.origin}")
+    if item.hands is not None:
+        _check_size(item.hands, rgb, f"hand mask for {item.origin}")
     db.session.add(frame)
     return frame
 
@@ -395,6 +398,9 @@ def _add_mask_annotation(frame: Frame, item: FrameItem, author: User, status: St
     if not empty:
         kind = item.meta.get("kind")
         annotation.instances.append(Instance(position=0, kind=kind, label=item.meta.get("object"), mask_path=path))
+    if item.hands is not None and item.hands.any():  # not part of the action-object mask (models.is_hand)
+        hands = media.store(io.encode_png(item.hands), ".png", written=written)
+        annotation.instances.append(Instance(position=len(annotation.instances), label=HAND_LABEL, mask_path=hands))
     db.session.add(annotation)
 
 

@@ -9,7 +9,8 @@ One module per method:
 * ``aop``: :class:`ActionObjectPrior`, the paper's AOP (learned: the mean mask);
 * ``egonet.saliency``: :class:`GraphSaliency`, the paper's GBVS (learns nothing,
   as in the paper);
-* ``handled``: :class:`HandledViewedObject`, the paper's Handled+Viewed-Obj;
+* ``handled``: :class:`HandledViewedObj`, the paper's Handled+Viewed-Obj (learned: a hand detector,
+  ``egonet.hands``), and :class:`HandledViewedObject`, its regions scored by their distance to given hands;
 * ``simple``: :class:`CenterPrior` and :class:`SpectralResidualSaliency`,
   references that are not rows of the paper.
 
@@ -31,7 +32,7 @@ from typing import Any
 
 from egonet.baselines.aop import ActionObjectPrior
 from egonet.baselines.fpmcg import FirstPersonMCG
-from egonet.baselines.handled import HandledViewedObject
+from egonet.baselines.handled import HandledViewedObj, HandledViewedObject
 from egonet.baselines.judd import Judd
 from egonet.baselines.protocol import (
     Predictor,
@@ -54,6 +55,7 @@ __all__ = [
     "CenterPrior",
     "FirstPersonMCG",
     "GraphSaliency",
+    "HandledViewedObj",
     "HandledViewedObject",
     "Judd",
     "Predictor",
@@ -73,7 +75,7 @@ __all__ = [
 BASELINES: dict[str, type] = {
     "judd": Judd,
     "gbvs": GraphSaliency,
-    "handled": HandledViewedObject,
+    "handled": HandledViewedObj,
     "aop": ActionObjectPrior,
     "fpmcg": FirstPersonMCG,
     "salobj": SalientObjectDepth,

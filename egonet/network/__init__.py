@@ -35,9 +35,10 @@ Conventions shared by every model (those of the authors' release, see
   channel 8192 is the row map.
 * Normalisation constants are buffers inside the model (and so inside every
   ``state_dict``): callers never subtract means themselves.
-* ``model(rgb, dhg)`` returns two-class logits ``(N, 2, H, W)`` and respects
-  ``train()``/``eval()``; ``model.predict(rgb, dhg)`` returns the softmax of
-  channel 1 ``(N, H, W)`` computed in eval mode under ``torch.no_grad``.
+* ``model(rgb, dhg)`` returns two-class logits ``(N, 2, H, W)`` (DeepLab-Obj:
+  one per object class and background) and respects ``train()``/``eval()``;
+  ``model.predict(rgb, dhg)`` returns one minus the background's softmax
+  ``(N, H, W)`` (channel 1's for two classes) in eval mode under ``torch.no_grad``.
 * ``model.config`` (a frozen ``ModelConfig``) holds the variant name and
   its architecture options, so a checkpoint can rebuild the model with
   ``build_model(config.name, **config.options)``. Checkpoints written before

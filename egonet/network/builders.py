@@ -16,7 +16,7 @@ Builders take keyword options only; these mean the same in every builder that ta
 from __future__ import annotations
 
 import inspect
-from collections.abc import Callable, Mapping
+from collections.abc import Callable, Mapping, Sequence
 
 from egonet.errors import EgonetError
 from egonet.network.lite import LITE_MEAN, LITE_STD, LiteStream, efficientnet_lite0_state_dict
@@ -26,9 +26,9 @@ from egonet.network.model import (COORD_ORDERS, DHG_ORDERS, CoordConvention, Coo
 from egonet.network.streams import (RELEASED_BGR_MEAN, RELEASED_DHG_FLIPPED_MEAN, InputNormalization, VGGDeepLabStream,
                                     _check_width_divisor)
 
-__all__ = ["MODELS", "PAPER_NAMES", "build_deeplab_dhg", "build_deeplab_rgb", "build_egonet", "build_egonet_dhg",
+__all__ = ["MODELS", "PAPER_NAMES", "build_deeplab_dhg", "build_deeplab_obj", "build_deeplab_rgb", "build_egonet", "build_egonet_dhg",
            "build_egonet_lite", "build_egonet_rgb", "build_model", "build_no_coords", "build_no_embedding",
-           "build_single_stream", "saved_options"]
+           "build_single_stream", "learns_classes", "saved_options"]
 
 #: What a checkpoint saved before these options existed was trained with.
 LEGACY_ORDERS = {"coord_order": "cols-first", "dhg_order": "depth-height-gray"}
@@ -86,6 +86,7 @@ def _two_stream_vgg(
     coord_order: CoordOrder = "rows-first",
     dhg_order: DHGOrder = "gray-height-depth",
     extra: Mapping[str, object] | None = None,
+    num_classes: int = 2,
 ) -> TwoStreamEgoNet:
     """Compose VGG streams, coordinate maps and the joint head; ``coords=None`` drops the maps.
 
@@ -110,7 +111,8 @@ def _two_stream_vgg(
         config=ModelConfig(name, options),
         rgb_stream=streams[0],
         dhg_stream=streams[1],
-        head=JointHead(in_channels=in_channels, embed_channels=None if embed is None else embed // divisor, dropout=dropout),
+        head=JointHead(in_channels=in_channels, embed_channels=None if embed is None else embed // divisor,
+                       num_classes=num_classes, dropout=dropout),
         coords=CoordinateMaps(convention=coords, order=coord_order) if coords is not None else None,
         rgb_norm=rgb_norm if rgb else None,
         dhg_norm=dhg_norm if dhg else None,
@@ -255,6 +257,35 @@ def build_deeplab_dhg(
     )
 
 
+def build_deeplab_obj(*, classes: Sequence[str] = (), dropout: float = 0.5, width_divisor: int = 1) -> TwoStreamEgoNet:
+    """Baseline: DeepLab on RGB trained for object-class segmentation (the paper's DeepLab-Obj, 41 classes there).
+
+    DeepLab-RGB's network with one output per class plus background: fc10
+    (DeepLab's fc8) reads the 4096 fc7 channels into ``len(classes) + 1``
+    maps; 65,054,528 + 4097 (K + 1) parameters. Trained on the labelled
+    instances' classes (``egonet.train`` takes them from each fold's training
+    frames), its action-object map is one minus the background probability
+    (:func:`~egonet.network.model.action_object_probability`): an object of
+    any class the wearer's activities involve, where the paper's object
+    segmentation knew nothing of which object is acted on.
+
+    Args:
+        classes: The class names, in output order (output 0 is background).
+
+    Example:
+        >>> with torch.device("meta"):
+        ...     model = build_deeplab_obj(classes=("cup", "pan"))
+        >>> model.head.fc10.out_channels
+        3
+    """
+    if isinstance(classes, str) or not all(isinstance(c, str) and c for c in classes) or len(set(classes)) != len(classes):
+        raise EgonetError(f"classes must be distinct non-empty names, got {classes!r}", field="classes")
+    return _two_stream_vgg(
+        "deeplab-obj", rgb=True, dhg=False, coords=None, embed=None, dropout=dropout, width_divisor=width_divisor,
+        extra={"classes": list(classes)}, num_classes=len(classes) + 1,
+    )
+
+
 def build_egonet_lite(
     *,
     coords: CoordConvention = "normalized",
@@ -326,6 +357,7 @@ MODELS: dict[str, Callable[..., EgoNetModel]] = {
     # The paper's DeepLab baselines: one stream, no coordinates, no embedding.
     "deeplab-rgb": build_deeplab_rgb,
     "deeplab-dhg": build_deeplab_dhg,
+    "deeplab-obj": build_deeplab_obj,
 }
 
 
@@ -363,6 +395,16 @@ def build_model(name: str, **options: object) -> EgoNetModel:
     return builder(**options)
 
 
+def learns_classes(name: str) -> bool:
+    """Whether variant ``name`` segments object classes (DeepLab-Obj): its builder takes ``classes``.
+
+    Example:
+        >>> learns_classes("deeplab-obj"), learns_classes("egonet")
+        (True, False)
+    """
+    return name in MODELS and "classes" in inspect.signature(MODELS[name]).parameters
+
+
 def saved_options(name: str, options: Mapping[str, object]) -> dict[str, object]:
     """The builder options of a saved model, with the orders it was trained in where it does not say.
 
@@ -395,4 +437,5 @@ def _check_dropout(dropout: object) -> float:
 
 #: The paper's names of the variants that are rows of its Table 2 (the score table shows a run of
 #: one of these as "<paper name> (run N)"; other variants keep their own name).
-PAPER_NAMES: dict[str, str] = {"egonet": "EgoNet", "deeplab-rgb": "DeepLab-RGB", "deeplab-dhg": "DeepLab-DHG"}
+PAPER_NAMES: dict[str, str] = {"egonet": "EgoNet", "deeplab-rgb": "DeepLab-RGB", "deeplab-dhg": "DeepLab-DHG",
+                               "deeplab-obj": "DeepLab-Obj"}

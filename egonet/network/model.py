@@ -13,7 +13,7 @@ from torch import Tensor, nn
 from egonet.errors import EgonetError
 from egonet.network.streams import InputNormalization
 
-__all__ = ["MIN_SIDE", "CoordinateMaps", "EarlyFusionEgoNet", "EgoNetModel", "JointHead", "ModelConfig",
+__all__ = ["MIN_SIDE", "CoordinateMaps", "EarlyFusionEgoNet", "EgoNetModel", "JointHead", "ModelConfig", "action_object_probability",
            "TwoStreamEgoNet"]
 
 #: Smallest accepted input height and width.
@@ -268,7 +268,8 @@ class EgoNetModel(nn.Module):
             geometry: ``"input"`` or ``"zoom8"`` (see :meth:`forward`).
 
         Returns:
-            ``(N, H, W)`` softmax probability of class 1, in ``[0, 1]``.
+            ``(N, H, W)`` action-object probability in ``[0, 1]``
+            (:func:`action_object_probability`).
         """
         was_training = self.training
         self.eval()
@@ -277,7 +278,18 @@ class EgoNetModel(nn.Module):
                 logits = self(rgb, dhg, geometry=geometry)
         finally:
             self.train(was_training)
-        return logits.softmax(dim=1)[:, 1]
+        return action_object_probability(logits)
+
+
+def action_object_probability(logits: Tensor) -> Tensor:
+    """``(N, C, H, W)`` logits -> ``(N, H, W)``: one minus the background's softmax probability.
+
+    For the two-class models this is class 1's probability (computed as the
+    sum of the non-background classes, so exactly it); for an object-class
+    model (DeepLab-Obj) it is the probability that the pixel belongs to *some*
+    labelled object, whatever its class.
+    """
+    return logits.softmax(dim=1)[:, 1:].sum(dim=1)
 
 
 class TwoStreamEgoNet(EgoNetModel):

@@ -39,6 +39,8 @@ class SynthFrame:
             where ``depth_m`` is 0.
         mask: ``(H, W)`` bool visible pixels of the action-object (never
             empty).
+        hands: ``(H, W)`` bool visible pixels of the wearer's hands and arms
+            (sleeves included: one primitive group in the scene); often empty.
         K: ``(3, 3)`` float64 camera intrinsics.
         meta: JSON-serialisable facts about the frame: ``camera_height_m``,
             ``pitch_deg``, ``roll_deg``, ``yaw_deg``, ``up_cam``, ``kind``
@@ -56,6 +58,7 @@ class SynthFrame:
     mask: np.ndarray
     K: np.ndarray
     meta: dict
+    hands: np.ndarray
 
 
 # ---------------------------------------------------------------------------
@@ -146,6 +149,7 @@ def render_frame(
         mask=mask,
         K=K,
         meta=meta,
+        hands=cast.obj == _HAND,
     )
 
 

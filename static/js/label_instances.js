@@ -109,7 +109,7 @@ export function renderInstances() {
         <select class="kind" aria-label="kind" ${editable ? "" : "disabled"}>
           <option value="">kind…</option><option value="tactile">tactile</option><option value="visual">visual</option>
         </select>
-        <input class="label" placeholder="name (optional)" maxlength="120" aria-label="name" ${editable ? "" : "disabled"}>
+        <input class="label" list="object-classes" placeholder="class (optional)" maxlength="120" aria-label="name" ${editable ? "" : "disabled"}>
         ${editable ? '<button type="button" class="delete" title="Delete object (Del)" aria-label="delete">✕</button>' : ""}
       </div>`;
     li.querySelector(".swatch").style.background = `rgb(${r}, ${g}, ${b})`; // a style attribute would break the CSP

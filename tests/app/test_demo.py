@@ -7,12 +7,12 @@ import pytest
 
 from app.errors import Problem
 from app.extensions import db
-from app.models import Activity, Frame, Sequence, User
-from app.services import labelling
+from app.models import HAND_LABEL, Activity, Frame, Sequence, User
+from app.services import labelling, media
 from app.services.demo import create_demo, renderer_truth, unlabelled_count
 from app.services.ground_truth import ground_truths, labelled_frames, mask_of
 from app.services.importing import import_path
-from egonet import synth
+from egonet import io, synth
 from tests.app.conftest import PASSWORD
 from tests.app.factories import image_folder
 
@@ -57,6 +57,27 @@ def test_the_last_quarter_of_each_activity_is_left_unlabelled_and_the_renderer_s
         np.testing.assert_array_equal(truth, synth.render_frame(activity, 3, seed=2, **SIZE).mask)
         # For a labelled frame it is the stored ground truth.
         np.testing.assert_array_equal(renderer_truth(frames[0]), mask_of(truths[frames[0].id]))
+
+
+def test_the_demo_ships_hand_masks_that_are_no_part_of_the_action_object(ctx):
+    create_demo(frames_per_activity=6, unlabelled_fraction=0.0, **SIZE)
+    hands_seen = 0
+    for frame in labelled_frames():
+        annotation = ground_truths([frame.id])[frame.id]
+        rendered = synth.render_frame(frame.meta["activity"], frame.meta["index"], seed=0, **SIZE)
+        hands = [i for i in annotation.instances if i.label == HAND_LABEL]
+        objects = [i for i in annotation.instances if i.label != HAND_LABEL]
+        assert [i.label for i in objects] == [frame.meta["object"]]
+        # The ground truth is the action-object alone, whatever the hands.
+        np.testing.assert_array_equal(mask_of(annotation), rendered.mask)
+        if rendered.hands.any():
+            hands_seen += 1
+            (hand,) = hands
+            np.testing.assert_array_equal(io.read_mask(media.absolute_path(hand.mask_path)), rendered.hands)
+            assert not (rendered.hands & rendered.mask).any()
+        else:
+            assert hands == []
+    assert hands_seen >= 10  # most demo frames show a hand
 
 
 def test_renderer_truth_refuses_frames_it_did_not_make(ctx, tmp_path):

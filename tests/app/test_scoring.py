@@ -27,7 +27,7 @@ from egonet.baselines import (
     ActionObjectPrior,
     CenterPrior,
     GraphSaliency,
-    HandledViewedObject,
+    HandledViewedObj,
     SpectralResidualSaliency,
     TrainingFrame,
 )
@@ -35,7 +35,7 @@ from egonet.metrics import MIN_FRAMES, count_stats, score_maps
 from tests.app.access.studies import build_study
 
 SIZE = (48, 64)
-HANDLED_ROW = "Handled+Viewed-Obj (hands: labelled tactile objects)"
+HANDLED_ROW = "Handled+Viewed-Obj (hands: skin colour)"  # these frames have no hand instances
 # The paper's Table 2 order, then the references.
 BASELINE_ROWS = ["Judd", "GBVS", HANDLED_ROW, "AOP", "FP-MCG", "salObj+depth", "centre prior", "saliency"]
 # Each activity's action-object sits somewhere else, so a prior fitted with
@@ -54,8 +54,11 @@ class Clock:
         return self.t
 
 
-def add_activity(name: str, *, n: int = 3, seed: int = 0) -> None:
-    """``n`` labelled frames of random colour with the activity's box (shifted a little per frame) as ground truth."""
+def add_activity(name: str, *, n: int = 3, seed: int = 0, hands: bool = False) -> None:
+    """``n`` labelled frames of random colour with the activity's box (shifted a little per frame) as ground truth.
+
+    With ``hands``, each frame also shows a skin-coloured hand at the bottom, stored as an instance labelled ``hand``.
+    """
     rng = np.random.default_rng(seed)
     rows, cols = BOXES[name]
 
@@ -67,7 +70,12 @@ def add_activity(name: str, *, n: int = 3, seed: int = 0) -> None:
             rgb[mask] //= 3  # a darker object, so saliency has something to find
             # Cooking's objects are handled (tactile), the others' only looked at.
             meta = {"kind": "tactile" if name == "cooking" else "visual"}
-            yield FrameItem(f"{name}-{i}", i, f"test {name} {i}", rgb=rgb, mask=mask, meta=meta)
+            hand = None
+            if hands:
+                hand = np.zeros(SIZE, bool)
+                hand[38:, 4 + 6 * i : 20 + 6 * i] = True
+                rgb[hand] = (205, 145, 115)
+            yield FrameItem(f"{name}-{i}", i, f"test {name} {i}", rgb=rgb, mask=mask, meta=meta, hands=hand)
 
     add_frames(activity=name, sequence="take", items=items(), mask_status=Status.REVIEWED)
 
@@ -247,7 +255,7 @@ def test_baselines_match_a_direct_computation_and_aop_follows_the_fold_rule(ctx)
     report = scoring.build_report(run_ids=[], study_ids=[], baselines=True)
     assert [r.name for r in report.rows] == BASELINE_ROWS
     learned = {r.name for r in report.rows if r.detail == "fitted per fold under leave-one-activity-out"}
-    assert learned == {"Judd", "AOP", "FP-MCG", "salObj+depth"}
+    assert learned == {"Judd", HANDLED_ROW, "AOP", "FP-MCG", "salObj+depth"}
     assert report.activities == sorted(BOXES)
 
     frames = frames_by_activity()
@@ -267,8 +275,8 @@ def test_baselines_match_a_direct_computation_and_aop_follows_the_fold_rule(ctx)
         leaky = ActionObjectPrior().fit_masks([m for ms in masks.values() for m in ms])
         assert score_maps([leaky.predict(rgb) for rgb in rgbs[activity]], masks[activity]).ap != pytest.approx(expected.ap, abs=1e-3)
 
-    def handled(rgb, mask, activity):  # the hands: the labelled tactile object (cooking's), else the centre
-        return HandledViewedObject(width=160, scale=50.0, max_area=0.05).predict(rgb, near=mask if activity == "cooking" else None)
+    def handled(rgb, mask, activity):  # no hand labels anywhere: every fold's hands are skin colour, never the labels
+        return HandledViewedObj().fit_summaries([]).predict(rgb)
 
     predictors = (("centre prior", lambda rgb, m, a: CenterPrior().predict(rgb)),
                   ("saliency", lambda rgb, m, a: SpectralResidualSaliency().predict(rgb)),
@@ -292,8 +300,8 @@ def test_baselines_match_a_direct_computation_and_aop_follows_the_fold_rule(ctx)
 def test_with_one_activity_there_are_no_learned_baselines(ctx):
     add_activity("cooking")
     report = scoring.build_report(run_ids=[], study_ids=[])
-    learned = ("Judd", "AOP", "FP-MCG", "salObj+depth")
-    assert [r.name for r in report.rows] == [name for name in BASELINE_ROWS if name not in learned]
+    learned = ("Judd", "Handled+Viewed-Obj", "AOP", "FP-MCG", "salObj+depth")  # the registry's order
+    assert [r.name for r in report.rows] == [name for name in BASELINE_ROWS if name not in (*learned, HANDLED_ROW)]
     assert report.notes == [f"{name}: no other activity has labelled frames to fit the fold of cooking." for name in learned]
 
 

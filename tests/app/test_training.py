@@ -10,9 +10,10 @@ import numpy as np
 import pytest
 
 from app.extensions import db
-from app.models import Activity, Frame
+from app.models import HAND_LABEL, Activity, Frame
 from app.models.training import Checkpoint, FoldsMode, Prediction, RunStatus, TrainingEpoch, TrainingRun
-from app.services import media, training
+from app.services import ground_truth, media, training
+from app.services.scoring.sources import run_row_name
 from app.services.demo import create_demo
 from egonet.checkpoint import load_checkpoint
 
@@ -70,6 +71,25 @@ def test_a_run_records_a_checkpoint_per_fold_and_every_held_out_prediction(ctx, 
         assert isinstance(frame, Frame)
         assert probability.shape == (frame.height, frame.width) == (48, 64) and probability.dtype == np.float32
         assert 0.0 <= probability.min() and probability.max() <= 1.0
+
+
+def test_deeplab_obj_learns_the_training_activities_object_classes_and_its_row_says_how_many(ctx, demo):
+    run = train_now(demo, model="deeplab-obj")
+    assert run.status is RunStatus.DONE, run.message
+    labels = {}
+    for frame in ground_truth.labelled_frames(two_activities(demo)):
+        annotation = ground_truth.ground_truths([frame.id])[frame.id]
+        labels.setdefault(frame.sequence.activity.name, set()).update(i.label.lower() for i in annotation.instances)
+    assert any(HAND_LABEL in found for found in labels.values())  # the demo's hands are there, and are no class
+    for checkpoint in run.checkpoints:
+        other = next(a for a in labels if a != checkpoint.fold)
+        options = load_checkpoint(training.checkpoint_root() / checkpoint.path)["model"]["options"]
+        assert options["classes"] == sorted(labels[other] - {HAND_LABEL})
+        assert checkpoint.metrics["classes"] == len(options["classes"])
+    counts = sorted({c.metrics["classes"] for c in run.checkpoints})
+    n = str(counts[0]) if len(counts) == 1 else f"{counts[0]}-{counts[-1]}"
+    assert run_row_name(run) == f"DeepLab-Obj, {n} classes (run {run.id})"
+    assert len(list(training.held_out_predictions(run))) == 4
 
 
 def test_stored_maps_are_the_engine_maps_to_16_bits(ctx, demo):

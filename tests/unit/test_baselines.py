@@ -10,6 +10,7 @@ from egonet.baselines import (
     CenterPrior,
     FirstPersonMCG,
     GraphSaliency,
+    HandledViewedObj,
     HandledViewedObject,
     Judd,
     Predictor,
@@ -226,7 +227,7 @@ def test_registry_and_build():
     assert BASELINES["aop"].name == "AOP" and BASELINES["gbvs"].name == "GBVS"
     assert isinstance(build_baseline("center"), CenterPrior)
     assert isinstance(build_baseline("gbvs"), GraphSaliency)
-    assert isinstance(build_baseline("handled"), HandledViewedObject)
+    assert isinstance(build_baseline("handled"), HandledViewedObj) and is_trained("handled")
     assert isinstance(build_baseline("saliency"), SpectralResidualSaliency)
     assert build_baseline("aop", size=(3, 4)).size == (3, 4)
     assert is_trained("aop") and not is_trained("gbvs") and not is_trained("center")
@@ -334,10 +335,49 @@ def test_handled_viewed_prefers_the_object_nearest_the_hands_and_skips_the_hands
     p = HandledViewedObject().predict(rgb, near=hand, exclude=hand)
     assert p[12, 12] > 0.9 and p[12, 12] > p[48, 64]
     assert p[25, 10] == 0.0  # the hand itself is not the object
-    # The labelled tactile object as "near" (no detector): that object wins.
-    tactile = np.zeros_like(hand)
-    tactile[40:56, 56:72] = True
-    assert HandledViewedObject().predict(rgb, near=tactile)[48, 64] == pytest.approx(1.0)
+    # Whatever mask is "near" (here the centre object itself): that object wins.
+    held = np.zeros_like(hand)
+    held[40:56, 56:72] = True
+    assert HandledViewedObject().predict(rgb, near=held)[48, 64] == pytest.approx(1.0)
+
+
+def hand_frame(corner: int):
+    """``two_objects`` with the corner object at column ``corner`` held by a skin-coloured arm from the bottom edge; the arm's mask."""
+    rgb = frame(96, 128, 200)
+    rgb[40:56, 56:72] = (200, 40, 40)  # at the centre
+    rgb[4:20, corner : corner + 16] = (40, 40, 200)
+    hand = np.zeros(rgb.shape[:2], bool)
+    hand[20:, corner : corner + 16] = True
+    rgb[hand] = (205, 145, 115)
+    return rgb, hand
+
+
+def test_the_learned_handled_row_finds_the_hands_itself_and_takes_the_object_they_hold():
+    # Trained on frames whose hands are labelled (instances "hand"), never told where the scored frame's hands are.
+    training = [TrainingFrame(*hand_frame(c)[:1], None, np.zeros((96, 128), bool), (("Hand", hand_frame(c)[1]),))
+                for c in (4, 20, 36, 84, 100)]  # fmt: skip
+    model = HandledViewedObj(hand_width=128, pixels_per_frame=4000).fit(training)
+    assert model.hands == "learned, 5 frames"
+    rgb, hand = hand_frame(108)  # a corner no training frame had
+    np.testing.assert_array_equal(model.detect_hands(rgb), hand)
+    p = model.predict(rgb)
+    assert p[12, 116] > 0.9 and p[12, 116] > p[48, 64]  # the object the hand holds, not the centre's
+    assert p[25, 116] < 0.02  # the hand is no object: only the floor (a fiftieth of the centre prior)
+    # No hands in view: the object nearest the centre, as the paper's fallback.
+    assert model.predict(two_objects())[48, 64] == pytest.approx(1.0)
+    # Its state is plain arrays and gives back the same maps.
+    again = HandledViewedObj(hand_width=128, pixels_per_frame=4000).load_state(model.state())
+    np.testing.assert_array_equal(again.predict(rgb), p)
+    assert again.hands == "learned, 5 frames"
+
+
+def test_without_hand_labels_the_handled_row_falls_back_on_skin_colour():
+    rgb, hand = hand_frame(108)
+    model = HandledViewedObj().fit([TrainingFrame(rgb, None, np.zeros((96, 128), bool))])
+    assert model.hands == "skin colour"
+    np.testing.assert_array_equal(model.detect_hands(rgb), hand)  # this hand is plainly skin-coloured
+    with pytest.raises(ValueError, match="hand_threshold must be in"):
+        HandledViewedObj(hand_threshold=1.5)
 
 
 def test_handled_viewed_checks_its_masks():

@@ -175,3 +175,20 @@ def test_native_mask_is_at_the_frame_size():
     data = FrameDataset([Sample(rgb, dhg, mask), Sample(rgb, dhg, None)], size=(12, 16))
     assert np.array_equal(data.native_mask(0), mask)
     assert data.native_mask(1).shape == (48, 64) and not data.native_mask(1).any()
+
+
+def test_the_object_class_target_paints_instances_in_order_and_unknown_classes_are_background():
+    rgb = np.zeros((8, 8, 3), np.uint8)
+    cup, pan, bowl = (np.zeros((8, 8), bool) for _ in range(3))
+    cup[0:4, 0:4] = True
+    pan[2:6, 2:6] = True  # over the cup's corner: painted later, it wins there
+    bowl[7, 7] = True
+    sample = Sample(rgb=rgb, dhg=None, mask=cup | pan | bowl, instances=(("cup", cup), ("pan", pan), ("bowl", bowl)))
+    data = FrameDataset([sample], size=(8, 8))
+    assert data.class_names() == ["bowl", "cup", "pan"]
+    target = data.with_classes(["pan", "cup"])[0]["mask"].numpy()
+    expected = np.zeros((8, 8), np.int64)
+    expected[0:4, 0:4] = 2
+    expected[2:6, 2:6] = 1
+    np.testing.assert_array_equal(target, expected)  # the bowl is no class of this list: background
+    np.testing.assert_array_equal(data[0]["mask"].numpy(), (cup | pan | bowl).astype(np.int64))  # without classes: the mask

@@ -70,7 +70,22 @@ def lite_rgb_only() -> TwoStreamEgoNet:
 
 
 def test_models_registry_names():
-    assert set(MODELS) == set(VGG_NAMES) | set(DEEPLAB_NAMES) | {"egonet-lite"}
+    assert set(MODELS) == set(VGG_NAMES) | set(DEEPLAB_NAMES) | {"egonet-lite", "deeplab-obj"}
+
+
+def test_deeplab_obj_has_one_output_per_class_and_its_map_is_one_minus_background():
+    with torch.device("meta"):
+        paper = build_model("deeplab-obj", classes=tuple(f"class {k}" for k in range(41)))
+    assert count(paper) == 65_054_528 + 4096 * 42 + 42  # the paper's 41 classes and background
+    model = build_model("deeplab-obj", classes=("cup", "pan"), width_divisor=16)
+    assert model.config.options == {"classes": ["cup", "pan"], "dropout": 0.5, "width_divisor": 16}
+    rgb = torch.rand(2, 3, 24, 32)
+    logits = model.eval()(rgb)
+    assert logits.shape == (2, 3, 24, 32)
+    torch.testing.assert_close(model.predict(rgb), 1 - logits.softmax(dim=1)[:, 0])
+    for bad in (("cup", "cup"), ("",), "cup"):
+        with pytest.raises(ValueError, match="classes must be distinct non-empty names"):
+            build_model("deeplab-obj", classes=bad)
 
 
 @pytest.mark.parametrize("name", DEEPLAB_NAMES)

@@ -313,3 +313,25 @@ def test_torchrun_trains_on_two_processes_and_only_rank_zero_writes(tmp_path):
     state = load_checkpoint(tmp_path / "out" / "x.pt")
     assert state["epoch"] == 2 and state["iteration"] == 2  # 4 frames, 2 per process and step
     assert json.loads((tmp_path / "out" / "config.json").read_text())["environment"]["world_size"] == 2
+
+
+# --------------------------------------------------------------------------- object classes (DeepLab-Obj)
+
+
+def test_deeplab_obj_learns_the_classes_of_each_folds_training_frames_only(tmp_path):
+    samples = []
+    for s in tiny_samples(6, groups=("a", "b", "c")):
+        mask = s.mask
+        other = np.zeros_like(mask)
+        other[0:4, 0:6] = True
+        instances = {"a": (("cup", mask),), "b": (("cup", mask), ("pan", other)), "c": (("knife", mask),)}[s.group]
+        samples.append(Sample(rgb=s.rgb, dhg=None, mask=mask, group=s.group, key=s.key, instances=instances))
+    config = TrainConfig(**(TINY | {"model": "deeplab-obj"}), epochs=1, model_options={"width_divisor": 16})
+    maps = []
+    results = cross_validate(samples, config, out_dir=tmp_path, on_map=lambda fold, sample, p: maps.append(p))
+    seen = {r.name: load_checkpoint(r.checkpoint)["model"]["options"]["classes"] for r in results}
+    assert seen == {"a": ["cup", "knife", "pan"], "b": ["cup", "knife"], "c": ["cup", "pan"]}
+    assert [r.metrics["classes"] for r in results] == [3, 2, 2]
+    model = model_from_checkpoint(load_checkpoint(results[1].checkpoint))
+    assert model.head.fc10.out_channels == 3  # background, cup, knife
+    assert len(maps) == 6 and all(p.dtype == np.float32 and 0 <= p.min() and p.max() <= 1 for p in maps)

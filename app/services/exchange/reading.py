@@ -8,7 +8,7 @@ import numpy as np
 
 from app.errors import Problem
 from app.extensions import db
-from app.models import Activity, Annotation, Frame, Instance, InstanceKind, Role, Sequence, Status, User
+from app.models import Activity, Annotation, Frame, Instance, InstanceKind, Role, Sequence, Status, User, is_hand
 from app.services import media
 from app.services.exchange.selection import ANNOTATORS_DIR, COCO_FILE, MASKS_DIR, ExchangeProblem, frame_names
 from app.services.importing import unpacked
@@ -346,7 +346,8 @@ def _write_item(item: _Item, *, replace: bool, users: dict[str, User], written: 
     for position, (mask, kind, label) in enumerate(zip(item.masks, item.kinds, item.labels)):
         path = media.store(io.encode_png(mask), ".png", written=written)
         annotation.instances.append(Instance(position=position, kind=kind, label=label, mask_path=path))
-        union |= mask
+        if not is_hand(label):
+            union |= mask
     annotation.mask_path = media.store(io.encode_png(union), ".png", written=written) if union.any() else None
     empty = item.no_action_object if item.no_action_object is not None else not item.masks
     annotation.no_action_object = bool(empty) and not union.any()

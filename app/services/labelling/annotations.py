@@ -39,8 +39,9 @@ from sqlalchemy.orm.exc import StaleDataError
 
 from app.errors import Problem
 from app.extensions import db
-from app.models import FINISHED, Annotation, Frame, Instance, InstanceKind, Status, User, utcnow
+from app.models import FINISHED, Annotation, Frame, Instance, InstanceKind, Status, User, is_hand, utcnow
 from app.services import media
+from app.services.labelling.classes import check_labels
 from app.services.labelling.grabcut import forget_sessions
 from app.services.labelling.masks import decode_mask_png, decode_rle
 from egonet import io as egonet_io
@@ -159,6 +160,7 @@ def instance_specs(frame: Frame, instances: list[dict]) -> list["InstanceSpec"]:
     """
     shape = (frame.height, frame.width)
     _check_keys([item["key"] for item in instances])
+    check_labels([(item["label"] or "").strip() or None for item in instances])
     masks = [decode_rle(item["mask"], shape, field=f"instances[{i}].mask") for i, item in enumerate(instances)]
     return [
         InstanceSpec(
@@ -296,7 +298,7 @@ def _write(
         raise stale(current)
     if annotation is not None:
         _carry_marks(annotation, specs)
-    drawn = [s for s in specs if s.mask.any()]
+    drawn = [s for s in specs if s.mask.any() and not is_hand(s.label)]
     if no_action_object and drawn:
         raise Problem(
             "no_action_object: the frame has drawn action-objects; delete them first",
@@ -306,7 +308,8 @@ def _write(
         _check_complete(specs, no_action_object)
     union = np.zeros((frame.height, frame.width), bool)
     for spec in specs:
-        union |= spec.mask
+        if not is_hand(spec.label):  # hands are drawn to train the hand detector, they are no action-object
+            union |= spec.mask
     union_path = media.store(egonet_io.encode_png(union), ".png") if union.any() else None
 
     if annotation is None:
@@ -407,7 +410,7 @@ def _check_complete(specs: list[InstanceSpec], no_action_object: bool) -> None:
         if not spec.mask.any():
             raise Problem(f"instances[{i}].mask: empty; draw the object or delete the instance",
                           fields={f"instances[{i}].mask": "empty"})
-    if not specs and not no_action_object:
+    if not any(not is_hand(s.label) for s in specs) and not no_action_object:
         raise Problem(
             'status: draw at least one action-object or mark the frame "no action-object" before marking it done',
             fields={"status": "nothing drawn and not marked no action-object"},

@@ -166,9 +166,8 @@ def _baseline_jobs(truth: Truth, thresholds: int, *, fit_in_worker: bool) -> lis
         detail = "fitted per fold under leave-one-activity-out" if trained else "not trained"
         jobs.append(
             _Job(
-                rows=[_RowSpec(f"baseline:{key}", "", sources.baseline_name(key), BASELINE, detail)],
+                rows=[_RowSpec(f"baseline:{key}", "", sources.baseline_name(key, truth), BASELINE, detail)],
                 cache_key={"baseline": key, "version": cls.version, "params": params(build_baseline(key)),
-                           "hands": sources.HANDLED_HANDS if key == "handled" else None,
                            "truth": truth.fingerprint, "thresholds": thresholds},  # fmt: skip
                 # A learned baseline reads every frame twice (its folds' fit, then its maps) unless its folds are cached.
                 frames=len(truth.frames) * (2 if trained else 1),

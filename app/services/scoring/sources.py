@@ -7,10 +7,9 @@ maps, one at a time, into per-frame counts (``cache.FrameStats``):
 * a completed training run: its held-out predictions (``app.services.training``);
   the authors' released model, never trained on ours, holds every frame out;
 * a baseline (``egonet.baselines``) on every labelled frame: a learned one
-  (AOP, Judd, FP-MCG, salObj+depth) with the model of the frame's
-  leave-one-activity-out fold, fitted without the frame's activity
-  (``fitting``); GBVS, the centre prior and saliency as they are; the
-  handled + viewed object (its hands: the labelled tactile objects);
+  (AOP, Judd, FP-MCG, salObj+depth, Handled+Viewed-Obj's hand detector) with
+  the model of the frame's leave-one-activity-out fold, fitted without the
+  frame's activity (``fitting``); GBVS, the centre prior and saliency as they are;
 * a participant: the click soft masks of the frames they answered
   (``app.services.studies``), and an empty map for each trial they did not
   answer (expired, or never reached once their session is over), flagged
@@ -22,14 +21,14 @@ Each returns ``({statistics name: Stats}, notes)``, what ``cache`` stores.
 from __future__ import annotations
 
 import hashlib
-from collections import defaultdict
+from collections import Counter, defaultdict
 from collections.abc import Callable, Iterable, Iterator
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 
 import numpy as np
 
 from app.extensions import db
-from app.models import Activity, Annotation, Frame, Instance, InstanceKind
+from app.models import Activity, Annotation, Frame, Instance, is_hand
 from app.models import Sequence as FrameSequence
 from app.models.studies import FrameKind, Outcome, Participant, StudyFrame, Trial
 from app.models.training import TrainingRun
@@ -42,19 +41,33 @@ from egonet.baselines import BASELINES, build_baseline, is_trained
 from egonet.metrics import count_stats
 from egonet.network.builders import PAPER_NAMES
 
-# The handled row's hands are the labelled tactile objects (no hand detector is installed): an oracle for the hands.
-HANDLED_HANDS = "labelled tactile objects"
-
-
 def baseline_rows() -> list[tuple[str, bool]]:
-    """Every baseline's row name and whether it is learned (fitted per fold), in the table's order."""
+    """Every baseline's name (the paper's name of its method) and whether it is learned (fitted per fold), in the table's order."""
     return [(baseline_name(key), is_trained(key)) for key in BASELINES]
 
 
-def baseline_name(key: str) -> str:
-    """The row name of baseline ``key``: the paper's name of its method."""
+def baseline_name(key: str, truth: Truth | None = None) -> str:
+    """The row name of baseline ``key``: the paper's name of its method; with ``truth``, Handled+Viewed-Obj's says where its hands come from."""
     name = BASELINES[key].name
-    return f"{name} (hands: {HANDLED_HANDS})" if key == "handled" else name
+    return f"{name} (hands: {_hands_of(truth, build_baseline(key).min_frames)})" if key == "handled" and truth else name
+
+
+def _hands_of(truth: Truth, min_frames: int) -> str:
+    """What the handled row's folds detect hands with: a model learned on n frames with ``hand`` instances, or skin colour.
+
+    Counted from the labels (a fold learns from the other activities' frames
+    with a hand instance, when it has ``min_frames`` of them; else skin colour).
+    """
+    per_activity = Counter(truth.activity[fid] for fid, labels in truth.labels.items() if any(map(is_hand, labels)))
+    total = sum(per_activity.values())
+    folds = [total - per_activity[a] for a in truth.by_activity()] if len(truth.by_activity()) > 1 else [0]
+    learned = sorted(n for n in folds if n >= min_frames)
+    if not learned:
+        return "skin colour"
+    frames = f"{learned[0]}" if learned[0] == learned[-1] else f"{learned[0]}-{learned[-1]}"
+    described = f"learned, {frames} frames" + (" a fold" if len(folds) > 1 else "")
+    skin = len(folds) - len(learned)
+    return described + (f"; skin colour in {skin} fold{'s' if skin > 1 else ''}" if skin else "")
 
 
 Scored = tuple[dict[str, Stats], list[str]]
@@ -79,6 +92,7 @@ class Truth:
     activity: dict[int, str]  # frame id -> activity name
     entries: dict[int, str]
     fingerprint: str
+    labels: dict[int, list[str]] = field(default_factory=dict)  # frame id -> its instances' labels
 
     def mask(self, frame_id: int) -> np.ndarray | None:
         annotation = self.annotations.get(frame_id)
@@ -105,6 +119,7 @@ def load_truth() -> Truth:
     ids = [f.id for f in frames]
     annotations: dict[int, Annotation] = {}
     instances: dict[int, list[str]] = defaultdict(list)
+    labels: dict[int, list[str]] = defaultdict(list)
     for start in range(0, len(ids), 5000):  # keep IN lists well under SQLite's variable limit
         chunk = ground_truth.ground_truths(ids[start : start + 5000])
         annotations.update(chunk)
@@ -114,6 +129,7 @@ def load_truth() -> Truth:
             .order_by(Instance.annotation_id, Instance.position)
         ):
             instances[aid].append(f"{label}={path}")
+            labels[aid].append(label or "")
     names = dict(
         db.session.execute(
             db.select(Frame.id, Activity.name)
@@ -128,7 +144,8 @@ def load_truth() -> Truth:
     for fid, a in annotations.items():
         entries[fid] = (f"{fid}:{media_of.get(fid)}:{a.id}:{a.version}:{a.mask_path}:{a.updated_at.isoformat()}:"
                         f"{','.join(instances[a.id])};")  # fmt: skip
-    truth = Truth(frames, annotations, {f.id: names[f.id] for f in frames}, entries, "")
+    truth = Truth(frames, annotations, {f.id: names[f.id] for f in frames}, entries, "",
+                  {fid: labels[a.id] for fid, a in annotations.items()})
     truth.fingerprint = truth.digest(entries)
     return truth
 
@@ -165,9 +182,17 @@ def model_label(run: TrainingRun) -> str:
 
 
 def run_row_name(run: TrainingRun) -> str:
-    """A run's row: its model, or "released model" for the authors' weights (scored on every frame it predicted)."""
+    """A run's row: its model, or "released model" for the authors' weights (scored on every frame it predicted).
+
+    An object-class run (DeepLab-Obj) says how many classes its folds learned
+    ("DeepLab-Obj, 12 classes" or "10-12 classes" when the folds differ).
+    """
     if run.folds == "released":
         return f"released model, {run.config.get('released', {}).get('release', '').upper()} (run {run.id})"
+    counts = sorted({c.metrics["classes"] for c in run.checkpoints if "classes" in (c.metrics or {})})
+    if counts:
+        n = str(counts[0]) if len(counts) == 1 else f"{counts[0]}-{counts[-1]}"
+        return f"{model_label(run)}, {n} classes (run {run.id})"
     return f"{model_label(run)} (run {run.id})"
 
 
@@ -246,9 +271,6 @@ def baseline_maps(key: str, truth: Truth, notes: list[str], on_progress: Callabl
             continue
         for frame in frames:
             rgb = io.read_image(media.absolute_path(frame.rgb_path))
-            if key == "handled":  # its hands: the labelled tactile objects (an oracle, see HANDLED_HANDS)
-                yield frame, predictor.predict(rgb, near=_tactile_mask(truth.annotations[frame.id], rgb.shape[:2]))
-                continue
             dhg = io.read_dhg(media.absolute_path(frame.dhg_path)) if trained and frame.dhg_path else None
             yield frame, predictor.predict(rgb, dhg)
 
@@ -258,13 +280,3 @@ def baseline_stats(key: str, truth: Truth, thresholds: int, on_progress: Callabl
     notes: list[str] = []
     stats, _ = _accumulate(baseline_maps(key, truth, notes, on_progress), truth, thresholds, on_progress)
     return {"": stats.build()}, notes
-
-
-def _tactile_mask(annotation: Annotation, shape: tuple[int, int]) -> np.ndarray | None:
-    """The union of the annotation's tactile objects (the "handled" ones), or None when it has none."""
-    union = None
-    for instance in annotation.instances:
-        if instance.kind == InstanceKind.TACTILE:
-            mask = io.read_mask(media.absolute_path(instance.mask_path))
-            union = mask if union is None else union | mask
-    return union if union is not None and union.shape == shape else None

@@ -21,7 +21,7 @@ import numpy as np
 from sqlalchemy import update
 
 from app.extensions import db
-from app.models import User, utcnow
+from app.models import User, is_hand, utcnow
 from app.models.training import FINAL_STATUSES, Checkpoint, Prediction, RunStatus, TrainingRun
 from app.services import ground_truth, media
 from app.services.training.control import RunRequest, TrainingProblem, cancel_run, checkpoint_root, claim_run, create_run
@@ -226,7 +226,9 @@ def _plan(run: TrainingRun, config):
     """The run's samples, the folds still to train, and the checkpoint to continue (if any)."""
     from egonet.train import make_folds
 
-    samples = _samples(run.config.get("activity_ids"))
+    from egonet.network.builders import learns_classes
+
+    samples = _samples(run.config.get("activity_ids"), classes=learns_classes(config.model))
     resume_id = run.config.get("resume_checkpoint")
     if resume_id is not None:
         return _resumed_plan(run, samples, resume_id)
@@ -235,8 +237,17 @@ def _plan(run: TrainingRun, config):
     return samples, [f for f in folds if f.name not in finished], None
 
 
-def _samples(activity_ids: list[int] | None) -> list:
-    """The frames with ground truth as ``egonet.data.Sample`` (keyed by frame id, grouped by activity)."""
+def _class_of(label: str | None) -> str:
+    """An instance's object class for DeepLab-Obj: its label in lower case, "object" when it has none."""
+    return " ".join((label or "").split()).lower() or "object"
+
+
+def _samples(activity_ids: list[int] | None, *, classes: bool = False) -> list:
+    """The frames with ground truth as ``egonet.data.Sample`` (keyed by frame id, grouped by activity).
+
+    With ``classes``, each sample carries its action-objects' instances as
+    ``(class, mask path)`` (:func:`_class_of`; hands are no object class).
+    """
     from egonet.data import Sample
 
     frames = ground_truth.labelled_frames(activity_ids)
@@ -253,6 +264,8 @@ def _samples(activity_ids: list[int] | None) -> list:
                 mask=media.absolute_path(annotation.mask_path) if annotation.mask_path else None,
                 group=frame.sequence.activity.name,
                 key=frame.id,
+                instances=tuple((_class_of(i.label), media.absolute_path(i.mask_path))
+                                for i in annotation.instances if not is_hand(i.label)) if classes else (),
             )
         )
     if not samples:
