@@ -257,7 +257,7 @@ def test_a_frame_that_cannot_be_learned_from_is_a_note_and_the_worker_keeps_it(a
         annotation = ground_truth.ground_truths([frames_by_activity()["hotel"][0].id]).popitem()[1]
         annotation.instances[0].mask_path = media.store(egonet_io.encode_png(np.full((8, 8), 255, np.uint8)), ".png")
         db.session.commit()  # an instance whose mask is not the frame's size
-        assert score_baselines.func(99) == 4  # GBVS, handled, centre, saliency: they learn nothing
+        assert score_baselines.func(99) == 3  # GBVS, centre, saliency: they learn nothing
     page = admin_client.get("/scores/").get_data(as_text=True)
     (note,) = re.findall(r"<li>The worker could not fit[^<]*</li>", page)  # said once
     assert "AOP could not be scored: instances[0] must be a bool (48, 64) mask" in note and 'data-row="baseline:aop"' not in page

@@ -7,7 +7,7 @@ from app.extensions import db
 from app.models.studies import FrameKind, StudyFrame, Trial
 from app.models.training import Prediction
 from app.services import scoring, studies
-from app.services.scoring.cells import count, frames_text
+from app.services.scoring.cells import BASELINE, count, frames_text
 from egonet.metrics import MIN_FRAMES
 from tests.app.test_scoring import frames_by_activity, make_run
 from tests.app.test_studies_checks import quality_study, run_through, run_through_passing
@@ -80,7 +80,12 @@ def test_the_methods_paragraph_says_what_each_kind_of_row_was_scored_on_in_each_
     # --frames each: every kind on its own frames, counted here.
     each = scoring.build_report(frames="each").to_methods()
     assert "(the each frame mode)" in each and "shared frame mode" not in each
-    assert f"Baselines: AOP, centre prior, saliency, GBVS and handled + viewed object (hands: labelled tactile objects), scored on every labelled frame: {frames_text(sum(map(len, labelled.values())))} each ({breakdown(labelled)})" in each
+    names = [r.name for r in scoring.build_report(frames="each").rows if r.kind == BASELINE]
+    assert names[:2] == ["Judd", "GBVS"] and "centre prior" in names  # the paper's names, in Table 2's order
+    listed = ", ".join(names[:-1]) + " and " + names[-1]
+    assert f"Baselines: {listed}, scored on every labelled frame: {frames_text(sum(map(len, labelled.values())))} each ({breakdown(labelled)})" in each
+    learned = [n for n in names if n not in ("GBVS", "centre prior", "saliency")]
+    assert f"; {', '.join(learned[:-1])} and {learned[-1]} were fitted per fold under leave-one-activity-out" in each
     for run, split in ((loao, "trained with leave-one-activity-out cross-validation"), (single, "trained on a single split")):
         mine = by_activity(held_out(run.id))
         assert re.search(rf"one training run, {split}[^;]*, scored on its held-out frames: {frames_text(sum(map(len, mine.values())))} \({breakdown(mine)}\)[;.]", each)

@@ -11,7 +11,7 @@ from app.extensions import db
 from app.models import Activity, utcnow
 from app.services import ground_truth, studies
 from app.services.demo import create_demo
-from tests.app.test_scoring import BASELINE_ROWS, config_of, make_run
+from tests.app.test_scoring import BASELINE_ROWS, HANDLED_ROW, config_of, make_run
 from tests.browser.conftest import screenshot, sign_in
 
 pytestmark = pytest.mark.browser
@@ -76,7 +76,11 @@ def test_scores_page_switches_seeds_comparison_plots_and_per_frame_scores(live_a
     # Pooled and shared frames by default, said above the tables; the seeds are one row.
     assert page.locator("#convention .metric-name").inner_text().startswith("Pooled: max F and AP")
     assert "shared by all rows" in page.locator("#convention .frames-name").inner_text()
-    assert rows_of(page) == ["egonet-lite (3 seeds) show 3 seeds", *BASELINE_ROWS, "P01 0 unanswered", "P02 2 unanswered"]
+    rows = rows_of(page)
+    handled = next(r for r in rows if r.startswith("Handled+Viewed-Obj"))
+    assert re.fullmatch(r"Handled\+Viewed-Obj \(hands: learned, \d+(-\d+)? frames a fold\)", handled), handled  # the demo's hand masks
+    baselines = [handled if name == HANDLED_ROW else name for name in BASELINE_ROWS]
+    assert rows == ["egonet-lite (3 seeds) show 3 seeds", *baselines, "P01 0 unanswered", "P02 2 unanswered"]
     group_row = page.locator(f'#score-table-max_f tr[data-row="{group}"]')
     cooking = group_row.locator("td").first
     # 2 frames: the value and its spread over the seeds, but no interval.

@@ -6,7 +6,8 @@ all staff run GrabCut and keep undo histories (a reviewer's fix draws too),
 see the overview, read annotations and their masks, and export. Bodiless
 writes answer 400 (the body or ``?version=`` is missing), and so do the
 GrabCut mask without its query; nobody has a stored undo history (404); an
-export form without a status goes back to the Label page (302).
+export form without a status goes back to the Label page (302). Only admins
+manage the object classes (an empty name is not on the list: 404).
 ``url_values`` makes a finished export (row and zip) for its page and download.
 """
 
@@ -21,7 +22,7 @@ from app.services import media
 from app.services.importing import import_path
 from app.services.users import create_user
 from egonet import io
-from tests.app.access import STAFF
+from tests.app.access import ADMIN, STAFF
 from tests.app.factories import image_folder
 
 LABELLERS = frozenset({Role.ANNOTATOR, Role.ADMIN})
@@ -57,6 +58,9 @@ RULES = {
     "label.filmstrip": (LABELLERS, 200),
     "label.suggest": (LABELLERS, 400),
     "label.accept_proposal": (LABELLERS, 400),
+    "label.class_list": (ADMIN, 200),
+    "label.add_classes": (ADMIN, 400),
+    "label.remove_class": (ADMIN, 404),
     "exports.create": (STAFF, 302),
     "exports.detail": (STAFF, 200),
     "exports.status": (STAFF, 200),
