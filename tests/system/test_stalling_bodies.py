@@ -66,8 +66,10 @@ def test_six_pathological_bodies_do_not_stall_the_log_in_page(server):
     print(f"\nprobe answers (name, status, s): {sorted(answers)}")
     print(f"GET /login meanwhile: {len(log_in_page)} answers, slowest {max(t for _, t in log_in_page):.3f} s")
     assert sorted((name, status) for name, status, _ in answers) == [("login", 415)] * 3 + [("save", 400)] * 3
-    assert max(took for *_, took in answers) < 5.0, answers  # the old scan: ~15 s each, then WORKER TIMEOUT
-    assert {status for status, _ in log_in_page} == {200} and max(t for _, t in log_in_page) < 2.0, log_in_page
+    # Generous bounds (a loaded CI machine runs other tests beside this one) that the old scan misses by far:
+    # ~15 s a body, then WORKER TIMEOUT, and every GET /login timed out for 35 s.
+    assert max(took for *_, took in answers) < 8.0, answers
+    assert {status for status, _ in log_in_page} == {200} and max(t for _, t in log_in_page) < 10.0, log_in_page
     annotator.close()
     anonymous.close()
 
@@ -86,4 +88,4 @@ def test_a_64_mib_json_body_to_log_in_is_refused_before_it_arrives(server):
         took = time.monotonic() - started
     status_line = reply.split(b"\r\n")[0].decode()
     print(f"\n64 MiB declared, 256 KiB sent: {status_line} in {took:.3f} s")
-    assert reply.startswith(b"HTTP/1.1 415") and took < 2.0, (reply[:200], took)
+    assert reply.startswith(b"HTTP/1.1 415") and took < 5.0, (reply[:200], took)  # it never waits for the 64 MiB
