@@ -116,7 +116,9 @@ def unsafe_bodies(view):
 
 
 @pytest.mark.slow
-@pytest.mark.parametrize("role", ["anonymous", "admin", "annotator", "reviewer", "participant"])
+# Admins reach every staff view (annotators' and reviewers' routes are theirs too), participants theirs, and
+# anonymous clients the public ones: three roles reach every view, and the text rule runs before any of them.
+@pytest.mark.parametrize("role", ["anonymous", "admin", "participant"])
 def test_no_route_takes_unsafe_text_or_answers_500_to_huge_integers(app, client, make_user, tmp_path, role):
     values = all_url_values(app, tmp_path)
     user = None if role == "anonymous" else make_user(role, f"bytes-{role}")
