@@ -39,12 +39,23 @@ def pytest_cmdline_main(config):
 
 
 def pytest_collection_modifyitems(config, items):
+    # Costly science whose outcome no database changes (fitting, training,
+    # scoring arrays) runs once, on the default SQLite; the rest runs on both.
+    twice = [item for item in items if item.get_closest_marker("one_database") and _on_postgresql(item)]
+    if twice:
+        config.hook.pytest_deselected(items=twice)
+        items[:] = [item for item in items if item not in twice]
     if config.getoption("--all"):
         return
     skip = pytest.mark.skip(reason="marked slow or browser: run with --all")
     for item in items:
         if item.get_closest_marker("slow") or item.get_closest_marker("browser"):
             item.add_marker(skip)
+
+
+def _on_postgresql(item) -> bool:
+    callspec = getattr(item, "callspec", None)
+    return callspec is not None and callspec.params.get("database_url") == "postgresql"
 
 
 @pytest.fixture(scope="session", autouse=True)

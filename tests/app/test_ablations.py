@@ -131,6 +131,7 @@ def test_ablations_help_states_n_and_intervals(runner):
 
 
 @pytest.mark.slow
+@pytest.mark.one_database
 def test_ablations_train_recorded_runs_and_write_the_table(app, demo, runner, tmp_path):
     out = tmp_path / "table"
     args = ["egonet", "ablations", "--models", "egonet-lite", "--seeds", "0,1", "--name", "tiny", "--out", str(out), *BUDGET]

@@ -59,6 +59,7 @@ def rewrite_truth(frame_id: int, mask: np.ndarray) -> None:
     db.session.commit()
 
 
+@pytest.mark.one_database
 @pytest.mark.parametrize("key", list(BASELINES))
 def test_a_scored_frames_own_masks_never_change_its_map(ctx, key):
     for seed, name in enumerate(("cooking", "hotel", "desk work")):
@@ -209,6 +210,7 @@ def test_the_handled_rows_name_says_where_each_folds_hands_come_from(ctx):
 
 
 @pytest.mark.slow
+@pytest.mark.one_database
 def test_the_handled_row_with_learned_hands_beats_a_random_map_on_the_demo(ctx):
     create_demo(frames_per_activity=8, unlabelled_fraction=0, width=160, height=120)
     truth = scoring_sources.load_truth()
@@ -223,6 +225,7 @@ def test_the_handled_row_with_learned_hands_beats_a_random_map_on_the_demo(ctx):
 
 
 @pytest.mark.slow
+@pytest.mark.one_database
 def test_every_baseline_beats_a_random_map_on_the_demo(ctx):
     create_demo(frames_per_activity=6, unlabelled_fraction=0, width=160, height=120)
     report = scoring.build_report(run_ids=[], study_ids=[], resamples=0)

@@ -108,6 +108,7 @@ def test_demo_command_unlabelled_fraction_0_labels_every_frame_and_bad_values_na
 
 
 @pytest.mark.slow
+@pytest.mark.one_database
 def test_the_demo_leaves_a_trained_quick_start_run_that_suggest_uses(ctx, runner):
     """About 20 s: the quick-start run trains on 14 frames."""
     from app.models.training import RunStatus, TrainingRun

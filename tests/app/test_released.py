@@ -198,6 +198,7 @@ def sqlite_only(app) -> None:
 
 
 @pytest.mark.slow
+@pytest.mark.one_database
 def test_cli_import_weights_then_predict_and_score(app, demo, runner, full_rgb_caffemodel, tmp_path):
     sqlite_only(app)
     path, _ = full_rgb_caffemodel

@@ -547,6 +547,7 @@ def test_a_run_whose_maps_cannot_be_scored_is_a_note_not_an_error(ctx, app):
 
 
 @pytest.mark.slow
+@pytest.mark.one_database
 def test_a_small_trained_run_scores_as_a_direct_computation_on_its_held_out_maps(app, runner, tmp_path):
     import torch
 

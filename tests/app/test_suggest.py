@@ -498,6 +498,7 @@ def random_box_iou(truth: np.ndarray, rng: np.random.Generator, n: int = 200) ->
 
 
 @pytest.mark.slow
+@pytest.mark.one_database
 def test_a_trained_run_proposes_held_out_objects_far_better_than_a_random_box(app, make_user):
     """egonet-lite, 8 epochs at 64x48 on 6 demo frames per activity (128x96), one split (about a minute).
 
