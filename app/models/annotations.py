@@ -147,6 +147,11 @@ class Instance(Base):
         """Whether this is a proposal the annotator has not accepted or edited yet."""
         return self.proposal_source is not None
 
+    @property
+    def is_hand(self) -> bool:
+        """Whether it outlines the wearer's hand rather than an action-object (``is_hand``)."""
+        return is_hand(self.label)
+
 
 class GrabCutState(Base):
     """A GrabCut session (one per user, frame and instance key), saved after

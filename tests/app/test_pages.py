@@ -90,6 +90,22 @@ def _two_annotators(app, tmp_path, size=(48, 64)):
         return frame.id, done.id, draft.id, left, right
 
 
+def test_a_review_tile_counts_hands_apart_from_action_objects(app, admin_client, tmp_path):
+    with app.app_context():
+        import_path(image_folder(tmp_path / "rec", n=1, size=(48, 64)), activity="cooking")
+        frame = db.session.execute(db.select(Frame)).scalars().one()
+        cup, hand = np.zeros((48, 64), bool), np.zeros((48, 64), bool)
+        cup[10:20, 10:20], hand[30:40, 40:60] = True, True
+        anna, _ = create_user("anna", "annotator", "anna-password-123")
+        labelling.save_annotation(frame, anna, {
+            "version": 0, "status": "done", "no_action_object": False, "time_spent_delta_s": 0.0,
+            "instances": [{"key": "k0", "kind": InstanceKind.TACTILE.value, "label": "cup", "mask": _rle(cup)},
+                          {"key": "k1", "kind": None, "label": "Hand", "mask": _rle(hand)}],
+        })
+    page = admin_client.get("/label/").get_data(as_text=True)
+    assert "1 object: tactile · 1 hand" in page and "2 objects" not in page
+
+
 def test_the_review_queue_shows_each_mask_over_its_frame(app, admin_client, tmp_path):
     frame_id, done_id, _, left, right = _two_annotators(app, tmp_path, size=(96, 128))
     page = admin_client.get("/label/").get_data(as_text=True)
