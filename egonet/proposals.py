@@ -122,8 +122,9 @@ def handled_objects(rgb: np.ndarray) -> np.ndarray:
     Example:
         >>> rgb = np.full((48, 64, 3), 200, np.uint8); rgb[18:30, 20:32] = (200, 40, 40); rgb[18:30, 32:44] = (40, 40, 200)
         >>> p = handled_objects(rgb)
-        >>> round(float(p[24, 26]), 2), round(float(p[24, 38]), 2), cv2.connectedComponents((p >= 0.5).astype(np.uint8))[0] - 1
-        (0.97, 0.97, 2)
+        >>> apart = cv2.connectedComponents((p >= 0.5).astype(np.uint8))[1]  # the red and the blue square: two proposals
+        >>> round(float(p[24, 26]), 2), round(float(p[24, 38]), 2), bool(apart[24, 26] != apart[24, 38])
+        (0.97, 0.97, True)
     """
     h, w = rgb.shape[:2]
     baseline = HandledViewedObject()

@@ -109,7 +109,7 @@ def suggest_command(source, run_id, frames, activities, username, device, queue)
         on_start(len(chosen))
         report = suggest_frames(chosen, user, run_id=run_id, source=source, device=device, on_progress=on_progress)
     for suggestion in report.suggestions:
-        click.echo(suggestion.summary())
+        click.echo(f"frame {suggestion.frame_id}: {suggestion.summary()}")
     for frame_id, why in report.skipped:
         click.echo(f"frame {frame_id}: skipped, {why}")
     click.echo(f"{what}: {report.proposals} proposals on {len(report.suggestions)} frames for {user.username}, "

@@ -131,10 +131,12 @@ def test_a_proposal_is_refined_by_grabcut_and_overlaps_the_truth(app, annotator)
     assert s["run_id"] == run_id and s["source"] == "model" and s["proposed_by"] == f"run {run_id}"
     assert s["prediction"] == "stored" and s["threshold"] == 0.5
     assert s["threshold_source"] == "checkpoint" and s["held_out"] and s["checkpoint_choice"] == "its fold held this frame out"
-    assert len(s["proposals"]) == 1 and f"run {run_id} proposed 1 object" in s["message"]
+    assert len(s["proposals"]) == 1 and s["reason"] == "trained on real frames like this one"
+    assert s["message"] == f"Run {run_id}: trained on real frames like this one. It proposed 1 object: accept or reject it."
     (inst,) = ann["instances"]
     assert inst["key"] == s["proposals"][0] and inst["proposed_by_run_id"] == run_id and inst["proposal_source"] == "model"
-    assert ann["status"] == "in_progress" and ann["version"] == 1 and ann["proposed_by_run_id"] == run_id
+    # Proposals alone claim nothing: the annotation is "todo" until one is accepted or edited.
+    assert ann["status"] == "todo" and ann["version"] == 1 and ann["proposed_by_run_id"] == run_id
     with app.app_context():
         proposal = saved_mask(own_annotation(frame_id).instances[0])
         # Measured: the thresholded map alone 0.80, the proposal 0.95 (a random box of the object's size: 0.0-0.3).
@@ -221,6 +223,7 @@ def test_accepting_clears_the_mark_and_moves_the_version(app, annotator, propose
     assert response.status_code == 200, response.get_json()
     data = response.get_json()
     assert data["version"] == version + 1 and data["instances"][0]["proposed_by_run_id"] is None
+    assert data["status"] == "in_progress"  # accepted: the annotator's own, the frame is being labelled
     assert data["instances"][0]["proposal_source"] is None
     assert data["proposed_by_run_id"] is not None  # the annotation keeps where its objects came from
     again = annotator.post(url, json={"version": data["version"], "key": key})
@@ -256,6 +259,7 @@ def test_a_grabcut_step_on_a_proposal_clears_the_mark(app, annotator, proposed):
     assert annotator.post("/api/label/grabcut/stroke", json=stroke).status_code == 200
     with app.app_context():
         assert not own_annotation(frame_id).instances[0].proposed
+        assert own_annotation(frame_id).status is Status.IN_PROGRESS  # edited: the annotator's own now
 
 
 def test_done_is_refused_while_proposals_are_pending(app, annotator, proposed):
@@ -299,7 +303,7 @@ def test_without_a_run_suggest_proposes_from_depth_and_marks_the_source(app, ann
     assert response.status_code == 200, response.get_json()
     s, ann = response.get_json()["suggestion"], response.get_json()["annotation"]
     assert (s["source"], s["proposed_by"], s["run_id"], s["threshold_source"]) == ("depth", "depth", None, "source")
-    assert s["message"].startswith(f"frame {frame_id}: depth proposed ") and "the nearest compact surface" in s["message"]
+    assert s["message"].startswith("Depth: this frame has depth. It proposed ")
     assert [i["proposal_source"] for i in ann["instances"]] == ["depth"] * len(s["proposals"]) != []
     assert ann["proposed_by_run_id"] is None and all(i["proposed_by_run_id"] is None for i in ann["instances"])
     with app.app_context():
@@ -333,31 +337,42 @@ def test_without_depth_or_a_run_auto_is_the_handled_object_and_the_model_asks_fo
     assert running.status_code == 409 and running.get_json()["fields"] == {"run_id": "no finished training run"}
 
 
-def test_the_hint_says_which_run_auto_uses_and_how_to_train_one_for_the_activity(app, annotator):
+def test_the_hint_says_what_auto_uses_and_why_before_the_click(app, annotator):
     frame_id, _ = held_bag(app)
     train = "Train one for shop: the Training page, or flask egonet train --activities shop"
     page = annotator.get(f"/label/frames/{frame_id}").get_data(as_text=True)
-    assert f'<p class="hint" id="suggest-hint">No trained run yet: Auto proposes from depth. {train}</p>' in page
+    assert f'<p class="hint" id="suggest-hint">Auto uses depth: this frame has depth. {train}</p>' in page
     with app.app_context():
         frame = db.session.get(Frame, frame_id)
-        run_id = stored_run({}, activities=("cooking", "dining"))
+        # A run trained on activities that are not here (no frames of any kind): not for Auto, said so.
+        elsewhere = stored_run({}, activities=("cooking", "dining"))
         choices = labelling.source_choices(frame)
-        assert choices["hint"] == f"Auto uses run {run_id} (trained on cooking, dining): not on shop. {train}"
-        assert [(c["source"], c["run_id"], c["label"]) for c in choices["choices"]] == [
-            ("auto", None, f"Auto (run {run_id})"),
-            ("depth", None, "Depth: the nearest compact surface"),
-            ("handled", None, "Handled: the colour region nearest the centre"),
-            ("saliency", None, "Saliency: spectral residual saliency"),
-            ("model", run_id, f"Run {run_id}: stored"),
+        assert choices["hint"] == (f"Auto uses depth: this frame has depth. Run {elsewhere} was trained on frames no "
+                                   f"longer here, not on real frames like this one: choose it above to try it anyway. {train}")
+        assert [(c["source"], c["run_id"], c["label"], c["disabled"]) for c in choices["choices"]] == [
+            ("auto", None, "Auto (depth)", False),
+            ("depth", None, "Depth: the nearest compact surface", False),
+            ("handled", None, "Handled: the colour region nearest the centre", False),
+            ("saliency", None, "Saliency: spectral residual saliency", False),
+            ("model", elsewhere, f"Run {elsewhere}: stored — trained on frames no longer here", False),
         ]
         trained_here = stored_run({}, activities=("shop",), name="shop run")
-        assert labelling.source_choices(frame)["hint"] == f"Auto uses run {trained_here} (trained on shop)."
+        assert labelling.source_choices(frame)["hint"].startswith(
+            f"Auto uses run {trained_here}: trained on real frames like this one.")
     (plain,) = make_frames(app, n=1, activity="desk work")
     with app.app_context():
         choices = labelling.source_choices(db.session.get(Frame, plain))
     assert choices["choices"][1] == {"source": "depth", "run_id": None, "label": "Depth: this frame has none",
                                      "disabled": True}
-    assert choices["hint"].endswith("flask egonet train --activities 'desk work'")
+    # egonet-lite reads DHG, which this RGB-only frame lacks: said before the click, Auto passes over the runs.
+    assert [(c["label"], c["disabled"]) for c in choices["choices"] if c["source"] == "model"] == [
+        (f"Run {trained_here}: shop run — needs depth (DHG): this frame has none", True),
+        (f"Run {elsewhere}: stored — needs depth (DHG): this frame has none", True),
+    ]
+    assert choices["hint"] == ("Auto uses handled: no depth here; it proposes object-sized colour regions near the "
+                               "centre. Train one for desk work: the Training page, or flask egonet train --activities 'desk work'")
+    response = annotator.post(f"/api/label/frames/{plain}/suggest", json={"version": 0, "run_id": trained_here})
+    assert response.status_code == 409 and response.get_json()["fields"] == {"run_id": "needs depth (DHG)"}
 
 
 @pytest.mark.parametrize(
@@ -447,7 +462,7 @@ def test_cli_suggests_in_the_foreground_or_queues(app, runner, make_user, monkey
         run_id = stored_run({f: network_like(true_mask()) for f in frames})
     result = runner.invoke(args=["egonet", "suggest", "--run", str(run_id), "--frames", f"{frames[0]},{frames[1]}", "--user", "ann"])
     assert result.exit_code == 0, result.output
-    assert f"frame {frames[0]}: run {run_id} proposed 1 object" in result.output
+    assert f"frame {frames[0]}: Run {run_id} proposed 1 object: accept or reject it." in result.output
     assert f"run {run_id}: 2 proposals on 2 frames for ann, 0 frames skipped" in result.output
 
     queued = []
@@ -477,7 +492,7 @@ def test_the_grabcut_sessions_of_replaced_proposals_go(app, annotator, proposed)
     with app.app_context():
         keys = set(db.session.execute(db.select(GrabCutState.instance_key)).scalars())
     assert keys == set(data["suggestion"]["proposals"]) and key not in keys
-    assert data["annotation"]["status"] == Status.IN_PROGRESS.value
+    assert data["annotation"]["status"] == Status.TODO.value
 
 
 # --------------------------------------------------------------------------- a model that learnt something
