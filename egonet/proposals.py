@@ -9,7 +9,7 @@ labelling service cuts it into regions as it does a trained run's map):
 * ``"handled"``: the paper's "handled + viewed object" baseline
   (:class:`~egonet.baselines.HandledViewedObject`), the colour regions
   (each under 5 % of the frame) nearest the centre, kept apart by a
-  one-pixel seam so that neighbouring regions stay separate proposals,
+  seam so that neighbouring regions stay separate proposals,
   object-sized, instead of merging into one (:func:`handled_objects`);
 * ``"saliency"``: spectral-residual saliency
   (:class:`~egonet.baselines.SpectralResidualSaliency`).
@@ -129,10 +129,10 @@ def handled_objects(rgb: np.ndarray) -> np.ndarray:
     h, w = rgb.shape[:2]
     baseline = HandledViewedObject()
     p = baseline.predict(rgb)
-    labels = cv2.resize(baseline.regions(rgb), (w, h), interpolation=cv2.INTER_NEAREST)
-    seam = np.zeros((h, w), bool)
-    seam[:, 1:] |= labels[:, 1:] != labels[:, :-1]
-    seam[1:] |= labels[1:] != labels[:-1]
+    labels = cv2.resize(baseline.regions(rgb).astype(np.float32), (w, h), interpolation=cv2.INTER_NEAREST)
+    # Wherever a 3x3 neighbourhood holds two regions: a seam no 8-connected path crosses.
+    kernel = np.ones((3, 3), np.uint8)
+    seam = cv2.dilate(labels, kernel) != cv2.erode(labels, kernel)
     return np.where(seam, 0.0, p).astype(np.float32)
 
 
