@@ -89,7 +89,7 @@ def test_an_annotators_day_then_review_and_export(live_app, live_server, browser
     page.click("#confirm-keep")
     page.wait_for_selector("#confirm-empty", state="hidden")
     assert server_annotation(live_app, f0) == {"version": 0}
-    assert page.locator("#suggest-hint").inner_text().startswith("No trained run yet: Auto proposes from depth.")
+    assert page.locator("#suggest-hint").inner_text().startswith("Auto uses depth: this frame has depth.")
     page.click("#suggest")
     page.wait_for_selector("#instances .instance.proposed")
     settle(page)
