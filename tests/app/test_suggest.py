@@ -558,6 +558,9 @@ def test_auto_chooses_by_evidence_not_by_order(app, annotator):
         frame = db.session.get(Frame, real)
         assert proposers.frame_kind(frame) == "real" and proposers.frame_kind(rendered) == "rendered"
         assert proposers.auto_choice(frame) == (None, "depth", "this frame has depth")
+        runs = [c for c in labelling.source_choices(frame)["choices"] if c["source"] == "model"]
+        assert runs == [{"source": "model", "run_id": run_id, "disabled": False,  # offered, with what it learnt from
+                         "label": f"Run {run_id}: demo run — trained on the demo's rendered frames"}]
         run, source, reason = proposers.auto_choice(rendered)
         assert (run.id, source, reason) == (run_id, "model", "trained on the demo's rendered frames like this one")
 
@@ -657,6 +660,9 @@ def test_suggest_claims_no_frame(app, client, make_user):
         assert label_counts() == (2, False)  # Frames 3, To label 3; nothing listed in progress
     grid = client.get(f"/activities/{activity_id}").get_data(as_text=True)
     assert "status-in_progress" not in grid
+    # bob opening the frame with ann's proposals hears of nobody holding it.
+    others = client.post(f"/api/label/frames/{frames[0]}/presence", json={"open": False}).get_json()["others"]
+    assert others == []
 
     # Accepting the proposal makes it ann's work: bob's next frame is another one, and the counts follow.
     client.login_as(ann)
@@ -667,6 +673,8 @@ def test_suggest_claims_no_frame(app, client, make_user):
     assert "<h2>In progress" in client.get("/label/").get_data(as_text=True)
     client.login_as(bob)
     assert next_frame().endswith(f"/label/frames/{frames[1]}")
+    others = client.post(f"/api/label/frames/{frames[0]}/presence", json={"open": False}).get_json()["others"]
+    assert [(o["username"], o["status"]) for o in others] == [("ann", "in_progress")]
     assert "<td>2</td>" in client.get("/label/").get_data(as_text=True)
 
 
