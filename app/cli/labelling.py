@@ -70,8 +70,9 @@ def import_annotations_command(path, author, status, replace, skip_missing):
 
 @bp.cli.command("suggest")
 @click.option("--source", type=click.Choice(["auto", "model", "depth", "handled", "saliency"]), default="auto",
-              show_default=True, help="Who proposes: auto is the latest trained run usable for the frame, else "
-              "depth, else handled; model a trained run; depth, handled and saliency need no run.")
+              show_default=True, help="Who proposes: auto is a run trained on frames like each one (the demo's rendered "
+              "frames, or real ones), else depth, else handled; model a trained run; depth, handled and saliency "
+              "need no run.")
 @click.option("--run", "run_id", type=int, help="The training run that proposes [default: the latest finished one].")
 @click.option("--frames", help="Comma-separated frame ids.")
 @click.option("--activity", "activities", multiple=True, help="The frames of this activity (repeatable).")

@@ -1,9 +1,10 @@
 """Proposals ("Suggest"): a trained run, depth, or a baseline proposes a frame's action-objects.
 
-Who proposes is a ``proposers.Proposer``: by default ("auto") the latest
-finished run with a checkpoint usable for the frame, else the frame's depth
-(the nearest compact surface off the supporting planes), else the handled +
-viewed object; or the source or run the annotator chose (``proposers``).
+Who proposes is a ``proposers.Proposer``: by default ("auto") chosen by
+evidence, a run trained on (or scoring well on) frames like this one, else
+the frame's depth (the nearest compact surface off the supporting planes),
+else the handled + viewed object's object-sized regions; or the source or
+run the annotator chose (``proposers``).
 The proposer's probability map of the frame is cut at its threshold (a
 run's best-F threshold, one half for the other sources) into connected
 regions (``regions``), each of which becomes an instance.
