@@ -202,10 +202,11 @@ def auto_runs(frame: Frame) -> tuple[list[RunEvidence], list[RunEvidence]]:
     return eligible, [e for e in evidence if not e.eligible]
 
 
-def auto_choice(frame: Frame) -> tuple[TrainingRun | None, str, str]:
+def auto_choice(frame: Frame, eligible: list[RunEvidence] | None = None) -> tuple[TrainingRun | None, str, str]:
     """What "auto" uses on the frame and why: ``(run or None, source, reason)``, the reason in the
-    annotator's words ("this frame has depth")."""
-    eligible, _ = auto_runs(frame)
+    annotator's words ("this frame has depth"); ``eligible`` as ``auto_runs`` gives it, when known."""
+    if eligible is None:
+        eligible, _ = auto_runs(frame)
     if eligible:
         best = eligible[0]
         why = f"trained on {KIND_WORDS[frame_kind(frame)]} like this one" if best.trained else \
@@ -226,14 +227,14 @@ def source_choices(frame: Frame) -> dict:
         first choice is Auto, labelled with what it will use; a choice that
         cannot work on the frame is disabled and says why.
     """
-    run, chosen, reason = auto_choice(frame)
+    eligible, others = auto_runs(frame)
+    run, chosen, reason = auto_choice(frame, eligible)
     auto = f"run {run.id}" if run is not None else chosen
     choices = [{"source": "auto", "run_id": None, "label": f"Auto ({auto})", "disabled": False}]
     for source in proposals.SOURCES:
         missing = source == "depth" and frame.depth_path is None
         label = f"{source.capitalize()}: {'this frame has none' if missing else DESCRIPTIONS[source]}"
         choices.append({"source": source, "run_id": None, "label": label, "disabled": missing})
-    eligible, others = auto_runs(frame)
     usable = {e.run.id for e in eligible + others}
     other_ids = {e.run.id for e in others}
     for r in suggestion_runs():
