@@ -18,11 +18,20 @@ any stroke (0 when nothing is proposed), the hit rate (IoU >= 0.5), and the
 strokes to IoU 0.9 (median over the frames that got there within
 ``MAX_STROKES``, and how many did).
 
+A third table is what Suggest's Auto falls back on for a real frame
+without depth (``--rgb-only``): the handled source on the authors' three
+RGB frames (``egonet-samples``, their DHG set aside) and on the chair's
+colour images alone; per frame how many proposals, the largest one's share
+of the frame after GrabCut, and on the chair the best IoU; "handled, as the
+baseline draws it" is the map before 2026-12-04, whose neighbouring regions
+merged into one proposal.
+
 Run from the repository root::
 
     .venv/bin/python bench/bench_suggest.py            # chair + 28 demo frames (a few minutes)
     .venv/bin/python bench/bench_suggest.py --demo 2   # 2 demo frames per activity
     .venv/bin/python bench/bench_suggest.py --checkpoint instance/checkpoints/run-1/single.pt
+    .venv/bin/python bench/bench_suggest.py --rgb-only                 # the RGB-only table alone (a minute)
 """
 
 from __future__ import annotations
@@ -44,7 +53,8 @@ if str(ROOT) not in sys.path:
     sys.path.insert(0, str(ROOT))
 
 from app.services.labelling.regions import proposal_regions  # noqa: E402
-from bench.bench_grabcut import RGBD_FRAMES, annotator_box, annotator_stroke, iou  # noqa: E402
+from bench.bench_grabcut import RGBD_FRAMES, SHARED, annotator_box, annotator_stroke, iou  # noqa: E402
+from egonet.baselines import HandledViewedObject  # noqa: E402
 from egonet import io, proposals, synth  # noqa: E402
 from egonet.dhg import dhg_from_depth, encode_dhg  # noqa: E402
 from egonet.grabcut import GrabCutSession  # noqa: E402
@@ -155,16 +165,44 @@ def report(title: str, cases: list, model) -> None:
             print("           per frame: " + ", ".join(f"{name} {r[0]:.3f}" for (name, *_), r in zip(cases, rows)))
 
 
+def rgb_only_report() -> None:
+    """Handled on real frames without depth: proposals per frame, the largest one's share, the chair's best IoU."""
+    samples = SHARED / "data" / "egonet-samples" / "rgb"
+    cases = [(f"egonet {p.stem}", io.read_image(p), None) for p in sorted(samples.glob("*.jpg"))]
+    cases += [(f"chair-{name}", io.read_image(RGBD_FRAMES / "color" / f"{name}.jpg"), chair_truth())
+              for name in ("00000", "00001", "00002") if RGBD_FRAMES.exists()]
+    if not cases:
+        print("RGB-only real frames: no frames")
+        return
+    print(f"\nRGB-only real frames (no depth; egonet-samples without their DHG, the chair's colour images): {len(cases)}")
+    for title, make in (("handled, as the baseline draws it", lambda rgb: HandledViewedObject().predict(rgb)),
+                        ("handled, regions kept apart", lambda rgb: proposals.source_map("handled", rgb))):
+        line = []
+        for name, rgb, truth in cases:
+            regions, _ = proposal_regions(make(rgb), proposals.THRESHOLD)
+            masks = [r.mask if r.mask.all() else GrabCutSession(rgb).seed_mask(r.mask, band=r.band) for r in regions]
+            largest = max((m.mean() for m in masks), default=0.0)
+            best = f" IoU {max((iou(m, truth) for m in masks), default=0.0):.3f}" if truth is not None else ""
+            line.append(f"{name} n={len(masks)} largest {largest:.1%}{best}")
+        print(f"{title:<36} " + "; ".join(line))
+
+
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     parser.add_argument("--demo", type=int, default=4, help="demo frames per activity (default 4, at most 10)")
     parser.add_argument("--checkpoint", type=Path, help="a trained run's checkpoint (.pt) to propose as 'model' too")
+    parser.add_argument("--rgb-only", action="store_true", help="only the table of real frames without depth")
     args = parser.parse_args()
     cv2.setNumThreads(1)
+    if args.rgb_only:
+        print(f"{time.strftime('%Y-%m-%d')}, load average {os.getloadavg()[0]:.1f}")
+        rgb_only_report()
+        return
     model = model_source(args.checkpoint) if args.checkpoint else None
     print(f"{time.strftime('%Y-%m-%d')}, load average {os.getloadavg()[0]:.1f}")
     report("PrimeSense chair (real RGB-D, hand-drawn truth)", chair_cases(), model)
     report("demo frames left to label (rendered, seed 0, 320x240)", demo_cases(args.demo), model)
+    rgb_only_report()
 
 
 if __name__ == "__main__":

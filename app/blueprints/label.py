@@ -359,7 +359,7 @@ def add_time(frame_id: int):
 def suggest(frame_id: int):
     """``{version, source?, run_id?}``: a trained run, or a source that needs none (depth, handled,
     saliency), proposes the frame's action-objects into the user's annotation; ``source`` "auto" (the
-    default) is the latest usable run, else depth, else handled.
+    default) chooses by evidence: a run for frames like this one, else depth, else handled (see proposers.auto_choice).
 
     200 with ``{annotation, suggestion}`` when it ran here; 202 with
     ``{queued: true, message}`` when the model is slow here and the worker

@@ -70,8 +70,9 @@ def import_annotations_command(path, author, status, replace, skip_missing):
 
 @bp.cli.command("suggest")
 @click.option("--source", type=click.Choice(["auto", "model", "depth", "handled", "saliency"]), default="auto",
-              show_default=True, help="Who proposes: auto is the latest trained run usable for the frame, else "
-              "depth, else handled; model a trained run; depth, handled and saliency need no run.")
+              show_default=True, help="Who proposes: auto is a run trained on frames like each one (the demo's rendered "
+              "frames, or real ones), else depth, else handled; model a trained run; depth, handled and saliency "
+              "need no run.")
 @click.option("--run", "run_id", type=int, help="The training run that proposes [default: the latest finished one].")
 @click.option("--frames", help="Comma-separated frame ids.")
 @click.option("--activity", "activities", multiple=True, help="The frames of this activity (repeatable).")
@@ -109,7 +110,7 @@ def suggest_command(source, run_id, frames, activities, username, device, queue)
         on_start(len(chosen))
         report = suggest_frames(chosen, user, run_id=run_id, source=source, device=device, on_progress=on_progress)
     for suggestion in report.suggestions:
-        click.echo(suggestion.summary())
+        click.echo(f"frame {suggestion.frame_id}: {suggestion.summary()}")
     for frame_id, why in report.skipped:
         click.echo(f"frame {frame_id}: skipped, {why}")
     click.echo(f"{what}: {report.proposals} proposals on {len(report.suggestions)} frames for {user.username}, "

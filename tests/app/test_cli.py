@@ -123,7 +123,7 @@ def test_the_demo_leaves_a_trained_quick_start_run_that_suggest_uses(ctx, runner
     assert (run.config["train"]["width"], run.config["train"]["height"], run.config["train"]["lr"]) == (96, 72, 0.05)
     assert f"run {run.id} (demo quick start (egonet-lite)): done" in result.output
     unlabelled = db.session.execute(db.select(Frame).where(~Frame.annotations.any())).scalars().first()
-    assert labelling.source_choices(unlabelled)["hint"].startswith(f"Auto uses run {run.id} (trained on cooking, ")
+    assert labelling.source_choices(unlabelled)["hint"] == f"Auto uses run {run.id}: trained on the demo's rendered frames like this one."
     again = runner.invoke(args=args)
     assert f"demo: the quick-start run {run.id} is there already" in again.output
     assert db.session.execute(db.select(db.func.count(TrainingRun.id))).scalar_one() == 1

@@ -96,3 +96,36 @@ def test_0007_gives_stored_dhg_images_the_authors_order(ctx):
     finally:
         upgrade()
     assert stored()["authors"] == paths["authors"]
+
+
+def test_0021_annotations_of_proposals_only_claim_nothing(ctx, make_user):
+    """On a database at 0016: in-progress annotations holding only proposals become "todo", and back."""
+    from app.models import Activity, Annotation, Frame, Instance, Sequence, Status
+
+    downgrade(revision="0016")
+    try:
+        ann = make_user("annotator", "ann")
+        sequence = Sequence(activity=Activity(name="a"), name="s")
+        kinds = {"proposals": "depth", "own": None, "empty-no-object": "none", "done": "depth"}
+        for i, name in enumerate(kinds):
+            frame = Frame(sequence=sequence, index=i, source_name=name, width=4, height=3, content_hash=f"h{i}",
+                          rgb_path=f"x{i}.png", meta={})
+            annotation = Annotation(frame=frame, author_id=ann.id, status=Status.DONE if name == "done" else Status.IN_PROGRESS,
+                                    no_action_object=name == "empty-no-object")
+            if name != "empty-no-object":
+                annotation.instances.append(Instance(position=0, key="k", mask_path="m.png", proposal_source=kinds[name]))
+            db.session.add(annotation)
+        db.session.commit()
+
+        def statuses() -> dict[str, str]:
+            db.session.expire_all()
+            rows = db.session.execute(db.select(Frame.source_name, Annotation.status).join(Annotation.frame)).all()
+            db.session.rollback()
+            return {name: status.value for name, status in rows}
+
+        upgrade()
+        assert statuses() == {"proposals": "todo", "own": "in_progress", "empty-no-object": "in_progress", "done": "done"}
+        downgrade(revision="0016")
+        assert statuses()["proposals"] == "in_progress"
+    finally:
+        upgrade()

@@ -89,7 +89,7 @@ def test_an_annotators_day_then_review_and_export(live_app, live_server, browser
     page.click("#confirm-keep")
     page.wait_for_selector("#confirm-empty", state="hidden")
     assert server_annotation(live_app, f0) == {"version": 0}
-    assert page.locator("#suggest-hint").inner_text().startswith("No trained run yet: Auto proposes from depth.")
+    assert page.locator("#suggest-hint").inner_text().startswith("Auto uses depth: this frame has depth.")
     page.click("#suggest")
     page.wait_for_selector("#instances .instance.proposed")
     settle(page)
@@ -150,7 +150,7 @@ def test_an_annotators_day_then_review_and_export(live_app, live_server, browser
     with live_app.app_context():
         cabinet = np.zeros(states[0].shape, bool)
         cabinet[CABINET] = True
-        run_id = stored_run({f1: network_like(cabinet)}, name="room run")
+        run_id = stored_run({f1: network_like(cabinet)}, name="room run", activities=("room",))  # trained on real frames: Auto's
     page.click("#propagate-next")
     wait_for_frame(page, live_server, f1)
     carried = mask_of(page, 0)

@@ -52,7 +52,7 @@ def test_label_a_real_rgbd_video_propagate_accept_a_suggestion_and_export(live_a
         import_path(PRIMESENSE, activity="room")
         frames = list(db.session.execute(db.select(Frame.id).order_by(Frame.index)).scalars())
         f0, f1, f2 = frames
-        run_id = stored_run({f0: network_like(chair, shift=(4, -4))}, name="room model")
+        run_id = stored_run({f0: network_like(chair, shift=(4, -4))}, name="room model", activities=("room",))
     context = browser.new_context(viewport={"width": 1280, "height": 800})
     page = context.new_page()
     sign_in(page, live_app, live_server, username="ann", role="annotator")

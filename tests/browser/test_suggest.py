@@ -40,7 +40,7 @@ def test_suggest_then_accept_one_and_reject_another(live_app, live_server, page)
     assert page.locator("#suggest-source option").all_inner_texts() == [
         f"Auto (run {run_id})", "Depth: this frame has none", "Handled: the colour region nearest the centre",
         "Saliency: spectral residual saliency", f"Run {run_id}: tiny demo run"]
-    assert page.locator("#suggest-hint").inner_text() == f"Auto uses run {run_id} (trained on kitchen)."
+    assert page.locator("#suggest-hint").inner_text() == f"Auto uses run {run_id}: trained on real frames like this one."
     assert "Suggest: a trained run, or depth, proposes objects" in page.locator(".shortcuts").inner_text()
 
     page.click("#suggest")
@@ -48,7 +48,8 @@ def test_suggest_then_accept_one_and_reject_another(live_app, live_server, page)
     settle(page)
     tag = page.locator("#instances .instance.proposed .proposal-tag")
     assert tag.inner_text() == f"proposed by run {run_id}"
-    assert f"run {run_id} proposed 1 object" in page.locator("#suggest-result").inner_text()
+    assert page.locator("#suggest-result").inner_text() == (
+        f"Run {run_id}: trained on real frames like this one. It proposed 1 object: accept or reject it.")
     objects = page.evaluate("window.labelPage.instances()")
     assert len(objects) == 1 and objects[0]["hasEngine"]  # GrabCut strokes can correct it at once
     assert abs(objects[0]["area"] - truth().sum()) < 0.1 * truth().sum()
@@ -78,13 +79,13 @@ def test_without_a_trained_run_suggest_proposes_from_depth(live_app, live_server
     open_frame(page, live_server, frame_id)
     assert page.locator("#suggest-source option").first.inner_text() == "Auto (depth)"
     assert page.locator("#suggest-hint").inner_text() == (
-        "No trained run yet: Auto proposes from depth. "
+        "Auto uses depth: this frame has depth. "
         "Train one for shop: the Training page, or flask egonet train --activities shop")
     page.click("#suggest")
     page.wait_for_selector("#instances .instance.proposed")
     settle(page)
     assert page.locator("#instances .proposal-tag").inner_text() == "proposed by depth"
-    assert "depth proposed 1 object" in page.locator("#suggest-result").inner_text()
+    assert page.locator("#suggest-result").inner_text() == "Depth: this frame has depth. It proposed 1 object: accept or reject it."
     (proposal,) = page.evaluate("window.labelPage.instances()")
     assert abs(proposal["area"] - bag.sum()) < 0.1 * bag.sum()  # the bag the hand holds
     screenshot(page, "suggest-depth")
@@ -93,3 +94,34 @@ def test_without_a_trained_run_suggest_proposes_from_depth(live_app, live_server
     with live_app.app_context():
         annotation = db.session.execute(db.select(Annotation).filter_by(frame_id=frame_id)).scalar_one()
         assert [(i.key, i.proposal_source) for i in annotation.instances] == [(proposal["key"], None)]
+
+
+def test_the_suggest_control_says_before_the_click_what_can_work_and_claims_nothing(live_app, live_server, page):
+    """An RGB-only frame and a finished run that reads DHG: the run is offered disabled with the reason, Auto is
+    handled and says why; a Suggest that proposes nothing says so in words and leaves the frame unclaimed."""
+    first, _ = object_frames(live_app)
+    with live_app.app_context():
+        run_id = stored_run({}, name="needs dhg")  # no stored map: it would have to predict, and it reads DHG
+    sign_in(page, live_app, live_server, username="ann", role="annotator")
+    open_frame(page, live_server, first)
+    options = page.locator("#suggest-source option")
+    assert options.all_inner_texts() == [
+        "Auto (handled)", "Depth: this frame has none", "Handled: the colour region nearest the centre",
+        "Saliency: spectral residual saliency", f"Run {run_id}: needs dhg — needs depth (DHG): this frame has none"]
+    assert [options.nth(i).is_disabled() for i in range(5)] == [False, True, False, False, True]
+    hint = page.locator("#suggest-hint").inner_text()
+    assert hint.startswith("Auto uses handled: no depth here; it proposes object-sized colour regions near the centre.")
+    assert "No trained run yet" not in hint
+
+    page.click("#suggest")
+    page.wait_for_selector("#suggest-result:not([hidden])")
+    # The object (a red block of 20 % of the frame) is larger than handled's colour regions: nothing proposed,
+    # said in words, and nothing claimed.
+    assert page.locator("#suggest-result").inner_text() == (
+        "Handled: no depth here; it proposes object-sized colour regions near the centre. It found no object to "
+        "propose here; choose another source, or draw a box (B).")
+    settle_page = page.locator("#status-badge")
+    assert settle_page.inner_text().lower() == "todo"
+    screenshot(page, "suggest-rgb-only-menu")
+    with live_app.app_context():
+        assert db.session.execute(db.select(Annotation).filter_by(frame_id=first)).scalar_one_or_none() is None

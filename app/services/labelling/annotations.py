@@ -324,7 +324,8 @@ def _write(
         annotation.proposed_by_run_id, annotation.proposed_by_checkpoint_id = proposed_by
     annotation.no_action_object = no_action_object
     annotation.mask_path = union_path
-    annotation.status = _next_status(annotation.status, requested=status, changed=changed)
+    own = no_action_object or any(not s.proposed for s in specs)
+    annotation.status = _next_status(annotation.status, requested=status, changed=changed, own=own)
     if fixed_by is not None and changed:
         annotation.fixed_by, annotation.fixed_at = fixed_by, utcnow()
     annotation.time_spent_s = (annotation.time_spent_s or 0.0) + time_delta_s
@@ -417,9 +418,14 @@ def _check_complete(specs: list[InstanceSpec], no_action_object: bool) -> None:
         )
 
 
-def _next_status(current: Status, *, requested: Status | None, changed: bool) -> Status:
+def _next_status(current: Status, *, requested: Status | None, changed: bool, own: bool) -> Status:
+    """The status after a write. An open annotation is in progress while it holds something of the
+    annotator's own (an object not merely proposed, or "no action-object"), else "todo": proposals
+    nobody accepted yet (Suggest) do not claim the frame."""
     if requested is not None:
         return requested
+    if current in (Status.TODO, Status.IN_PROGRESS):
+        return Status.IN_PROGRESS if own else Status.TODO
     if not changed:
         return current
     if current is Status.DONE:

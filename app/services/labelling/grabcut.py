@@ -43,7 +43,7 @@ from sqlalchemy.orm.exc import StaleDataError
 
 from app.errors import Problem
 from app.extensions import db
-from app.models import Annotation, Frame, Instance, User
+from app.models import Annotation, Frame, Instance, Status, User
 from app.models.annotations import GrabCutState
 from app.services import frames as frames_service
 from app.services import media
@@ -495,6 +495,15 @@ def _clear_proposal(frame_id: int, user_id: int, key: str) -> None:
     carries the new mask anyway.
     """
     own = db.select(Annotation.id).where(Annotation.frame_id == frame_id, Annotation.author_id == user_id)
+    # Edited, the proposal is the annotator's own: the frame is being labelled (annotations._next_status).
+    # The annotation's row first, as a save takes it, then the instances'.
+    db.session.execute(
+        db.update(Annotation)
+        .where(Annotation.id.in_(own), Annotation.status == Status.TODO,
+               Annotation.instances.any(db.and_(Instance.key == key, Instance.proposal_source.is_not(None))))
+        .values(status=Status.IN_PROGRESS)
+        .execution_options(synchronize_session=False)
+    )
     db.session.execute(
         db.update(Instance)
         .where(Instance.annotation_id.in_(own), Instance.key == key,

@@ -16,7 +16,7 @@ from datetime import datetime, timedelta
 from sqlalchemy.exc import IntegrityError
 
 from app.extensions import db
-from app.models import Annotation, Frame, User, utcnow
+from app.models import Annotation, Frame, Status, User, utcnow
 from app.models.annotations import FramePresence
 
 HEARTBEAT_S = 30
@@ -82,7 +82,8 @@ def others_on(frame: Frame, user: User) -> list[Holder]:
     }
     holders = []
     annotations = db.session.execute(
-        db.select(Annotation).where(Annotation.frame_id == frame.id, Annotation.author_id != user.id)
+        db.select(Annotation).where(Annotation.frame_id == frame.id, Annotation.author_id != user.id,
+                                    Annotation.status != Status.TODO)  # proposals nobody took up claim nothing
     ).scalars()
     for annotation in annotations:
         row = present.pop(annotation.author_id, None)

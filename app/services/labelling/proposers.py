@@ -8,12 +8,24 @@ with depth), "handled" (the colour region nearest the centre) or
 that cuts it into regions (``regions``): a run's best-F threshold, or
 ``egonet.proposals.THRESHOLD``.
 
-``choose`` picks one: "auto" is the latest finished run with a checkpoint
-usable for the frame, else depth when the frame has depth, else handled;
-so Suggest works on every frame from the first minute, and learned
-proposals take over once a run is trained. ``source_choices`` lists them
-for the labelling page with a hint that says which run "auto" uses, what it
-was trained on, and how to train one for the frame's activity.
+``choose`` picks one; "auto" chooses by evidence, not by order
+(``auto_choice``):
+
+1. a run for frames like this one: trained on the same kind of frames
+   (the demo's rendered frames, or real ones: ``frame_kind``), or scoring
+   at least ``MIN_MEASURED_F`` on held-out frames of that kind; the best
+   measured on that kind first, then the latest;
+2. else depth, when the frame has depth (measured by a sensor; depth
+   predicted from the image, ``Frame.meta["depth_source"] == "predicted"``,
+   is weaker evidence and the reason says so);
+3. else handled, whose regions are object-sized (each under
+   ``HandledViewedObject.max_area`` of the frame, kept apart).
+
+So Suggest works on every frame from the first minute, and learned
+proposals take over once a run trained on such frames exists.
+``source_choices`` lists the sources for the labelling page before any
+click: what Auto will use and why, and each choice that cannot work on the
+frame disabled with the reason (a run that needs DHG on a frame without).
 
 A run's checkpoint for a frame is one that never trained on it when there
 is one (the fold that held the frame's activity, or the frame, out), so
@@ -29,10 +41,13 @@ import numpy as np
 
 from app.errors import Problem
 from app.extensions import db
-from app.models import Frame
+from sqlalchemy import func
+
+from app.models import Activity, Frame, Sequence
 from app.models.training import Checkpoint, FoldsMode, Prediction, RunStatus, TrainingRun
 from app.services import frames as frames_service
 from app.services import media, training
+from app.services.demo import DEMO_SOURCE
 from egonet import io as egonet_io
 from egonet import proposals
 from egonet.errors import EgonetError
@@ -49,6 +64,12 @@ DEFAULT_THRESHOLD = 0.5
 """When a checkpoint stores no best-F threshold."""
 FAST_MODELS = ("egonet-lite",)
 """Models that predict a frame fast enough on a CPU to answer the page inline."""
+MIN_MEASURED_F = 0.3
+"""A run scoring at least this mean F on held-out frames of a kind is for frames of that kind even
+if it trained on others (the demo's quick-start run scores 0.36 on its held-out rendered frames,
+where its proposals beat depth's: docs/labelling.md)."""
+KIND_WORDS = {"rendered": "the demo's rendered frames", "real": "real frames"}
+"""What ``frame_kind`` says, in the page's words."""
 
 
 class SuggestProblem(Problem):
@@ -64,6 +85,7 @@ class Proposer:
     checkpoint: Checkpoint | None = None
     held_out: bool = False
     why: str = ""  # why this checkpoint, or what the source looks for
+    reason: str = ""  # why Auto chose it, in the annotator's words ("" when the annotator chose)
 
     @property
     def label(self) -> str:
@@ -96,8 +118,7 @@ class Proposer:
 def choose(frame: Frame, *, run_id: int | None = None, source: str = "auto") -> Proposer:
     """The proposer of the frame: ``run_id`` (a run asked for), else ``source``.
 
-    "auto" is the latest finished run with a checkpoint usable for the frame,
-    else depth when the frame has depth, else handled.
+    "auto" chooses by evidence (``auto_choice``).
 
     Raises:
         SuggestProblem: 400 for an unknown source or a run with a source
@@ -111,11 +132,13 @@ def choose(frame: Frame, *, run_id: int | None = None, source: str = "auto") -> 
     if run_id is not None and source not in ("auto", "model"):
         raise SuggestProblem(f"run_id: only the model source takes a run, not {source!r}",
                              fields={"run_id": f"not with source {source!r}"})
+    if source == "auto" and run_id is None:
+        run, chosen, reason = auto_choice(frame)
+        proposer = choose(frame, run_id=run.id if run is not None else None, source=chosen)
+        proposer.reason = reason
+        return proposer
     if source == "auto":
-        run = latest_run(frame) if run_id is None else None
-        if run_id is None and run is None:
-            return choose(frame, source="depth" if frame.depth_path is not None else "handled")
-        source, run_id = "model", run_id if run_id is not None else run.id
+        source = "model"
     if source == "model":
         run = resolve_run(run_id, frame)
         checkpoint, held_out, why = choose_checkpoint(run, frame)
@@ -126,38 +149,125 @@ def choose(frame: Frame, *, run_id: int | None = None, source: str = "auto") -> 
     return Proposer(source, why=DESCRIPTIONS[source])
 
 
+def frame_kind(frame: Frame) -> str:
+    """"rendered" for the demo's frames (``flask egonet demo``), "real" for imported ones."""
+    return "rendered" if frame.sequence.source == DEMO_SOURCE else "real"
+
+
+@dataclass
+class RunEvidence:
+    """What speaks for a run on frames of one kind: trained on such frames, its held-out scores on them."""
+
+    run: TrainingRun
+    trained: bool  # trained on frames of the kind
+    f_score: float | None  # mean F on held-out frames of the kind (None: none scored)
+    scored: int  # how many
+
+    @property
+    def eligible(self) -> bool:
+        return self.trained or (self.f_score is not None and self.f_score >= MIN_MEASURED_F)
+
+
+def run_evidence(run: TrainingRun, kind: str) -> RunEvidence:
+    """Whether ``run`` trained on frames of ``kind`` ("rendered" or "real"), and how it scored on held-out ones.
+
+    The authors' released model trained on real frames; a run trained here
+    on the kinds of the sequences of its activities that existed when it
+    was created.
+    """
+    rendered = func.coalesce(Sequence.source, "") == DEMO_SOURCE
+    of_kind = rendered if kind == "rendered" else ~rendered
+    if run.folds is FoldsMode.RELEASED:
+        trained = kind == "real"
+    else:
+        names = run.config.get("activities") or []
+        trained = bool(names) and db.session.execute(
+            db.select(Sequence.id).join(Activity)
+            .where(Activity.name.in_(names), Sequence.created_at <= run.created_at, of_kind).limit(1)
+        ).first() is not None
+    f_score, scored = db.session.execute(
+        db.select(func.avg(Prediction.f_score), func.count(Prediction.id))
+        .join(Frame, Prediction.frame_id == Frame.id).join(Sequence, Frame.sequence_id == Sequence.id)
+        .where(Prediction.run_id == run.id, Prediction.held_out.is_(True), Prediction.f_score.is_not(None), of_kind)
+    ).one()
+    return RunEvidence(run, trained, float(f_score) if f_score is not None else None, scored)
+
+
+def auto_runs(frame: Frame) -> tuple[list[RunEvidence], list[RunEvidence]]:
+    """The runs usable for the frame, as ``(for Auto, the others)``: those for frames like it, the best
+    measured on its kind first (then the latest), and those trained on other frames only."""
+    kind = frame_kind(frame)
+    evidence = [run_evidence(run, kind) for run in suggestion_runs() if _usable_checkpoints(run, frame)]
+    eligible = sorted((e for e in evidence if e.eligible), key=lambda e: -(e.f_score if e.f_score is not None else -1))
+    return eligible, [e for e in evidence if not e.eligible]
+
+
+def auto_choice(frame: Frame, eligible: list[RunEvidence] | None = None) -> tuple[TrainingRun | None, str, str]:
+    """What "auto" uses on the frame and why: ``(run or None, source, reason)``, the reason in the
+    annotator's words ("this frame has depth"); ``eligible`` as ``auto_runs`` gives it, when known."""
+    if eligible is None:
+        eligible, _ = auto_runs(frame)
+    if eligible:
+        best = eligible[0]
+        why = f"trained on {KIND_WORDS[frame_kind(frame)]} like this one" if best.trained else \
+            f"scores F {best.f_score:.2f} on {best.scored} held-out {KIND_WORDS[frame_kind(frame)]}"
+        return best.run, "model", why
+    if frame.depth_path is not None:
+        if (frame.meta or {}).get("depth_source") == "predicted":
+            return None, "depth", "this frame has depth, predicted from its image (less sure than measured depth)"
+        return None, "depth", "this frame has depth"
+    return None, "handled", "no depth here; it proposes object-sized colour regions near the centre"
+
+
 def source_choices(frame: Frame) -> dict:
-    """The labelling page's choice of proposer for the frame, and the hint beside it.
+    """The labelling page's choice of proposer for the frame, and the hint beside it, before any click.
 
     Returns:
-        ``{"choices": [{"source", "run_id", "label", "disabled"}, ...], "hint": str}``.
+        ``{"choices": [{"source", "run_id", "label", "disabled"}, ...], "hint": str}``: the
+        first choice is Auto, labelled with what it will use; a choice that
+        cannot work on the frame is disabled and says why.
     """
-    run = latest_run(frame)
-    auto = f"run {run.id}" if run is not None else ("depth" if frame.depth_path is not None else "handled")
+    eligible, others = auto_runs(frame)
+    run, chosen, reason = auto_choice(frame, eligible)
+    auto = f"run {run.id}" if run is not None else chosen
     choices = [{"source": "auto", "run_id": None, "label": f"Auto ({auto})", "disabled": False}]
     for source in proposals.SOURCES:
         missing = source == "depth" and frame.depth_path is None
         label = f"{source.capitalize()}: {'this frame has none' if missing else DESCRIPTIONS[source]}"
         choices.append({"source": source, "run_id": None, "label": label, "disabled": missing})
-    choices += [{"source": "model", "run_id": r.id, "label": f"Run {r.id}: {r.name}", "disabled": False}
-                for r in suggestion_runs()]
-    return {"choices": choices, "hint": _hint(frame, run)}
+    usable = {e.run.id for e in eligible + others}
+    other_ids = {e.run.id for e in others}
+    for r in suggestion_runs():
+        note = ""
+        if r.id not in usable:
+            note = " — needs depth (DHG): this frame has none" if frame.dhg_path is None else " — cannot read this frame"
+        elif r.id in other_ids:
+            note = f" — {_trained_words(r)}"
+        choices.append({"source": "model", "run_id": r.id, "label": f"Run {r.id}: {r.name}{note}",
+                        "disabled": r.id not in usable})
+    return {"choices": choices, "hint": _hint(frame, run, reason, auto, others)}
 
 
-def _hint(frame: Frame, run: TrainingRun | None) -> str:
-    """Which run "auto" uses and what it learnt from, or which source it falls back on; how to train one."""
+def _trained_words(run: TrainingRun) -> str:
+    """"trained on the demo's rendered frames", as the page says what a run learnt from."""
+    kinds = [KIND_WORDS[kind] for kind in KIND_WORDS if run_evidence(run, kind).trained]
+    return f"trained on {' and '.join(kinds)}" if kinds else "trained on frames no longer here"
+
+
+def _hint(frame: Frame, run: TrainingRun | None, reason: str, auto: str, others: list[RunEvidence]) -> str:
+    """What Auto uses and why; the runs it passes over and why; how to train one for the frame's activity."""
     activity = frame.sequence.activity.name
     train = f"Train one for {activity}: the Training page, or flask egonet train --activities {shlex.quote(activity)}"
-    if run is None:
-        fallback = "depth" if frame.depth_path is not None else "the handled + viewed object (this frame has no depth)"
-        return f"No trained run yet: Auto proposes from {fallback}. {train}"
-    if run.folds is FoldsMode.RELEASED:
-        return f"Auto uses run {run.id} (the authors' released model, not trained here). {train}"
-    activities = run.config.get("activities") or []
-    trained = f"run {run.id} (trained on {', '.join(activities)})"
-    if activity in activities:
-        return f"Auto uses {trained}."
-    return f"Auto uses {trained}: not on {activity}. {train}"
+    hint = f"Auto uses {auto}: {reason}."
+    if run is not None:
+        activities = run.config.get("activities") or []
+        if run.folds is not FoldsMode.RELEASED and activity not in activities:
+            hint += f" It never saw {activity}. {train}"
+        return hint
+    for e in others[:2]:
+        hint += (f" Run {e.run.id} was {_trained_words(e.run)}, not on {KIND_WORDS[frame_kind(frame)]} like this one:"
+                 " choose it above to try it anyway.")
+    return f"{hint} {train}"
 
 
 # --------------------------------------------------------------------------
@@ -216,8 +326,11 @@ def resolve_run(run_id: int | None, frame: Frame | None = None) -> TrainingRun:
         )
     if not _usable_checkpoints(run, frame):
         what = "any frame" if frame is None else f"frame {frame.id}"
-        why = " (it has no DHG image)" if frame is not None and frame.dhg_path is None else ""
-        raise SuggestProblem(f"run_id: run {run.id} has no checkpoint that can predict {what}{why}",
+        if frame is not None and frame.dhg_path is None:
+            raise SuggestProblem(f"run_id: run {run.id} needs depth (DHG) and frame {frame.id} has none; "
+                                 "choose depth, handled or saliency", status=409,
+                                 fields={"run_id": "needs depth (DHG)"})
+        raise SuggestProblem(f"run_id: run {run.id} has no checkpoint that can predict {what}",
                              status=409, fields={"run_id": "no usable checkpoint"})
     return run
 

@@ -1,9 +1,10 @@
 """Proposals ("Suggest"): a trained run, depth, or a baseline proposes a frame's action-objects.
 
-Who proposes is a ``proposers.Proposer``: by default ("auto") the latest
-finished run with a checkpoint usable for the frame, else the frame's depth
-(the nearest compact surface off the supporting planes), else the handled +
-viewed object; or the source or run the annotator chose (``proposers``).
+Who proposes is a ``proposers.Proposer``: by default ("auto") chosen by
+evidence, a run trained on (or scoring well on) frames like this one, else
+the frame's depth (the nearest compact surface off the supporting planes),
+else the handled + viewed object's object-sized regions; or the source or
+run the annotator chose (``proposers``).
 The proposer's probability map of the frame is cut at its threshold (a
 run's best-F threshold, one half for the other sources) into connected
 regions (``regions``), each of which becomes an instance.
@@ -15,7 +16,7 @@ background of the object's colour, and the annotator can go on correcting
 it with strokes; the session passes the frame's depth when the GrabCut
 service does.
 
-The proposals become the user's in-progress annotation of the frame, each
+The proposals go into the user's annotation of the frame, each
 instance marked with its source (and the run and checkpoint, from a run),
 the annotation recording a run as well. The annotator's own work is never
 overwritten: proposals go beside the instances already there (a region
@@ -24,7 +25,10 @@ only proposals still pending from an earlier suggestion are replaced. A
 done or reviewed annotation, or one marked "no action-object", is refused
 with 409: reopen it first. A proposal stays marked until the annotator
 accepts it (``accept_proposal``) or edits its mask (see ``annotations``
-and ``grabcut``); rejecting one is deleting it.
+and ``grabcut``); rejecting one is deleting it. Proposals alone do not claim the frame: an
+annotation holding nothing of the annotator's own stays "todo"
+(``annotations._next_status``), so trying Suggest leaves the frame to
+label for everyone, until a proposal is accepted or edited.
 
 One frame runs inline (the sources without a run take well under a second,
 egonet-lite predicts a frame in about 0.3 s on a CPU); a model without a
@@ -77,6 +81,7 @@ class Suggestion:
     annotation: Annotation | None = None
     proposals: list[str] = field(default_factory=list)  # keys of the new instances
     replaced: int = 0  # earlier proposals, still pending, that these replace
+    repeated: int = 0  # regions left out: objects the annotator drew already
     notes: list[str] = field(default_factory=list)
     seconds: float = 0.0
 
@@ -92,6 +97,7 @@ class Suggestion:
             "fold": p.checkpoint.fold if p.checkpoint else None,
             "checkpoint_choice": p.why if p.checkpoint else None,
             "held_out": p.held_out,
+            "reason": p.reason or None,
             "threshold": round(self.threshold, 4),
             "threshold_source": self.threshold_source,
             "prediction": self.prediction,
@@ -102,14 +108,22 @@ class Suggestion:
         }
 
     def summary(self) -> str:
-        """One line, for the CLI and the page's message."""
-        n, p = len(self.proposals), self.proposer
-        how = f"fold {p.checkpoint.fold!r}, {p.why}" if p.checkpoint else p.why
-        line = (f"frame {self.frame_id}: {p.label} proposed {n} object{'' if n == 1 else 's'} "
-                f"({how}; threshold {self.threshold:.2f}{', the default' if self.threshold_source == 'default' else ''})")
+        """What happened, in the annotator's words (the page's message; the CLI adds the frame): who
+        proposed and, when Auto chose, why; how many objects; what to do when there are none."""
+        p, n = self.proposer, len(self.proposals)
+        who = p.label[0].upper() + p.label[1:]
+        line = f"{who}: {p.reason}. " if p.reason else ""
+        if n:
+            line += (f"{who if not p.reason else 'It'} proposed {n} object{'' if n == 1 else 's'}: "
+                     f"accept or reject {'it' if n == 1 else 'each'}.")
+        else:
+            line += (f"{who if not p.reason else 'It'} found no object to propose here; "
+                     "choose another source, or draw a box (B).")
         if self.replaced:
-            line += f", replacing {self.replaced} earlier proposal{'' if self.replaced == 1 else 's'}"
-        return line + "".join(f"; {note}" for note in self.notes)
+            line += f" It replaced {self.replaced} earlier proposal{'' if self.replaced == 1 else 's'}."
+        if self.repeated:
+            line += f" {self.repeated} {'was' if self.repeated == 1 else 'were'} drawn already, left out."
+        return line
 
 
 def suggest_frame(
@@ -177,6 +191,7 @@ def _propose(frame: Frame, user: User, existing: Annotation | None, regions: lis
             proposal_source=p.source, proposed_by_run_id=p.run.id if p.run else None,
             proposed_by_checkpoint_id=p.checkpoint.id if p.checkpoint else None,
         ))
+    result.repeated = repeated
     if repeated:
         result.notes.append(f"{repeated} region{'' if repeated == 1 else 's'} left out: already drawn")
     result.annotation = existing  # nothing to write: no new version, no empty annotation
@@ -295,6 +310,8 @@ def accept_proposal(frame: Frame, user: User, *, key: str, version: int) -> Anno
                       fields={"key": "not a proposal"})
     for name, value in Instance.UNMARKED.items():
         setattr(instance, name, value)
+    if annotation.status is Status.TODO:  # the first object of the annotator's own: now it is being labelled
+        annotation.status = Status.IN_PROGRESS
     annotation.updated_at = utcnow()  # always an UPDATE, so the version moves on
     try:
         db.session.commit()
