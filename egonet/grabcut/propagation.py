@@ -84,6 +84,7 @@ _DOUBT = 1.0  # forward-backward flow miss (work-size pixels) above which the fl
 _AFFINE_POINTS = 2000  # most flow vectors the object's affine motion is fitted on
 _AFFINE_MISS = 1.0  # RANSAC inlier distance for that fit, work-size pixels
 _ITERATIONS = 2  # graph cuts: one with the previous frame's models, one re-fitted
+_SUPPORT = 0.5  # share of a part the cut changes that must lie where the flow is in doubt
 _SPECK = 0.02  # parts smaller than this fraction of the largest are dropped
 _MIN_SAMPLES = 40  # fewest pixels per side to fit a colour model on (5 components)
 _DEPTH_TOL_M = 0.08  # depth slack around the object's range (motion, sensor noise), metres
@@ -225,6 +226,7 @@ class _Warp:
     prev_mask_low: np.ndarray
     warped_low: np.ndarray
     back: np.ndarray
+    forth: np.ndarray
     mismatch: np.ndarray
 
 
@@ -237,7 +239,7 @@ def _warp(prev_rgb: np.ndarray, prev_mask: np.ndarray, next_rgb: np.ndarray) -> 
     back, forth = _flows(prev_low, next_low)
     # Going back then forth should return to the start: the miss measures the flow's doubt.
     mismatch = np.linalg.norm(back + _pull(forth, back), axis=2)
-    return _Warp(roi, prev_low, next_low, mask_low, _pull(mask_low, back), back, mismatch)
+    return _Warp(roi, prev_low, next_low, mask_low, _pull(mask_low, back), back, forth, mismatch)
 
 
 def warp_mask(prev_rgb: np.ndarray, prev_mask: np.ndarray, next_rgb: np.ndarray) -> np.ndarray:
@@ -307,7 +309,7 @@ def _doubt(warp: _Warp) -> np.ndarray:
     return doubt if moved is None else doubt & (warped != (moved >= 0.5))
 
 
-def _trimap(warp: _Warp) -> tuple[np.ndarray, np.ndarray]:
+def _trimap(warp: _Warp, doubt: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     """GC_* seeds from the warped mask: uint8 ``(h, w)`` labels and the bool core.
 
     The eroded core is sure foreground and pixels beyond the dilated border
@@ -326,7 +328,6 @@ def _trimap(warp: _Warp) -> tuple[np.ndarray, np.ndarray]:
     reach = cv2.dilate(as_u8, _disk(radius)).astype(bool)
     core = cv2.erode(as_u8, _disk(radius)).astype(bool)
     edge = cv2.morphologyEx(as_u8, cv2.MORPH_GRADIENT, _disk(_EDGE)).astype(bool)
-    doubt = _doubt(warp)
     gc = np.full(warped.shape, cv2.GC_BGD, np.uint8)
     gc[warped] = cv2.GC_FGD
     unsure = reach & ~core & (edge | doubt)
@@ -435,12 +436,141 @@ def _iou(a: np.ndarray, b: np.ndarray) -> float:
     return np.count_nonzero(a & b) / max(1, np.count_nonzero(a | b))
 
 
+@dataclasses.dataclass(frozen=True)
+class Carried:
+    """A carried mask and how far to trust it.
+
+    Attributes:
+        mask: Bool ``(H, W)``, the object in the new frame.
+        confidence: In [0, 1]: the smallest of the flow's consistency (share
+            of the carried object whose forward and backward flow agree), its
+            area kept (smaller over larger of the carried and the previous
+            area) and the cut's agreement with the flow (IoU); 1 for an empty
+            ``prev_mask`` (nothing to carry, nothing to doubt).
+        unsure: True when ``confidence`` is below ``UNSURE``: a person should
+            look at this frame before carrying further.
+        reason: Why it is unsure, in words for the annotator ("" when sure).
+        fell_back: Where the cut was overruled by the flow, as a share of
+            the carried object's pixels (0 when the cut was kept everywhere,
+            1 when the flow's mask was returned whole).
+    """
+
+    mask: np.ndarray
+    confidence: float
+    unsure: bool
+    reason: str
+    fell_back: float
+
+
+UNSURE = 0.6  # confidence below which a carried mask is unsure (the bench's real pairs are all >= 0.75)
+_REASONS = {
+    "consistency": "the object moved too much or changed too fast for the flow to follow",
+    "area": "the object's size changed a lot (partly hidden, or leaving the frame)",
+    "cut": "the object's outline could not be found again",
+}
+
+
+def _guard(label: np.ndarray, warp: _Warp, doubt: np.ndarray) -> np.ndarray:
+    """The cut where the image supports it, else the flow's mask (bool, work size).
+
+    The cut may overrule the warped mask only where the flow is in doubt
+    (its forward and backward answers disagree, or depth says the pixel
+    left the object): each part the cut adds or removes is kept when at
+    least ``_SUPPORT`` of it lies there, and undone otherwise, so where the
+    flow is confident a colour model that cannot tell the object from its
+    surroundings does not move the edge.
+    """
+    warped = warp.warped_low >= 0.5
+    changed = label != warped
+    n, parts = cv2.connectedComponents(changed.view(np.uint8), connectivity=8)
+    if n <= 1:
+        return label
+    size = np.bincount(parts.ravel(), minlength=n)
+    doubted = np.bincount(parts[doubt], minlength=n)
+    keep = doubted >= _SUPPORT * size
+    keep[0] = False
+    return np.where(keep[parts], label, warped)
+
+
+def _confidence(warp: _Warp, result: np.ndarray, cut: np.ndarray | None = None) -> tuple[float, str]:
+    """``(confidence, reason)`` of a carried work-size mask (see :class:`Carried`); ``cut``: the
+    graph cut's own label when it differs from ``result`` (a failed cut), else ``result`` is it."""
+    warped = warp.warped_low >= 0.5
+    before = np.count_nonzero(warp.prev_mask_low >= 0.5)
+    if not warped.any() or not result.any():
+        return 0.0, _REASONS["area"]
+    terms = {
+        "consistency": 1.0 - np.count_nonzero(warped & (warp.mismatch > _DOUBT)) / np.count_nonzero(warped),
+        "area": min(before, np.count_nonzero(result)) / max(1, before, np.count_nonzero(result)),
+        "cut": _iou(result if cut is None else cut, warped),
+    }
+    worst = min(terms, key=terms.get)
+    return float(terms[worst]), _REASONS[worst] if terms[worst] < UNSURE else ""
+
+
+def carry(prev_rgb: np.ndarray, prev_mask: np.ndarray, next_rgb: np.ndarray, *,
+          prev_depth: np.ndarray | None = None, next_depth: np.ndarray | None = None) -> Carried:
+    """:func:`propagate` with its confidence: whether the carried mask needs a person's look.
+
+    Same arguments and errors as :func:`propagate`.
+
+    Returns:
+        A :class:`Carried`.
+    """
+    prev_rgb = _check_rgb(prev_rgb, "prev_rgb")
+    next_rgb = _check_rgb(next_rgb, "next_rgb")
+    _check_same_size(prev_rgb, next_rgb)
+    shape = prev_rgb.shape[:2]
+    prev_mask = _check_mask(prev_mask, shape)
+    prev_depth = _check_depth(prev_depth, "prev_depth", shape)
+    next_depth = _check_depth(next_depth, "next_depth", shape)
+    if not prev_mask.any():
+        return Carried(np.zeros(shape, bool), 1.0, False, "", 0.0)
+
+    warp = _warp(prev_rgb, prev_mask, next_rgb)
+    roi = warp.roi
+    warped = warp.warped_low >= 0.5
+    fallback = roi.paste(warp.warped_low, shape)
+
+    def flow_only(cut: np.ndarray | None = None) -> Carried:
+        # A failed cut still says something: its agreement with the flow counts.
+        confidence, reason = _confidence(warp, warped, cut)
+        return Carried(fallback, confidence, confidence < UNSURE, reason, 1.0)
+
+    if np.count_nonzero(warped) < _MIN_SAMPLES:
+        return flow_only()  # too small at the work size to cut: the flow's answer stands
+    doubt = _doubt(warp)
+    gc, core = _trimap(warp, doubt)
+    if next_depth is not None:
+        _apply_depth(gc, core, warp, prev_depth, next_depth)
+        # Inside the warped mask only depth hands pixels to the background: the image's support too.
+        doubt = doubt | (warped & ((gc == cv2.GC_BGD) | (gc == cv2.GC_PR_BGD)))
+    if min(np.count_nonzero(gc & 1), np.count_nonzero(~gc & 1)) < _MIN_SAMPLES:
+        return flow_only()
+    models = _models(warp.prev_low, warp.prev_mask_low >= 0.5) or _models(warp.next_low, (gc & 1).astype(bool))
+    if models is None:
+        return flow_only()
+    label = _cut(warp.next_low, gc, models)
+    area, warped_area = np.count_nonzero(label), np.count_nonzero(warped)
+    if _iou(label, warped) < 0.5 or not 0.5 * warped_area <= area <= 2 * warped_area:
+        return flow_only(label)  # a failed cut (colours too alike): trust the flow
+    guarded = _guard(label, warp, doubt)
+    fell_back = np.count_nonzero((guarded != label)) / max(1, warped_area)
+    # Where the result agrees with the warp, the warp's soft values place the edge
+    # to a fraction of a work-size pixel; elsewhere the cut, smoothed so the
+    # bilinear upsample gives a clean edge instead of work-size stairs.
+    soft = np.where(guarded == warped, warp.warped_low, cv2.GaussianBlur(guarded.astype(np.float32), (0, 0), 0.7))
+    confidence, reason = _confidence(warp, guarded)
+    return Carried(_drop_specks(roi.paste(soft, shape), fallback), confidence, confidence < UNSURE, reason, fell_back)
+
+
 def propagate(prev_rgb: np.ndarray, prev_mask: np.ndarray, next_rgb: np.ndarray, *,
               prev_depth: np.ndarray | None = None, next_depth: np.ndarray | None = None) -> np.ndarray:
     """Carry one object's mask from a frame to an adjacent frame (either direction).
 
     Optical flow moves the mask, then GrabCut, seeded from the moved mask,
-    snaps it to the object in the new frame (see the module's docstring).
+    snaps it to the object in the new frame where the flow is in doubt (see
+    the module's docstring); :func:`carry` also says how sure it is.
 
     Args:
         prev_rgb: RGB uint8 ``(H, W, 3)``, the frame the mask belongs to.
@@ -467,36 +597,4 @@ def propagate(prev_rgb: np.ndarray, prev_mask: np.ndarray, next_rgb: np.ndarray,
         >>> bool(propagate(frame, np.zeros((64, 64), bool), frame).any())
         False
     """
-    prev_rgb = _check_rgb(prev_rgb, "prev_rgb")
-    next_rgb = _check_rgb(next_rgb, "next_rgb")
-    _check_same_size(prev_rgb, next_rgb)
-    shape = prev_rgb.shape[:2]
-    prev_mask = _check_mask(prev_mask, shape)
-    prev_depth = _check_depth(prev_depth, "prev_depth", shape)
-    next_depth = _check_depth(next_depth, "next_depth", shape)
-    if not prev_mask.any():
-        return np.zeros(shape, bool)
-
-    warp = _warp(prev_rgb, prev_mask, next_rgb)
-    roi = warp.roi
-    warped = warp.warped_low >= 0.5
-    fallback = roi.paste(warp.warped_low, shape)
-    if np.count_nonzero(warped) < _MIN_SAMPLES:
-        return fallback  # too small at the work size to cut: the flow's answer stands
-    gc, core = _trimap(warp)
-    if next_depth is not None:
-        _apply_depth(gc, core, warp, prev_depth, next_depth)
-    if min(np.count_nonzero(gc & 1), np.count_nonzero(~gc & 1)) < _MIN_SAMPLES:
-        return fallback
-    models = _models(warp.prev_low, warp.prev_mask_low >= 0.5) or _models(warp.next_low, (gc & 1).astype(bool))
-    if models is None:
-        return fallback
-    label = _cut(warp.next_low, gc, models)
-    area, warped_area = np.count_nonzero(label), np.count_nonzero(warped)
-    if _iou(label, warped) < 0.5 or not 0.5 * warped_area <= area <= 2 * warped_area:
-        return fallback  # a failed cut (colours too alike): trust the flow
-    # Where the cut agrees with the warp, the warp's soft values place the edge
-    # to a fraction of a work-size pixel; elsewhere the cut, smoothed so the
-    # bilinear upsample gives a clean edge instead of work-size stairs.
-    soft = np.where(label == warped, warp.warped_low, cv2.GaussianBlur(label.astype(np.float32), (0, 0), 0.7))
-    return _drop_specks(roi.paste(soft, shape), fallback)
+    return carry(prev_rgb, prev_mask, next_rgb, prev_depth=prev_depth, next_depth=next_depth).mask
