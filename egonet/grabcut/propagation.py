@@ -470,23 +470,24 @@ _REASONS = {
 }
 
 
-def _guard(label: np.ndarray, warp: _Warp, doubt: np.ndarray) -> np.ndarray:
+def _guard(label: np.ndarray, warped: np.ndarray, support: np.ndarray) -> np.ndarray:
     """The cut where the image supports it, else the flow's mask (bool, work size).
 
-    The cut may overrule the warped mask only where the flow is in doubt
-    (its forward and backward answers disagree, or depth says the pixel
-    left the object): each part the cut adds or removes is kept when at
-    least ``_SUPPORT`` of it lies there, and undone otherwise, so where the
-    flow is confident a colour model that cannot tell the object from its
-    surroundings does not move the edge.
+    ``support`` is where the image backs the cut against the flow: where the
+    flow is in doubt (its forward and backward answers disagree), on the
+    thin strip along the warped edge (where the cut snaps the edge to the
+    image's), and where depth says a pixel left the object. Each part the
+    cut adds or removes is kept when at least ``_SUPPORT`` of it lies there,
+    and undone otherwise: where the flow is confident, a colour model that
+    cannot tell the object from its surroundings (a dark shoe on a dark
+    road, a dark mug under a hand) does not cut a piece off or add one.
     """
-    warped = warp.warped_low >= 0.5
     changed = label != warped
     n, parts = cv2.connectedComponents(changed.view(np.uint8), connectivity=8)
     if n <= 1:
         return label
     size = np.bincount(parts.ravel(), minlength=n)
-    doubted = np.bincount(parts[doubt], minlength=n)
+    doubted = np.bincount(parts[support], minlength=n)
     keep = doubted >= _SUPPORT * size
     keep[0] = False
     return np.where(keep[parts], label, warped)
@@ -541,10 +542,12 @@ def carry(prev_rgb: np.ndarray, prev_mask: np.ndarray, next_rgb: np.ndarray, *,
         return flow_only()  # too small at the work size to cut: the flow's answer stands
     doubt = _doubt(warp)
     gc, core = _trimap(warp, doubt)
+    # The cut's to decide: where the flow is in doubt, and the strip along the warped edge (sub-pixel snapping).
+    support = doubt | cv2.morphologyEx(warped.view(np.uint8), cv2.MORPH_GRADIENT, _disk(_EDGE)).astype(bool)
     if next_depth is not None:
         _apply_depth(gc, core, warp, prev_depth, next_depth)
         # Inside the warped mask only depth hands pixels to the background: the image's support too.
-        doubt = doubt | (warped & ((gc == cv2.GC_BGD) | (gc == cv2.GC_PR_BGD)))
+        support |= warped & ((gc == cv2.GC_BGD) | (gc == cv2.GC_PR_BGD))
     if min(np.count_nonzero(gc & 1), np.count_nonzero(~gc & 1)) < _MIN_SAMPLES:
         return flow_only()
     models = _models(warp.prev_low, warp.prev_mask_low >= 0.5) or _models(warp.next_low, (gc & 1).astype(bool))
@@ -554,7 +557,7 @@ def carry(prev_rgb: np.ndarray, prev_mask: np.ndarray, next_rgb: np.ndarray, *,
     area, warped_area = np.count_nonzero(label), np.count_nonzero(warped)
     if _iou(label, warped) < 0.5 or not 0.5 * warped_area <= area <= 2 * warped_area:
         return flow_only(label)  # a failed cut (colours too alike): trust the flow
-    guarded = _guard(label, warp, doubt)
+    guarded = _guard(label, warped, support)
     fell_back = np.count_nonzero((guarded != label)) / max(1, warped_area)
     # Where the result agrees with the warp, the warp's soft values place the edge
     # to a fraction of a work-size pixel; elsewhere the cut, smoothed so the
