@@ -445,8 +445,9 @@ class Carried:
         confidence: In [0, 1]: the smallest of the flow's consistency (share
             of the carried object whose forward and backward flow agree), its
             area kept (smaller over larger of the carried and the previous
-            area) and the cut's agreement with the flow (IoU); 1 for an empty
-            ``prev_mask`` (nothing to carry, nothing to doubt).
+            area), the cut's agreement with the flow (IoU) and its look (the
+            intersection of the object's colour histograms before and after);
+            1 for an empty ``prev_mask`` (nothing to carry, nothing to doubt).
         unsure: True when ``confidence`` is below ``UNSURE``: a person should
             look at this frame before carrying further.
         reason: Why it is unsure, in words for the annotator ("" when sure).
@@ -467,7 +468,14 @@ _REASONS = {
     "consistency": "the object moved too much or changed too fast for the flow to follow",
     "area": "the object's size changed a lot (partly hidden, or leaving the frame)",
     "cut": "the object's outline could not be found again",
+    "look": "it no longer looks like the object (hidden, or out of view)",
 }
+
+
+def _colours(image: np.ndarray, where: np.ndarray) -> np.ndarray:
+    """The share of ``where``'s pixels in each of 8x8x8 RGB bins."""
+    bins = (image[where] // 32).astype(np.int32) @ np.array([64, 8, 1], np.int32)
+    return np.bincount(bins, minlength=512) / max(1, bins.size)
 
 
 def _guard(label: np.ndarray, warped: np.ndarray, support: np.ndarray) -> np.ndarray:
@@ -504,6 +512,9 @@ def _confidence(warp: _Warp, result: np.ndarray, cut: np.ndarray | None = None) 
         "consistency": 1.0 - np.count_nonzero(warped & (warp.mismatch > _DOUBT)) / np.count_nonzero(warped),
         "area": min(before, np.count_nonzero(result)) / max(1, before, np.count_nonzero(result)),
         "cut": _iou(result if cut is None else cut, warped),
+        # Histogram intersection of the object's colours before and after: a hand over it, or the object gone.
+        "look": float(np.minimum(_colours(warp.prev_low, warp.prev_mask_low >= 0.5),
+                                 _colours(warp.next_low, result)).sum()),
     }
     worst = min(terms, key=terms.get)
     return float(terms[worst]), _REASONS[worst] if terms[worst] < UNSURE else ""
