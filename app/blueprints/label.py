@@ -62,6 +62,7 @@ TARGET = {"frame_id": Int(min=1), "instance": Str(min_len=1, max_len=40)}
 # use_depth: null or absent = the frame's depth when it has one (see labelling.grabcut_box).
 BOX = {**TARGET, "box": List(Float(), min_len=4, max_len=4), "use_depth": Bool(nullable=True, default=None)}
 CARRY = {"replace": Bool(default=False), "version": Int(min=0, nullable=True, default=None)}
+CARRY_MAX = 50  # frames the page's "Frames" field may ask for (a chain of requests)
 PROPAGATE = {**CARRY, "direction": Str(choices=["next", "previous"], default="next"),
              "count": Int(min=1, max=labelling.RANGE_MAX, default=1)}
 SUGGEST = {
@@ -150,6 +151,9 @@ def page_config(frame: Frame, *, mode: str, annotation: Annotation | None = None
             accept_proposal=url_for("label.accept_proposal", frame_id=frame.id),
         )
         config["suggest"] = labelling.source_choices(frame)
+        # The page carries up to carry_max frames as a chain of requests of at most range_max frames each.
+        config["carry_max"] = CARRY_MAX
+        config["carry_request"] = {"frames": labelling.RANGE_MAX, "object_frames": labelling.RANGE_OBJECT_FRAMES}
     else:
         config["own"] = annotation.author_id == current_user.id
         config["urls"].update(
