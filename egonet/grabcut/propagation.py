@@ -45,10 +45,21 @@ How, all inside one region of interest (ROI) at a reduced work size:
    stray speck would ruin the mask's box), unless the flow carried the
    object there (a tail's tip, a foot past a thin ankle).
 
+6. The cut never overrules the flow where the image does not back it: each
+   part where the cut disagrees with the warped mask is kept only when at
+   least half of it lies where the flow is in doubt, on the warped edge's
+   strip, or where depth says the pixel left the object; elsewhere the
+   warped mask stands (a dark shoe on a dark road, a dark mug under the
+   hand: the colour model cannot tell them from their surroundings, the
+   flow could).
+
 A cut that disagrees grossly with the warped mask (overlap below 0.5, or less
 than half or more than twice its area) is a cut that failed (colours of the
 object and its surroundings too alike), and the warped mask is returned
-instead. An empty ``prev_mask`` has nothing to carry: the result is an empty
+instead. ``carry`` also says how sure the result is (:class:`Carried`): the
+smallest of the flow's consistency on the object, the area kept, the cut's
+agreement with the flow and the object's colours kept (a histogram
+intersection); below ``UNSURE`` a person should look before carrying on. An empty ``prev_mask`` has nothing to carry: the result is an empty
 mask (no error), so a caller can propagate every instance of a frame blindly.
 
 Example:
@@ -450,7 +461,9 @@ class Carried:
             1 for an empty ``prev_mask`` (nothing to carry, nothing to doubt).
         unsure: True when ``confidence`` is below ``UNSURE``: a person should
             look at this frame before carrying further.
-        reason: Why it is unsure, in words for the annotator ("" when sure).
+        reason: Why it is unsure, in words for the annotator that follow
+            "the object" ("no longer looks like itself: hidden, or out of
+            view"); "" when sure.
         fell_back: Where the cut was overruled by the flow, as a share of
             the carried object's pixels (0 when the cut was kept everywhere,
             1 when the flow's mask was returned whole).
@@ -465,10 +478,10 @@ class Carried:
 
 UNSURE = 0.6  # confidence below which a carried mask is unsure (the bench's real pairs are all >= 0.75)
 _REASONS = {
-    "consistency": "the object moved too much or changed too fast for the flow to follow",
-    "area": "the object's size changed a lot (partly hidden, or leaving the frame)",
-    "cut": "the object's outline could not be found again",
-    "look": "it no longer looks like the object (hidden, or out of view)",
+    "consistency": "moved too much or too fast to follow",
+    "area": "changed size a lot: partly hidden, or leaving the frame",
+    "cut": "has no outline the cut could find again",
+    "look": "no longer looks like itself: hidden, or out of view",
 }
 
 

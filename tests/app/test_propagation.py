@@ -356,7 +356,7 @@ def test_a_range_stops_at_the_first_unsure_frame_and_says_which(app, annotator):
     assert [c["index"] for c in body["carried"]] == [1, 2, 3]
     stopped = body["stopped"]
     assert (stopped["kind"], stopped["frame_id"], stopped["index"]) == ("unsure", ids[3], 3)
-    assert stopped["reason"].startswith("stopped at frame #3: the result looks unsure (object 1 (o0): "), stopped
+    assert stopped["reason"].startswith("stopped at frame #3: the result looks unsure (object 1 (o0) "), stopped
     # The unsure frame is saved (the annotator lands on it to fix it); nothing beyond it is touched.
     assert body["frame_id"] == ids[3] and body["url"] == f"/label/frames/{ids[3]}"
     assert annotator.get(f"/api/label/frames/{ids[4]}/annotation").get_json()["version"] == 0

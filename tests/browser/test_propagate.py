@@ -118,8 +118,8 @@ def test_propagate_over_a_range_stops_at_the_unsure_frame_and_says_which(live_ap
     wait_for_frame(page, live_server, ids[12])
     note = page.locator("#carry-note")
     note.wait_for(state="visible")
-    assert note.inner_text() == ("Stopped at frame #12: the result looks unsure (object 1: it no longer looks like "
-                                 "the object (hidden, or out of view)); check it there. Carried to 12 frames.")
+    assert note.inner_text() == ("Stopped at frame #12: the result looks unsure (object 1 no longer looks like itself: "
+                                 "hidden, or out of view); check it there. Carried to 12 frames.")
     assert note.get_attribute("data-kind") == "warning"
     statuses = [page.locator(f".film-frame[data-id='{i}']").get_attribute("data-status") for i in ids]
     assert statuses == ["in_progress"] * 13 + ["todo"]

@@ -286,7 +286,7 @@ def test_an_object_gone_from_the_next_frame_is_unsure_and_says_why():
     before[mask] = (rng.integers(0, 40, (1600, 3)) + [180, 30, 30]).astype(np.uint8)
     gone = carry(before, mask, table)
     assert gone.unsure and gone.confidence < UNSURE
-    assert gone.reason == "it no longer looks like the object (hidden, or out of view)"
+    assert gone.reason == "no longer looks like itself: hidden, or out of view"
     # The same object still there, moved a little: sure, and no reason given.
     moved = carry(before, mask, np.roll(before, 3, axis=1))
     assert not moved.unsure and moved.confidence > 0.8 and moved.reason == ""

@@ -211,7 +211,7 @@ def carry(source: Frame, target: Frame, user: User, *, replace: bool, version: i
         except EgonetError as exc:  # the stored media disagree with each other (sizes)
             raise Problem.from_egonet(exc) from None
         if carried.unsure and not unsure:
-            unsure = f'object {n}{f" ({instance.label})" if instance.label else ""}: {carried.reason}'
+            unsure = f'object {n}{f" ({instance.label})" if instance.label else ""} {carried.reason}'
         specs.append(InstanceSpec(key=instance.key, kind=instance.kind, label=instance.label,
                                   mask_path=media.store(egonet_io.encode_png(carried.mask), ".png"), mask=carried.mask))
     # The target's old GrabCut sessions belong to the work being replaced.
