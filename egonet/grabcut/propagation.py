@@ -454,7 +454,7 @@ class Carried:
     Attributes:
         mask: Bool ``(H, W)``, the object in the new frame.
         confidence: In [0, 1]: the smallest of the flow's consistency (share
-            of the carried object whose forward and backward flow agree), its
+            of the carried object where the flow is not in doubt), its
             area kept (smaller over larger of the carried and the previous
             area), the cut's agreement with the flow (IoU) and its look (the
             intersection of the object's colour histograms before and after);
@@ -514,7 +514,7 @@ def _guard(label: np.ndarray, warped: np.ndarray, support: np.ndarray) -> np.nda
     return np.where(keep[parts], label, warped)
 
 
-def _confidence(warp: _Warp, result: np.ndarray, cut: np.ndarray | None = None) -> tuple[float, str]:
+def _confidence(warp: _Warp, result: np.ndarray, doubt: np.ndarray, cut: np.ndarray | None = None) -> tuple[float, str]:
     """``(confidence, reason)`` of a carried work-size mask (see :class:`Carried`); ``cut``: the
     graph cut's own label when it differs from ``result`` (a failed cut), else ``result`` is it."""
     warped = warp.warped_low >= 0.5
@@ -522,7 +522,9 @@ def _confidence(warp: _Warp, result: np.ndarray, cut: np.ndarray | None = None) 
     if not warped.any() or not result.any():
         return 0.0, _REASONS["area"]
     terms = {
-        "consistency": 1.0 - np.count_nonzero(warped & (warp.mismatch > _DOUBT)) / np.count_nonzero(warped),
+        # Doubt, not the bare forward-backward miss: a plain object's inside has no texture for the
+        # flow to agree on, yet it moves with the rest (:func:`_doubt`).
+        "consistency": 1.0 - np.count_nonzero(warped & doubt) / np.count_nonzero(warped),
         "area": min(before, np.count_nonzero(result)) / max(1, before, np.count_nonzero(result)),
         "cut": _iou(result if cut is None else cut, warped),
         # Histogram intersection of the object's colours before and after: a hand over it, or the object gone.
@@ -557,14 +559,15 @@ def carry(prev_rgb: np.ndarray, prev_mask: np.ndarray, next_rgb: np.ndarray, *,
     warped = warp.warped_low >= 0.5
     fallback = roi.paste(warp.warped_low, shape)
 
+    doubt = _doubt(warp)
+
     def flow_only(cut: np.ndarray | None = None) -> Carried:
         # A failed cut still says something: its agreement with the flow counts.
-        confidence, reason = _confidence(warp, warped, cut)
+        confidence, reason = _confidence(warp, warped, doubt, cut)
         return Carried(fallback, confidence, confidence < UNSURE, reason, 1.0)
 
     if np.count_nonzero(warped) < _MIN_SAMPLES:
         return flow_only()  # too small at the work size to cut: the flow's answer stands
-    doubt = _doubt(warp)
     gc, core = _trimap(warp, doubt)
     # The cut's to decide: where the flow is in doubt, and the strip along the warped edge (sub-pixel snapping).
     support = doubt | cv2.morphologyEx(warped.view(np.uint8), cv2.MORPH_GRADIENT, _disk(_EDGE)).astype(bool)
@@ -587,7 +590,7 @@ def carry(prev_rgb: np.ndarray, prev_mask: np.ndarray, next_rgb: np.ndarray, *,
     # to a fraction of a work-size pixel; elsewhere the cut, smoothed so the
     # bilinear upsample gives a clean edge instead of work-size stairs.
     soft = np.where(guarded == warped, warp.warped_low, cv2.GaussianBlur(guarded.astype(np.float32), (0, 0), 0.7))
-    confidence, reason = _confidence(warp, guarded)
+    confidence, reason = _confidence(warp, guarded, doubt)
     return Carried(_drop_specks(roi.paste(soft, shape), fallback), confidence, confidence < UNSURE, reason, fell_back)
 
 
