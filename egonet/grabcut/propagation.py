@@ -485,10 +485,24 @@ _REASONS = {
 }
 
 
-def _colours(image: np.ndarray, where: np.ndarray) -> np.ndarray:
-    """The share of ``where``'s pixels in each of 8x8x8 RGB bins."""
-    bins = (image[where] // 32).astype(np.int32) @ np.array([64, 8, 1], np.int32)
-    return np.bincount(bins, minlength=512) / max(1, bins.size)
+def _colours(image: np.ndarray, where: np.ndarray, offset: float) -> np.ndarray:
+    """The share of ``where``'s pixels in each of 17x17 chromaticity bins (r and g of
+    ``rgb / (r + g + b)``, 1/16 wide, shifted by ``offset`` of a bin): colour without
+    brightness, so a turn into the shade or a lamp does not count as a change."""
+    rgb = image[where].astype(np.float32) + 1.0
+    rg = rgb[:, :2] / rgb.sum(axis=1, keepdims=True)
+    bins = np.minimum((rg * 16 + offset).astype(np.int32), 16) @ np.array([17, 1], np.int32)
+    return np.bincount(bins, minlength=289) / max(1, bins.size)
+
+
+def _look(warp: _Warp, result: np.ndarray) -> float:
+    """How much of the object's colours the carried mask still holds: the
+    intersection of the chromaticity histograms before and after, on two
+    grids half a bin apart (the better one), so a colour lying on a bin's
+    edge does not jump bins."""
+    before = warp.prev_mask_low >= 0.5
+    return max(float(np.minimum(_colours(warp.prev_low, before, k), _colours(warp.next_low, result, k)).sum())
+               for k in (0.0, 0.5))
 
 
 def _guard(label: np.ndarray, warped: np.ndarray, support: np.ndarray) -> np.ndarray:
@@ -528,8 +542,7 @@ def _confidence(warp: _Warp, result: np.ndarray, doubt: np.ndarray, cut: np.ndar
         "area": min(before, np.count_nonzero(result)) / max(1, before, np.count_nonzero(result)),
         "cut": _iou(result if cut is None else cut, warped),
         # Histogram intersection of the object's colours before and after: a hand over it, or the object gone.
-        "look": float(np.minimum(_colours(warp.prev_low, warp.prev_mask_low >= 0.5),
-                                 _colours(warp.next_low, result)).sum()),
+        "look": _look(warp, result),
     }
     worst = min(terms, key=terms.get)
     return float(terms[worst]), _REASONS[worst] if terms[worst] < UNSURE else ""
