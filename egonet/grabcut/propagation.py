@@ -582,8 +582,12 @@ def carry(prev_rgb: np.ndarray, prev_mask: np.ndarray, next_rgb: np.ndarray, *,
     if np.count_nonzero(warped) < _MIN_SAMPLES:
         return flow_only()  # too small at the work size to cut: the flow's answer stands
     gc, core = _trimap(warp, doubt)
-    # The cut's to decide: where the flow is in doubt, and the strip along the warped edge (sub-pixel snapping).
-    support = doubt | cv2.morphologyEx(warped.view(np.uint8), cv2.MORPH_GRADIENT, _disk(_EDGE)).astype(bool)
+    # The cut's to decide: where the flow is in doubt, and, when the work grid is the frame's own
+    # pixels, the strip along the warped edge (snapping it to the image's edge). On a reduced grid
+    # the warp's soft values place the edge finer than the cut's coarse pixels can.
+    support = doubt.copy()
+    if (roi.w, roi.h) == (roi.x1 - roi.x0, roi.y1 - roi.y0):
+        support |= cv2.morphologyEx(warped.view(np.uint8), cv2.MORPH_GRADIENT, _disk(_EDGE)).astype(bool)
     if next_depth is not None:
         _apply_depth(gc, core, warp, prev_depth, next_depth)
         # Inside the warped mask only depth hands pixels to the background: the image's support too.
