@@ -158,7 +158,7 @@ def propagate(frame: Frame, user: User, *, step: int = 1, count: int = 1, replac
 def copy_from_previous(frame: Frame, user: User, *, replace: bool = False, version: int | None = None) -> Annotation:
     """Carry the user's annotation of the previous frame of the sequence into ``frame``.
 
-    Args and errors as ``propagate_to_next``, mirrored: 404 ``previous``
+    Args and errors as ``propagate`` for one frame, mirrored: 404 ``previous``
     without a previous frame or without the user's instances on it, 409 when
     ``frame`` already has the user's work.
     """
