@@ -39,19 +39,17 @@ How, all inside one region of interest (ROI) at a reduced work size:
    ``next_depth`` under the warped core) is sure background, so the flow's
    smear onto a wall or table behind the object is cut away even where it
    has the object's colour. Missing readings (0 or NaN) change nothing.
-5. Back to full resolution: where the cut agrees with the warp, the warp's
+5. The cut never overrules the flow where the image does not back it: each
+   part where the cut disagrees with the warped mask is kept only when at
+   least half of it lies where the flow is in doubt, on the warped edge's
+   strip (when the work grid is the frame's own pixels; on a reduced grid
+   the warp's soft edge is finer), or where depth says the pixel left the
+   object; elsewhere the warped mask stands.
+6. Back to full resolution: where the cut agrees with the warp, the warp's
    soft values (sub-pixel); elsewhere the cut, smoothed; upsampled
    bilinearly, then parts smaller than 2 % of the largest are dropped (one
    stray speck would ruin the mask's box), unless the flow carried the
    object there (a tail's tip, a foot past a thin ankle).
-
-6. The cut never overrules the flow where the image does not back it: each
-   part where the cut disagrees with the warped mask is kept only when at
-   least half of it lies where the flow is in doubt, on the warped edge's
-   strip, or where depth says the pixel left the object; elsewhere the
-   warped mask stands (a dark shoe on a dark road, a dark mug under the
-   hand: the colour model cannot tell them from their surroundings, the
-   flow could).
 
 A cut that disagrees grossly with the warped mask (overlap below 0.5, or less
 than half or more than twice its area) is a cut that failed (colours of the
@@ -59,8 +57,9 @@ object and its surroundings too alike), and the warped mask is returned
 instead. ``carry`` also says how sure the result is (:class:`Carried`): the
 smallest of the flow's consistency on the object, the area kept, the cut's
 agreement with the flow and the object's colours kept (a histogram
-intersection); below ``UNSURE`` a person should look before carrying on. An empty ``prev_mask`` has nothing to carry: the result is an empty
-mask (no error), so a caller can propagate every instance of a frame blindly.
+intersection); below ``UNSURE`` a person should look before carrying on.
+An empty ``prev_mask`` has nothing to carry: the result is an empty mask (no
+error), so a caller can propagate every instance of a frame blindly.
 
 Example:
     >>> import numpy as np
@@ -464,19 +463,15 @@ class Carried:
         reason: Why it is unsure, in words for the annotator that follow
             "the object" ("no longer looks like itself: hidden, or out of
             view"); "" when sure.
-        fell_back: Where the cut was overruled by the flow, as a share of
-            the carried object's pixels (0 when the cut was kept everywhere,
-            1 when the flow's mask was returned whole).
     """
 
     mask: np.ndarray
     confidence: float
     unsure: bool
     reason: str
-    fell_back: float
 
 
-UNSURE = 0.6  # confidence below which a carried mask is unsure (the bench's real pairs are all >= 0.75)
+UNSURE = 0.6  # confidence below which a carried mask is unsure (every bench pair is at least 0.80)
 _REASONS = {
     "consistency": "moved too much or too fast to follow",
     "area": "changed size a lot: partly hidden, or leaving the frame",
@@ -509,13 +504,13 @@ def _guard(label: np.ndarray, warped: np.ndarray, support: np.ndarray) -> np.nda
     """The cut where the image supports it, else the flow's mask (bool, work size).
 
     ``support`` is where the image backs the cut against the flow: where the
-    flow is in doubt (its forward and backward answers disagree), on the
-    thin strip along the warped edge (where the cut snaps the edge to the
-    image's), and where depth says a pixel left the object. Each part the
-    cut adds or removes is kept when at least ``_SUPPORT`` of it lies there,
-    and undone otherwise: where the flow is confident, a colour model that
-    cannot tell the object from its surroundings (a dark shoe on a dark
-    road, a dark mug under a hand) does not cut a piece off or add one.
+    flow is in doubt (:func:`_doubt`), on the thin strip along the warped
+    edge when the work grid is the frame's own (where the cut snaps the
+    edge to the image's), and where depth says a pixel left the object.
+    Each part the cut adds or removes is kept when at least ``_SUPPORT`` of
+    it lies there, and undone otherwise: where the flow is confident, a
+    colour model that cannot tell the object from its surroundings (a dark
+    mug against a dark hand) does not cut a piece off or add one.
     """
     changed = label != warped
     n, parts = cv2.connectedComponents(changed.view(np.uint8), connectivity=8)
@@ -565,7 +560,7 @@ def carry(prev_rgb: np.ndarray, prev_mask: np.ndarray, next_rgb: np.ndarray, *,
     prev_depth = _check_depth(prev_depth, "prev_depth", shape)
     next_depth = _check_depth(next_depth, "next_depth", shape)
     if not prev_mask.any():
-        return Carried(np.zeros(shape, bool), 1.0, False, "", 0.0)
+        return Carried(np.zeros(shape, bool), 1.0, False, "")
 
     warp = _warp(prev_rgb, prev_mask, next_rgb)
     roi = warp.roi
@@ -577,7 +572,7 @@ def carry(prev_rgb: np.ndarray, prev_mask: np.ndarray, next_rgb: np.ndarray, *,
     def flow_only(cut: np.ndarray | None = None) -> Carried:
         # A failed cut still says something: its agreement with the flow counts.
         confidence, reason = _confidence(warp, warped, doubt, cut)
-        return Carried(fallback, confidence, confidence < UNSURE, reason, 1.0)
+        return Carried(fallback, confidence, confidence < UNSURE, reason)
 
     if np.count_nonzero(warped) < _MIN_SAMPLES:
         return flow_only()  # too small at the work size to cut: the flow's answer stands
@@ -602,13 +597,12 @@ def carry(prev_rgb: np.ndarray, prev_mask: np.ndarray, next_rgb: np.ndarray, *,
     if _iou(label, warped) < 0.5 or not 0.5 * warped_area <= area <= 2 * warped_area:
         return flow_only(label)  # a failed cut (colours too alike): trust the flow
     guarded = _guard(label, warped, support)
-    fell_back = np.count_nonzero((guarded != label)) / max(1, warped_area)
     # Where the result agrees with the warp, the warp's soft values place the edge
     # to a fraction of a work-size pixel; elsewhere the cut, smoothed so the
     # bilinear upsample gives a clean edge instead of work-size stairs.
     soft = np.where(guarded == warped, warp.warped_low, cv2.GaussianBlur(guarded.astype(np.float32), (0, 0), 0.7))
     confidence, reason = _confidence(warp, guarded, doubt)
-    return Carried(_drop_specks(roi.paste(soft, shape), fallback), confidence, confidence < UNSURE, reason, fell_back)
+    return Carried(_drop_specks(roi.paste(soft, shape), fallback), confidence, confidence < UNSURE, reason)
 
 
 def propagate(prev_rgb: np.ndarray, prev_mask: np.ndarray, next_rgb: np.ndarray, *,
