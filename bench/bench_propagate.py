@@ -80,7 +80,7 @@ for path in (ROOT, ROOT / "bench"):
 
 from bench_grabcut import _blob, _composite, _textured  # noqa: E402
 
-from egonet.grabcut import GrabCutSession, propagate  # noqa: E402
+from egonet.grabcut import Carried, GrabCutSession, carry  # noqa: E402
 from egonet.grabcut.propagation import warp_mask  # noqa: E402
 
 SHARED = ROOT.parent / "shared" / "data"
@@ -339,8 +339,8 @@ def mask_iou(a: np.ndarray, b: np.ndarray) -> float:
 METHODS: dict[str, Callable[[Frame, Frame], np.ndarray]] = {
     "copy": lambda a, b: a.truth.copy(),
     "flow": lambda a, b: warp_mask(a.rgb, a.truth, b.rgb),
-    "ours": lambda a, b: propagate(a.rgb, a.truth, b.rgb),
-    "ours+depth": lambda a, b: propagate(a.rgb, a.truth, b.rgb, prev_depth=a.depth, next_depth=b.depth),
+    "ours": lambda a, b: carry(a.rgb, a.truth, b.rgb),
+    "ours+depth": lambda a, b: carry(a.rgb, a.truth, b.rgb, prev_depth=a.depth, next_depth=b.depth),
 }
 
 
@@ -383,10 +383,14 @@ def main(argv: list[str] | None = None) -> int:
 
     print(f"{'pair':34s} " + " ".join(f"{m:>17s}" for m in METHODS) + "   (box IoU / mask IoU)")
     summary = []
+    checks = []
     for set_name, makers in sets.items():
         scores: dict[str, list[tuple[float, float]]] = {m: [] for m in METHODS}
         times: dict[str, list[tuple[float, float]]] = {m: [] for m in METHODS}
         seeding: dict[str, list[tuple[float, float]]] = {"ours": [], "ours+depth": []}
+        unsure: dict[str, list[bool]] = {"ours": [], "ours+depth": []}
+        confidence: dict[str, list[float]] = {"ours": [], "ours+depth": []}
+        objects: dict[tuple[str, str], list[float]] = {}  # (method, sequence): box IoU of each carried mask
         for make in makers:
             seq = make()
             for name, a, b in pairs(seq):
@@ -398,7 +402,12 @@ def main(argv: list[str] | None = None) -> int:
                     t, c = time.perf_counter(), time.process_time()
                     mask = fn(a, b)
                     times[m].append((1e3 * (time.perf_counter() - t), 1e3 * (time.process_time() - c)))
+                    if isinstance(mask, Carried):
+                        unsure[m].append(mask.unsure)
+                        confidence[m].append(mask.confidence)
+                        mask = mask.mask
                     scores[m].append((box_iou(mask, b.truth), mask_iou(mask, b.truth)))
+                    objects.setdefault((m, seq.name), []).append(scores[m][-1][0])
                     cells.append(f"{scores[m][-1][0]:8.3f} {scores[m][-1][1]:8.3f}")
                     if m in ("ours", "ours+depth") and mask.any() and not mask.all():
                         # What the app adds per object: a GrabCut session started from the mask.
@@ -411,6 +420,7 @@ def main(argv: list[str] | None = None) -> int:
                         cv2.imwrite(str(args.dump / file), _overlay(b.rgb, b.truth, mask))
                 print(f"{name:34s} " + " ".join(cells), flush=True)
         summary.append((set_name, scores, times, seeding))
+        checks.append((set_name, scores, unsure, confidence, objects))
 
     print()
     print(f"{'set':6s} {'method':10s} {'n':>3s} {'box IoU min':>11s} {'mean':>6s} {'>=0.9':>6s} "
@@ -453,6 +463,21 @@ def main(argv: list[str] | None = None) -> int:
               f"ours {err['ours']:.3f}" + (f", ours+depth {err[best]:.3f}" if best != "ours" else "")
               + f"; copy/ours {err['copy'] / max(err['ours'], 1e-9):.1f}x, "
               f"flow/ours {err['flow'] / max(err['ours'], 1e-9):.1f}x")
+    # The guarantee: never worse than the flow it starts from. Per carried mask (pair and
+    # direction) and per object (a sequence's mean over its pairs, both ways); and how many were unsure.
+    print()
+    for set_name, scores, unsure, confidence, objects in checks:
+        flow = np.array([b for b, _ in scores["flow"]])
+        for m in ("ours", "ours+depth"):
+            if not scores[m]:
+                continue
+            ours = np.array([b for b, _ in scores[m]])
+            below = [(k[1], np.mean(v) - np.mean(objects[("flow", k[1])])) for k, v in objects.items() if k[0] == m]
+            worst_object = min(below, key=lambda x: x[1])
+            print(f"{set_name:6s} {m:10s} vs flow: carried masks below it {np.sum(ours < flow - 1e-9)}/{len(ours)} "
+                  f"(worst {np.min(ours - flow):+.3f}); objects whose mean is below it "
+                  f"{sum(d < -1e-9 for _, d in below)}/{len(below)} (worst {worst_object[1]:+.3f} {worst_object[0]}); "
+                  f"unsure {sum(unsure[m])}/{len(unsure[m])}, confidence min {min(confidence[m]):.3f}")
     return 0
 
 

@@ -62,6 +62,9 @@ TARGET = {"frame_id": Int(min=1), "instance": Str(min_len=1, max_len=40)}
 # use_depth: null or absent = the frame's depth when it has one (see labelling.grabcut_box).
 BOX = {**TARGET, "box": List(Float(), min_len=4, max_len=4), "use_depth": Bool(nullable=True, default=None)}
 CARRY = {"replace": Bool(default=False), "version": Int(min=0, nullable=True, default=None)}
+CARRY_MAX = 50  # frames the page's "Frames" field may ask for (a chain of requests)
+PROPAGATE = {**CARRY, "direction": Str(choices=["next", "previous"], default="next"),
+             "count": Int(min=1, max=labelling.RANGE_MAX, default=1)}
 SUGGEST = {
     "version": Int(min=0),
     "source": Str(choices=list(labelling.SUGGEST_SOURCES), default="auto"),
@@ -148,6 +151,9 @@ def page_config(frame: Frame, *, mode: str, annotation: Annotation | None = None
             accept_proposal=url_for("label.accept_proposal", frame_id=frame.id),
         )
         config["suggest"] = labelling.source_choices(frame)
+        # The page carries up to carry_max frames as a chain of requests of at most range_max frames each.
+        config["carry_max"] = CARRY_MAX
+        config["carry_request"] = {"frames": labelling.RANGE_MAX, "object_frames": labelling.RANGE_OBJECT_FRAMES}
     else:
         config["own"] = annotation.author_id == current_user.id
         config["urls"].update(
@@ -396,15 +402,29 @@ def accept_proposal(frame_id: int):
 @roles(*LABELLERS)
 @takes_json()
 def propagate_next(frame_id: int):
-    """``{replace, version}`` -> the next frame's new annotation, with ``url`` to label it.
+    """``{replace, version, direction, count}`` -> the last carried frame's new
+    annotation, with ``url`` to label it, ``carried`` (each frame's id and
+    number, in order) and ``stopped`` (``{kind, frame_id, index, reason}``
+    when the range ended early, else null).
 
-    409 when the next frame has the user's work (``replace`` with its
-    ``version`` replaces unfinished work), 404 ``next`` on the last frame.
+    ``direction`` ``next`` (default) or ``previous``, ``count`` 1-10 frames
+    (default 1). 409 when the first target has the user's work (``replace``
+    with its ``version`` replaces unfinished work), 404 ``next`` / ``previous``
+    at the sequence's end, 400 ``count`` over the bounds.
     """
-    data = json_body(CARRY)
+    data = json_body(PROPAGATE)
     fr = labelling.get_frame(frame_id)
-    annotation = labelling.propagate_to_next(fr, me(), replace=data["replace"], version=data["version"])
-    return {**annotation_json(annotation, annotation.frame), "url": url_for("label.frame", frame_id=annotation.frame_id)}
+    run = labelling.propagate(fr, me(), step=1 if data["direction"] == "next" else -1, count=data["count"],
+                              replace=data["replace"], version=data["version"])
+    last = run.annotations[-1]
+    stop = run.stop
+    return {
+        **annotation_json(last, last.frame),
+        "url": url_for("label.frame", frame_id=last.frame_id),
+        "carried": [{"frame_id": a.frame_id, "index": a.frame.index} for a in run.annotations],
+        "stopped": stop and {"kind": stop.kind, "frame_id": stop.frame.id, "index": stop.frame.index,
+                             "reason": stop.reason},
+    }
 
 
 @bp.post("/api/label/frames/<int:frame_id>/copy-previous")

@@ -57,7 +57,7 @@ cut, its rescue, re-cuts with strokes; with depth too),
 :mod:`~egonet.grabcut.strokes` (checks and footprints),
 :mod:`~egonet.grabcut.state` (undo levels and ``state()``'s format) and
 :mod:`~egonet.grabcut.propagation` (``propagate``: a mask carried to the
-adjacent frame by optical flow, then refined).
+adjacent frame by optical flow, then refined; ``carry`` says too how sure it is).
 
 Example:
     >>> import numpy as np
@@ -85,9 +85,10 @@ Example:
 """
 
 from egonet.grabcut.frame import GrabCutFrame, GuideStore
-from egonet.grabcut.propagation import propagate
+from egonet.grabcut.propagation import Carried, carry, propagate
 from egonet.grabcut.session import GrabCutSession
 from egonet.grabcut.state import STATE_FORMAT
 from egonet.grabcut.strokes import LABELS, stroke_footprint
 
-__all__ = ["GrabCutSession", "GrabCutFrame", "GuideStore", "stroke_footprint", "LABELS", "STATE_FORMAT", "propagate"]
+__all__ = ["GrabCutSession", "GrabCutFrame", "GuideStore", "stroke_footprint", "LABELS", "STATE_FORMAT", "propagate",
+           "carry", "Carried"]

@@ -39,7 +39,13 @@ How, all inside one region of interest (ROI) at a reduced work size:
    ``next_depth`` under the warped core) is sure background, so the flow's
    smear onto a wall or table behind the object is cut away even where it
    has the object's colour. Missing readings (0 or NaN) change nothing.
-5. Back to full resolution: where the cut agrees with the warp, the warp's
+5. The cut never overrules the flow where the image does not back it: each
+   part where the cut disagrees with the warped mask is kept only when at
+   least half of it lies where the flow is in doubt, on the warped edge's
+   strip (when the work grid is the frame's own pixels; on a reduced grid
+   the warp's soft edge is finer), or where depth says the pixel left the
+   object; elsewhere the warped mask stands.
+6. Back to full resolution: where the cut agrees with the warp, the warp's
    soft values (sub-pixel); elsewhere the cut, smoothed; upsampled
    bilinearly, then parts smaller than 2 % of the largest are dropped (one
    stray speck would ruin the mask's box), unless the flow carried the
@@ -48,8 +54,12 @@ How, all inside one region of interest (ROI) at a reduced work size:
 A cut that disagrees grossly with the warped mask (overlap below 0.5, or less
 than half or more than twice its area) is a cut that failed (colours of the
 object and its surroundings too alike), and the warped mask is returned
-instead. An empty ``prev_mask`` has nothing to carry: the result is an empty
-mask (no error), so a caller can propagate every instance of a frame blindly.
+instead. ``carry`` also says how sure the result is (:class:`Carried`): the
+smallest of the flow's consistency on the object, the area kept, the cut's
+agreement with the flow and the object's colours kept (a histogram
+intersection); below ``UNSURE`` a person should look before carrying on.
+An empty ``prev_mask`` has nothing to carry: the result is an empty mask (no
+error), so a caller can propagate every instance of a frame blindly.
 
 Example:
     >>> import numpy as np
@@ -84,6 +94,7 @@ _DOUBT = 1.0  # forward-backward flow miss (work-size pixels) above which the fl
 _AFFINE_POINTS = 2000  # most flow vectors the object's affine motion is fitted on
 _AFFINE_MISS = 1.0  # RANSAC inlier distance for that fit, work-size pixels
 _ITERATIONS = 2  # graph cuts: one with the previous frame's models, one re-fitted
+_SUPPORT = 0.5  # share of a part the cut changes that must lie where the flow is in doubt
 _SPECK = 0.02  # parts smaller than this fraction of the largest are dropped
 _MIN_SAMPLES = 40  # fewest pixels per side to fit a colour model on (5 components)
 _DEPTH_TOL_M = 0.08  # depth slack around the object's range (motion, sensor noise), metres
@@ -225,6 +236,7 @@ class _Warp:
     prev_mask_low: np.ndarray
     warped_low: np.ndarray
     back: np.ndarray
+    forth: np.ndarray
     mismatch: np.ndarray
 
 
@@ -237,7 +249,7 @@ def _warp(prev_rgb: np.ndarray, prev_mask: np.ndarray, next_rgb: np.ndarray) -> 
     back, forth = _flows(prev_low, next_low)
     # Going back then forth should return to the start: the miss measures the flow's doubt.
     mismatch = np.linalg.norm(back + _pull(forth, back), axis=2)
-    return _Warp(roi, prev_low, next_low, mask_low, _pull(mask_low, back), back, mismatch)
+    return _Warp(roi, prev_low, next_low, mask_low, _pull(mask_low, back), back, forth, mismatch)
 
 
 def warp_mask(prev_rgb: np.ndarray, prev_mask: np.ndarray, next_rgb: np.ndarray) -> np.ndarray:
@@ -307,7 +319,7 @@ def _doubt(warp: _Warp) -> np.ndarray:
     return doubt if moved is None else doubt & (warped != (moved >= 0.5))
 
 
-def _trimap(warp: _Warp) -> tuple[np.ndarray, np.ndarray]:
+def _trimap(warp: _Warp, doubt: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     """GC_* seeds from the warped mask: uint8 ``(h, w)`` labels and the bool core.
 
     The eroded core is sure foreground and pixels beyond the dilated border
@@ -326,7 +338,6 @@ def _trimap(warp: _Warp) -> tuple[np.ndarray, np.ndarray]:
     reach = cv2.dilate(as_u8, _disk(radius)).astype(bool)
     core = cv2.erode(as_u8, _disk(radius)).astype(bool)
     edge = cv2.morphologyEx(as_u8, cv2.MORPH_GRADIENT, _disk(_EDGE)).astype(bool)
-    doubt = _doubt(warp)
     gc = np.full(warped.shape, cv2.GC_BGD, np.uint8)
     gc[warped] = cv2.GC_FGD
     unsure = reach & ~core & (edge | doubt)
@@ -435,12 +446,172 @@ def _iou(a: np.ndarray, b: np.ndarray) -> float:
     return np.count_nonzero(a & b) / max(1, np.count_nonzero(a | b))
 
 
+@dataclasses.dataclass(frozen=True)
+class Carried:
+    """A carried mask and how far to trust it.
+
+    Attributes:
+        mask: Bool ``(H, W)``, the object in the new frame.
+        confidence: In [0, 1]: the smallest of the flow's consistency (share
+            of the carried object where the flow is not in doubt), its
+            area kept (smaller over larger of the carried and the previous
+            area), the cut's agreement with the flow (IoU) and its look (the
+            intersection of the object's colour histograms before and after);
+            1 for an empty ``prev_mask`` (nothing to carry, nothing to doubt).
+        unsure: True when ``confidence`` is below ``UNSURE``: a person should
+            look at this frame before carrying further.
+        reason: Why it is unsure, in words for the annotator that follow
+            "the object" ("no longer looks like itself: hidden, or out of
+            view"); "" when sure.
+    """
+
+    mask: np.ndarray
+    confidence: float
+    unsure: bool
+    reason: str
+
+
+UNSURE = 0.6  # confidence below which a carried mask is unsure (every bench pair is at least 0.80)
+_REASONS = {
+    "consistency": "moved too much or too fast to follow",
+    "area": "changed size a lot: partly hidden, or leaving the frame",
+    "cut": "has no outline the cut could find again",
+    "look": "no longer looks like itself: hidden, or out of view",
+}
+
+
+def _colours(image: np.ndarray, where: np.ndarray, offset: float) -> np.ndarray:
+    """The share of ``where``'s pixels in each of 17x17 chromaticity bins (r and g of
+    ``rgb / (r + g + b)``, 1/16 wide, shifted by ``offset`` of a bin): colour without
+    brightness, so a turn into the shade or a lamp does not count as a change."""
+    rgb = image[where].astype(np.float32) + 1.0
+    rg = rgb[:, :2] / rgb.sum(axis=1, keepdims=True)
+    bins = np.minimum((rg * 16 + offset).astype(np.int32), 16) @ np.array([17, 1], np.int32)
+    return np.bincount(bins, minlength=289) / max(1, bins.size)
+
+
+def _look(warp: _Warp, result: np.ndarray) -> float:
+    """How much of the object's colours the carried mask still holds: the
+    intersection of the chromaticity histograms before and after, on two
+    grids half a bin apart (the better one), so a colour lying on a bin's
+    edge does not jump bins."""
+    before = warp.prev_mask_low >= 0.5
+    return max(float(np.minimum(_colours(warp.prev_low, before, k), _colours(warp.next_low, result, k)).sum())
+               for k in (0.0, 0.5))
+
+
+def _guard(label: np.ndarray, warped: np.ndarray, support: np.ndarray) -> np.ndarray:
+    """The cut where the image supports it, else the flow's mask (bool, work size).
+
+    ``support`` is where the image backs the cut against the flow: where the
+    flow is in doubt (:func:`_doubt`), on the thin strip along the warped
+    edge when the work grid is the frame's own (where the cut snaps the
+    edge to the image's), and where depth says a pixel left the object.
+    Each part the cut adds or removes is kept when at least ``_SUPPORT`` of
+    it lies there, and undone otherwise: where the flow is confident, a
+    colour model that cannot tell the object from its surroundings (a dark
+    mug against a dark hand) does not cut a piece off or add one.
+    """
+    changed = label != warped
+    n, parts = cv2.connectedComponents(changed.view(np.uint8), connectivity=8)
+    if n <= 1:
+        return label
+    size = np.bincount(parts.ravel(), minlength=n)
+    doubted = np.bincount(parts[support], minlength=n)
+    keep = doubted >= _SUPPORT * size
+    keep[0] = False
+    return np.where(keep[parts], label, warped)
+
+
+def _confidence(warp: _Warp, result: np.ndarray, doubt: np.ndarray, cut: np.ndarray | None = None) -> tuple[float, str]:
+    """``(confidence, reason)`` of a carried work-size mask (see :class:`Carried`); ``cut``: the
+    graph cut's own label when it differs from ``result`` (a failed cut), else ``result`` is it."""
+    warped = warp.warped_low >= 0.5
+    before = np.count_nonzero(warp.prev_mask_low >= 0.5)
+    if not warped.any() or not result.any():
+        return 0.0, _REASONS["area"]
+    terms = {
+        # Doubt, not the bare forward-backward miss: a plain object's inside has no texture for the
+        # flow to agree on, yet it moves with the rest (:func:`_doubt`).
+        "consistency": 1.0 - np.count_nonzero(warped & doubt) / np.count_nonzero(warped),
+        "area": min(before, np.count_nonzero(result)) / max(1, before, np.count_nonzero(result)),
+        "cut": _iou(result if cut is None else cut, warped),
+        # Histogram intersection of the object's colours before and after: a hand over it, or the object gone.
+        "look": _look(warp, result),
+    }
+    worst = min(terms, key=terms.get)
+    return float(terms[worst]), _REASONS[worst] if terms[worst] < UNSURE else ""
+
+
+def carry(prev_rgb: np.ndarray, prev_mask: np.ndarray, next_rgb: np.ndarray, *,
+          prev_depth: np.ndarray | None = None, next_depth: np.ndarray | None = None) -> Carried:
+    """:func:`propagate` with its confidence: whether the carried mask needs a person's look.
+
+    Same arguments and errors as :func:`propagate`.
+
+    Returns:
+        A :class:`Carried`.
+    """
+    prev_rgb = _check_rgb(prev_rgb, "prev_rgb")
+    next_rgb = _check_rgb(next_rgb, "next_rgb")
+    _check_same_size(prev_rgb, next_rgb)
+    shape = prev_rgb.shape[:2]
+    prev_mask = _check_mask(prev_mask, shape)
+    prev_depth = _check_depth(prev_depth, "prev_depth", shape)
+    next_depth = _check_depth(next_depth, "next_depth", shape)
+    if not prev_mask.any():
+        return Carried(np.zeros(shape, bool), 1.0, False, "")
+
+    warp = _warp(prev_rgb, prev_mask, next_rgb)
+    roi = warp.roi
+    warped = warp.warped_low >= 0.5
+    fallback = roi.paste(warp.warped_low, shape)
+
+    doubt = _doubt(warp)
+
+    def flow_only(cut: np.ndarray | None = None) -> Carried:
+        # A failed cut still says something: its agreement with the flow counts.
+        confidence, reason = _confidence(warp, warped, doubt, cut)
+        return Carried(fallback, confidence, confidence < UNSURE, reason)
+
+    if np.count_nonzero(warped) < _MIN_SAMPLES:
+        return flow_only()  # too small at the work size to cut: the flow's answer stands
+    gc, core = _trimap(warp, doubt)
+    # The cut's to decide: where the flow is in doubt, and, when the work grid is the frame's own
+    # pixels, the strip along the warped edge (snapping it to the image's edge). On a reduced grid
+    # the warp's soft values place the edge finer than the cut's coarse pixels can.
+    support = doubt.copy()
+    if (roi.w, roi.h) == (roi.x1 - roi.x0, roi.y1 - roi.y0):
+        support |= cv2.morphologyEx(warped.view(np.uint8), cv2.MORPH_GRADIENT, _disk(_EDGE)).astype(bool)
+    if next_depth is not None:
+        _apply_depth(gc, core, warp, prev_depth, next_depth)
+        # Inside the warped mask only depth hands pixels to the background: the image's support too.
+        support |= warped & ((gc == cv2.GC_BGD) | (gc == cv2.GC_PR_BGD))
+    if min(np.count_nonzero(gc & 1), np.count_nonzero(~gc & 1)) < _MIN_SAMPLES:
+        return flow_only()
+    models = _models(warp.prev_low, warp.prev_mask_low >= 0.5) or _models(warp.next_low, (gc & 1).astype(bool))
+    if models is None:
+        return flow_only()
+    label = _cut(warp.next_low, gc, models)
+    area, warped_area = np.count_nonzero(label), np.count_nonzero(warped)
+    if _iou(label, warped) < 0.5 or not 0.5 * warped_area <= area <= 2 * warped_area:
+        return flow_only(label)  # a failed cut (colours too alike): trust the flow
+    guarded = _guard(label, warped, support)
+    # Where the result agrees with the warp, the warp's soft values place the edge
+    # to a fraction of a work-size pixel; elsewhere the cut, smoothed so the
+    # bilinear upsample gives a clean edge instead of work-size stairs.
+    soft = np.where(guarded == warped, warp.warped_low, cv2.GaussianBlur(guarded.astype(np.float32), (0, 0), 0.7))
+    confidence, reason = _confidence(warp, guarded, doubt)
+    return Carried(_drop_specks(roi.paste(soft, shape), fallback), confidence, confidence < UNSURE, reason)
+
+
 def propagate(prev_rgb: np.ndarray, prev_mask: np.ndarray, next_rgb: np.ndarray, *,
               prev_depth: np.ndarray | None = None, next_depth: np.ndarray | None = None) -> np.ndarray:
     """Carry one object's mask from a frame to an adjacent frame (either direction).
 
     Optical flow moves the mask, then GrabCut, seeded from the moved mask,
-    snaps it to the object in the new frame (see the module's docstring).
+    snaps it to the object in the new frame where the flow is in doubt (see
+    the module's docstring); :func:`carry` also says how sure it is.
 
     Args:
         prev_rgb: RGB uint8 ``(H, W, 3)``, the frame the mask belongs to.
@@ -467,36 +638,4 @@ def propagate(prev_rgb: np.ndarray, prev_mask: np.ndarray, next_rgb: np.ndarray,
         >>> bool(propagate(frame, np.zeros((64, 64), bool), frame).any())
         False
     """
-    prev_rgb = _check_rgb(prev_rgb, "prev_rgb")
-    next_rgb = _check_rgb(next_rgb, "next_rgb")
-    _check_same_size(prev_rgb, next_rgb)
-    shape = prev_rgb.shape[:2]
-    prev_mask = _check_mask(prev_mask, shape)
-    prev_depth = _check_depth(prev_depth, "prev_depth", shape)
-    next_depth = _check_depth(next_depth, "next_depth", shape)
-    if not prev_mask.any():
-        return np.zeros(shape, bool)
-
-    warp = _warp(prev_rgb, prev_mask, next_rgb)
-    roi = warp.roi
-    warped = warp.warped_low >= 0.5
-    fallback = roi.paste(warp.warped_low, shape)
-    if np.count_nonzero(warped) < _MIN_SAMPLES:
-        return fallback  # too small at the work size to cut: the flow's answer stands
-    gc, core = _trimap(warp)
-    if next_depth is not None:
-        _apply_depth(gc, core, warp, prev_depth, next_depth)
-    if min(np.count_nonzero(gc & 1), np.count_nonzero(~gc & 1)) < _MIN_SAMPLES:
-        return fallback
-    models = _models(warp.prev_low, warp.prev_mask_low >= 0.5) or _models(warp.next_low, (gc & 1).astype(bool))
-    if models is None:
-        return fallback
-    label = _cut(warp.next_low, gc, models)
-    area, warped_area = np.count_nonzero(label), np.count_nonzero(warped)
-    if _iou(label, warped) < 0.5 or not 0.5 * warped_area <= area <= 2 * warped_area:
-        return fallback  # a failed cut (colours too alike): trust the flow
-    # Where the cut agrees with the warp, the warp's soft values place the edge
-    # to a fraction of a work-size pixel; elsewhere the cut, smoothed so the
-    # bilinear upsample gives a clean edge instead of work-size stairs.
-    soft = np.where(label == warped, warp.warped_low, cv2.GaussianBlur(label.astype(np.float32), (0, 0), 0.7))
-    return _drop_specks(roi.paste(soft, shape), fallback)
+    return carry(prev_rgb, prev_mask, next_rgb, prev_depth=prev_depth, next_depth=next_depth).mask

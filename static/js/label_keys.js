@@ -6,7 +6,7 @@
 import { redo, undo } from "./label_grabcut.js";
 import { deleteInstance, select, toggleHidden } from "./label_instances.js";
 import { showMessage } from "./label_panel.js";
-import { copyPrevious, propagateNext } from "./label_propagate.js";
+import { copyPrevious, propagateNext, propagatePrevious } from "./label_propagate.js";
 import { autosaver, leave, review, setStatus } from "./label_save.js";
 import { polygonKey } from "./label_shapes.js";
 import { $, clock, config, doc, editable, reviewing, ui } from "./label_state.js";
@@ -71,6 +71,10 @@ function onKeyDown(event) {
     event.preventDefault();
     setStatus("done", { thenGo: config.urls.next_unlabelled });
     return;
+  }
+  if (mod && event.shiftKey && key === "arrowleft" && !reviewing) {
+    event.preventDefault();
+    return propagatePrevious();
   }
   if (mod || event.altKey) return;
   const tool = Object.entries(TOOLS).find(([, k]) => k === key)?.[0];

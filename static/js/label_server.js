@@ -33,10 +33,11 @@ export function fetchEngineMask(key) {
   return fetchMask(`${config.urls.grabcut.mask}?frame_id=${config.frame.id}&instance=${encodeURIComponent(key)}`);
 }
 
-// Carry the user's annotation to the next frame ("propagate") or from the
-// previous one ("copy_previous"); body: {replace, version} -> the annotation.
-export function carry(kind, body) {
-  return api("POST", config.urls[kind], body);
+// Carry the user's annotation: url is a frame's propagate URL (body
+// {direction, count, replace, version}) or this frame's copy_previous URL
+// (body {replace, version}) -> the carried annotation.
+export function carry(url, body) {
+  return api("POST", url, body);
 }
 
 // A window of the sequence's frames: {start} (a position), {at} (a frame's number), {count}.

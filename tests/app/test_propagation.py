@@ -34,19 +34,23 @@ def lid() -> np.ndarray:
     return mask
 
 
-def moving_frames(app, n: int = 3, *, sequence: str = "s1", depth: bool = True) -> list[int]:
-    """A textured red cup sliding right over a green table (and a still blue lid), 0.6 m away on a 1.2 m table."""
+def moving_frames(app, n: int = 3, *, sequence: str = "s1", depth: bool = True, gone: tuple[int, ...] = (),
+                  repeat: int = 3) -> list[int]:
+    """A textured red cup sliding right over a green table (and a still blue lid), 0.6 m away on a 1.2 m table;
+    on the frames in ``gone`` a hand has taken the cup away (the table shows where it was). The cup's
+    motion repeats every ``repeat`` frames (long sequences, the filmstrip's, stay inside the frame)."""
     rng = np.random.default_rng(7)
     table = (rng.integers(0, 40, (H, W, 3)) + [40, 120, 50]).astype(np.uint8)
     cup = (rng.integers(0, 40, (40, 40, 3)) + [180, 30, 30]).astype(np.uint8)
     items = []
     for i in range(n):
         image = table.copy()
-        image[cup_at(i % 3)] = cup.reshape(-1, 3)  # long sequences (the filmstrip's) repeat the first three
+        if i not in gone:
+            image[cup_at(i % repeat)] = cup.reshape(-1, 3)
         image[-1, -1] = i % 256  # ... each frame its own content
         image[LID] = (30, 40, 200)
         d = np.full((H, W), 1.2, np.float32)
-        d[cup_at(i % 3) | lid()] = 0.6
+        d[cup_at(i % repeat) | lid()] = 0.6
         items.append(FrameItem(f"{sequence}-{i:03d}", i, f"test {i}", rgb=image, depth_m=d if depth else None))
     with app.app_context():
         add_frames(activity="kitchen", sequence=sequence, items=items)
@@ -197,13 +201,13 @@ def test_no_next_frame_nothing_drawn_and_sequence_boundaries(app, annotator):
 
 def test_stored_depth_goes_to_the_engine_when_both_frames_have_it(app, annotator, monkeypatch):
     seen = []
-    real = propagation.propagate
+    real = propagation.carry_mask
 
     def spy(prev_rgb, prev_mask, next_rgb, *, prev_depth=None, next_depth=None):
         seen.append((prev_depth, next_depth))
         return real(prev_rgb, prev_mask, next_rgb, prev_depth=prev_depth, next_depth=next_depth)
 
-    monkeypatch.setattr(propagation, "propagate", spy)
+    monkeypatch.setattr(propagation, "carry_mask", spy)
     with_depth = moving_frames(app, 2, sequence="rgbd")
     without = moving_frames(app, 2, sequence="rgb", depth=False)
     for f0, _ in (with_depth, without):
@@ -281,3 +285,98 @@ def test_real_rgbd_frames_propagate_the_chair_with_their_stored_depth(app, annot
     assert response.status_code == 200, response.data
     carried = get_png(annotator, response.get_json()["instances"][0]["mask_url"])
     assert iou(carried, chairs[1]) > 0.9 and iou(carried, chairs[1]) > iou(chairs[0], chairs[1])
+
+
+# ------------------------------------------------------------------ both ways, over a range
+
+
+def carried_mask(client, frame_id: int, key: str = "k0") -> np.ndarray:
+    annotation = client.get(f"/api/label/frames/{frame_id}/annotation").get_json()
+    return get_png(client, next(i for i in annotation["instances"] if i["key"] == key)["mask_url"])
+
+
+def test_propagate_to_the_previous_frame_carries_backwards(app, annotator):
+    f0, f1, f2 = moving_frames(app)
+    annotate(annotator, f2, cup_at(2), lid())
+    response = annotator.post(f"/api/label/frames/{f2}/propagate", json={"direction": "previous"})
+    assert response.status_code == 200, response.data
+    body = response.get_json()
+    assert body["frame_id"] == f1 and body["url"] == f"/label/frames/{f1}" and body["status"] == "in_progress"
+    assert body["carried"] == [{"frame_id": f1, "index": 1}] and body["stopped"] is None
+    cup = carried_mask(annotator, f1)
+    assert iou(cup, cup_at(1)) > 0.9 and iou(cup, cup_at(1)) > iou(cup_at(2), cup_at(1))
+    # The first frame has no previous one.
+    annotate(annotator, f0, cup_at(0))
+    response = annotator.post(f"/api/label/frames/{f0}/propagate", json={"direction": "previous"})
+    assert response.status_code == 404 and "previous" in response.get_json()["fields"]
+
+
+def test_a_range_carries_frame_after_frame_each_its_own_version(app, annotator):
+    ids = moving_frames(app, 6, depth=False, repeat=6)
+    annotate(annotator, ids[0], cup_at(0), lid())
+    response = annotator.post(f"/api/label/frames/{ids[0]}/propagate", json={"count": 4})
+    assert response.status_code == 200, response.data
+    body = response.get_json()
+    assert body["carried"] == [{"frame_id": ids[i], "index": i} for i in (1, 2, 3, 4)]
+    assert body["stopped"] is None and body["frame_id"] == ids[4]
+    for i in (1, 2, 3, 4):
+        annotation = annotator.get(f"/api/label/frames/{ids[i]}/annotation").get_json()
+        # Each frame is its own in-progress annotation at version 1, its objects with GrabCut sessions.
+        assert (annotation["status"], annotation["version"], annotation["grabcut"]) == ("in_progress", 1, ["k0", "k1"])
+        assert iou(carried_mask(annotator, ids[i]), cup_at(i)) > 0.85, i
+    assert annotator.get(f"/api/label/frames/{ids[5]}/annotation").get_json()["version"] == 0
+    # Backwards onto the carried work: the first target is asked about as for one frame (409, replace).
+    annotate(annotator, ids[5], cup_at(5), lid())
+    response = annotator.post(f"/api/label/frames/{ids[5]}/propagate", json={"direction": "previous", "count": 3})
+    assert response.status_code == 409 and "replace" in response.get_json()["fields"]
+    assert response.get_json()["frame_id"] == ids[4]
+
+
+def test_a_range_stops_before_work_and_at_the_sequence_end_and_says_so(app, annotator):
+    ids = moving_frames(app, 5, depth=False, repeat=5)
+    annotate(annotator, ids[0], cup_at(0))
+    kept = annotate(annotator, ids[3], lid(), status="done")
+    body = annotator.post(f"/api/label/frames/{ids[0]}/propagate", json={"count": 4}).get_json()
+    assert [c["frame_id"] for c in body["carried"]] == [ids[1], ids[2]]
+    assert body["stopped"] == {"kind": "work", "frame_id": ids[3], "index": 3,
+                               "reason": "stopped before frame #3: it already has your annotation (done)"}
+    after = annotator.get(f"/api/label/frames/{ids[3]}/annotation").get_json()
+    assert (after["version"], after["status"]) == (kept["version"], "done")  # left as it was
+    # From frame 3 on to the end: two frames, then the sequence ends.
+    body = annotator.post(f"/api/label/frames/{ids[3]}/propagate", json={"count": 5}).get_json()
+    assert [c["index"] for c in body["carried"]] == [4]
+    assert body["stopped"]["kind"] == "end" and body["stopped"]["reason"] == "frame #4 is the last of its sequence"
+
+
+def test_a_range_stops_at_the_first_unsure_frame_and_says_which(app, annotator):
+    # On frame 3 the cup is gone (taken out of view): the carried mask there is unsure.
+    ids = moving_frames(app, 6, depth=False, gone=(3,), repeat=6)
+    annotate(annotator, ids[0], cup_at(0))
+    body = annotator.post(f"/api/label/frames/{ids[0]}/propagate", json={"count": 5}).get_json()
+    assert [c["index"] for c in body["carried"]] == [1, 2, 3]
+    stopped = body["stopped"]
+    assert (stopped["kind"], stopped["frame_id"], stopped["index"]) == ("unsure", ids[3], 3)
+    assert stopped["reason"].startswith("stopped at frame #3: the result looks unsure (object 1 (o0) "), stopped
+    # The unsure frame is saved (the annotator lands on it to fix it); nothing beyond it is touched.
+    assert body["frame_id"] == ids[3] and body["url"] == f"/label/frames/{ids[3]}"
+    assert annotator.get(f"/api/label/frames/{ids[4]}/annotation").get_json()["version"] == 0
+
+
+@pytest.mark.parametrize("body, field", [
+    ({"count": 0}, "count"), ({"count": 11}, "count"), ({"count": "3"}, "count"),
+    ({"direction": "up"}, "direction"),
+])
+def test_range_bounds_are_clear_errors(app, annotator, body, field):
+    f0, _, _ = moving_frames(app)
+    annotate(annotator, f0, cup_at(0))
+    response = annotator.post(f"/api/label/frames/{f0}/propagate", json=body)
+    assert response.status_code == 400 and field in response.get_json()["fields"], response.data
+
+
+def test_many_objects_carry_to_fewer_frames_a_request(app, annotator):
+    f0, f1, _ = moving_frames(app)
+    annotate(annotator, f0, *[lid()] * 6)  # 6 objects: at most 8 frames a request (50 objects times frames)
+    response = annotator.post(f"/api/label/frames/{f0}/propagate", json={"count": 9})
+    assert response.status_code == 400
+    assert response.get_json()["fields"] == {"count": "at most 8 with 6 objects"}
+    assert annotator.get(f"/api/label/frames/{f1}/annotation").get_json()["version"] == 0  # nothing carried

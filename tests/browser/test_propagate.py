@@ -19,15 +19,16 @@ ROWS, COLS = slice(70, 170), slice(100, 230)  # the red object in frame 0
 STEP = 6  # columns it moves per frame
 
 
-def moving_frames(live_app, n: int = 4) -> list[int]:
-    """A textured red object sliding right over a noisy green table."""
+def moving_frames(live_app, n: int = 4, *, gone: tuple[int, ...] = ()) -> list[int]:
+    """A textured red object sliding right over a noisy green table (taken away on the frames in ``gone``)."""
     rng = np.random.default_rng(5)
     table = (rng.integers(0, 30, (H, W, 3)) + [40, 130, 50]).astype(np.uint8)
     thing = (rng.integers(0, 30, (100, 130, 3)) + [190, 40, 40]).astype(np.uint8)
     items = []
     for i in range(n):
         image = table.copy()
-        image[ROWS, COLS.start + STEP * i:COLS.stop + STEP * i] = thing
+        if i not in gone:
+            image[ROWS, COLS.start + STEP * i:COLS.stop + STEP * i] = thing
         items.append(FrameItem(f"frame-{i}", i, f"test {i}", rgb=image))
     with live_app.app_context():
         add_frames(activity="kitchen", sequence="s1", items=items)
@@ -98,6 +99,45 @@ def test_propagate_to_the_next_frame_then_move_with_the_filmstrip(live_app, live
     # Frame 2, before frame 3, has nothing of the user's to copy: the page says so.
     page.locator("#copy-previous").click()
     page.wait_for_function("() => document.querySelector('#message').textContent.includes('no action-object on frame #2')")
+
+
+def test_propagate_over_a_range_stops_at_the_unsure_frame_and_says_which(live_app, live_server, page_1280):
+    page = page_1280
+    ids = moving_frames(live_app, 14, gone=(12,))  # on frame 12 the object has been taken away
+    sign_in(page, live_app, live_server, username="ann", role="annotator")
+    open_frame(page, live_server, ids[0])
+    drag(page, [(90, 60), (240, 180)])
+    page.wait_for_function("() => window.labelPage.instances().length === 1 && window.labelPage.instances()[0].area > 0")
+    settle(page)
+
+    page.fill("#carry-count", "13")
+    assert page.locator("#propagate-next").inner_text() == "Propagate to next 13 frames ⇨"
+    assert page.locator("#propagate-previous").inner_text() == "⇦ Propagate to previous 13 frames"
+    page.locator("#propagate-next").click()
+    # Two requests (10 frames, then on), and the page opens the unsure frame, saying why it stopped there.
+    wait_for_frame(page, live_server, ids[12])
+    note = page.locator("#carry-note")
+    note.wait_for(state="visible")
+    assert note.inner_text() == ("Stopped at frame #12: the result looks unsure (object 1 no longer looks like itself: "
+                                 "hidden, or out of view); check it there. Carried to 12 frames.")
+    assert note.get_attribute("data-kind") == "warning"
+    statuses = [page.locator(f".film-frame[data-id='{i}']").get_attribute("data-status") for i in ids]
+    assert statuses == ["in_progress"] * 13 + ["todo"]
+    assert _share(page, 11) > 0.5  # the flow's mask stands there: the frame to fix, not an empty one
+    screenshot(page, "propagate-5-stopped-at-unsure")
+
+    # Ctrl+Shift+← carries back: frame 11 has the carried work, so the page asks first.
+    page.keyboard.press("Control+Shift+ArrowLeft")
+    banner = page.locator("#carry-conflict")
+    banner.wait_for(state="visible")
+    assert banner.inner_text().startswith("Frame #11 already has your annotation (1 action-object). "
+                                          "Replace your work on the previous frame")
+    page.locator("#carry-cancel").click()
+    # A count over the bound is refused on the page, naming the field.
+    page.fill("#carry-count", "51")
+    page.locator("#propagate-next").click()
+    page.wait_for_function("() => document.querySelector('#message').textContent.includes('Frames: a whole number from 1 to 50')")
+    assert page.url.endswith(f"/label/frames/{ids[12]}")
 
 
 def test_carrying_onto_existing_work_asks_before_replacing(live_app, live_server, page_1280):

@@ -51,7 +51,9 @@ from app.services.labelling.propagation import (
     adjacent_frame,
     copy_from_previous,
     filmstrip,
-    propagate_to_next,
+    RANGE_MAX,
+    RANGE_OBJECT_FRAMES,
+    propagate,
 )
 from app.services.labelling.proposers import SOURCES as SUGGEST_SOURCES
 from app.services.labelling.proposers import SuggestProblem, resolve_run, source_choices, suggestion_runs
@@ -127,7 +129,9 @@ __all__ = [
     "next_to_review",
     "next_unlabelled",
     "others_on",
-    "propagate_to_next",
+    "propagate",
+    "RANGE_MAX",
+    "RANGE_OBJECT_FRAMES",
     "proposal_regions",
     "put_history",
     "queue_suggestions",
