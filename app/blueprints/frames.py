@@ -4,9 +4,9 @@ from flask import Blueprint, abort, current_app, render_template, send_file, sen
 
 from app.extensions import db
 from app.models import Activity, Frame
-from app.models.training import Prediction
+from app.models.training import Checkpoint, Prediction
+from app.services import activations, attention_points, labelling, media
 from app.services import frames as frames_service
-from app.services import labelling, media
 from app.services import training as training_service
 from app.validation import query_int
 
@@ -53,6 +53,11 @@ def frame(frame_id: int):
     status = frames_service.frame_statuses([fr.id])[fr.id]
     prediction = training_service.latest_prediction(fr.id)
     spread = frames_service.prediction_range(prediction) if prediction else None
+    chosen = query_int("checkpoint")
+    figure = None
+    if chosen is not None:
+        checkpoint = db.get_or_404(Checkpoint, chosen)
+        figure = {"checkpoint": checkpoint, "message": activations.page_message(checkpoint, fr)}
     return render_template(
         "frames/frame.html",
         frame=fr,
@@ -63,13 +68,17 @@ def frame(frame_id: int):
         spread=spread,
         meta=frames_service.shown_meta(fr),
         viewer_config=viewer_config(fr, prediction, spread),
+        checkpoints=activations.checkpoint_choices(),
+        figure=figure,
     )
 
 
 def viewer_config(frame: Frame, prediction: Prediction | None, spread) -> dict:
     """What the viewer's script draws: every annotation's instances (colour, kind, mask URL) and the heat map's scales."""
     annotations, colour = [], 0
-    for annotation, shown in frames_service.viewer_annotations(frame):
+    listed = frames_service.viewer_annotations(frame)
+    sources = attention_points.sources_of(a for a, _ in listed)
+    for annotation, shown in listed:
         instances = []
         for instance in annotation.instances:
             instances.append({
@@ -80,8 +89,11 @@ def viewer_config(frame: Frame, prediction: Prediction | None, spread) -> dict:
                 "mask_url": url_for("label.instance_mask", annotation_id=annotation.id, position=instance.position),
             })
             colour += 1
+        points = sources.get(annotation.id)
         annotations.append({"id": annotation.id, "author": annotation.author.username, "status": annotation.status.value,
-                            "no_action_object": annotation.no_action_object, "shown": shown, "instances": instances})
+                            "no_action_object": annotation.no_action_object, "shown": shown, "instances": instances,
+                            "source": attention_points.describe(points) if points else None,
+                            "points": points.points if points else []})
     config = {"frame": {"width": frame.width, "height": frame.height}, "annotations": annotations, "prediction": None}
     if prediction is not None:
         config["prediction"] = {
@@ -99,6 +111,14 @@ def normalised_prediction(prediction_id: int):
     """The prediction's heat map stretched to its own range: for the eye only (the viewer's switch)."""
     prediction = db.get_or_404(Prediction, prediction_id)
     return send_file(frames_service.normalised_overlay(prediction), mimetype="image/png")
+
+
+@bp.get("/frames/<int:frame_id>/activations/<int:checkpoint_id>.png")
+def activations_figure(frame_id: int, checkpoint_id: int):
+    """The paper's Figure 3 for this checkpoint on this frame (drawn on first use for small models, then cached)."""
+    fr = db.get_or_404(Frame, frame_id)
+    checkpoint = db.get_or_404(Checkpoint, checkpoint_id)
+    return send_file(activations.figure_path(checkpoint, fr, in_request=True), mimetype="image/png", max_age=3600)
 
 
 @bp.get("/frames/colour-bar.png")
