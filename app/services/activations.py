@@ -10,8 +10,9 @@ map over its input below, each with its own colour bar.
 A figure is cached under ``CACHE_ROOT/activations/`` by checkpoint and
 frame media (safe to delete). A page request computes one only for models
 of at most ``ACTIVATIONS_INLINE_MAX_PARAMS`` parameters (default 5 M:
-egonet-lite's 1.6 M take tens of milliseconds on a CPU; the VGG variants'
-65-139 M take seconds and gigabytes); larger ones are drawn by
+egonet-lite's 1.6 M take about 20 ms of CPU a pass at a small run's size, the
+figure about 0.4 s; the VGG variants' 65-139 M take seconds and gigabytes);
+larger ones are drawn by
 ``flask egonet activations``, which fills the same cache, so the page shows
 them afterwards.
 """
@@ -35,7 +36,6 @@ from egonet import io
 from egonet.network.activations import LAYERS, pathways
 from egonet.network.builders import build_model
 
-DEFAULT_INLINE_MAX_PARAMS = 5_000_000
 TITLES = {"rgb": "RGB pathway", "dhg": "DHG pathway", "joint": "single stream (RGB + DHG + XY)"}
 
 
@@ -66,7 +66,7 @@ def cache_path(checkpoint: Checkpoint, frame: Frame) -> Path:
 
 
 def inline_limit() -> int:
-    return int(current_app.config.get("ACTIVATIONS_INLINE_MAX_PARAMS", DEFAULT_INLINE_MAX_PARAMS))
+    return int(current_app.config["ACTIVATIONS_INLINE_MAX_PARAMS"])
 
 
 def figure_path(checkpoint: Checkpoint, frame: Frame, *, in_request: bool) -> Path:
@@ -154,7 +154,7 @@ def figure_png(found: Activations, frame: Frame, checkpoint: Checkpoint) -> byte
     figure.suptitle(f"Frame {frame.id} · checkpoint {checkpoint.id} (run {checkpoint.run_id}, {found.model}, "
                     f"fold {checkpoint.fold})", fontsize=10)
     out = bytes_io.BytesIO()
-    figure.savefig(out, format="png", metadata={"Software": None})
+    figure.savefig(out, format="png", bbox_inches="tight", metadata={"Software": None})
     return out.getvalue()
 
 
@@ -167,7 +167,10 @@ def checkpoint_choices(limit: int = 200) -> list[tuple[int, str]]:
         db.select(Checkpoint).join(TrainingRun).where(TrainingRun.status == RunStatus.DONE)
         .order_by(Checkpoint.id.desc()).limit(limit)
     ).scalars()
-    return [(c.id, f"checkpoint {c.id}: run #{c.run_id} {c.run.name} ({c.run.model_name}), fold {c.fold}") for c in rows]
+    def model(run: TrainingRun) -> str:
+        return "" if run.model_name in run.name else f" ({run.model_name})"
+
+    return [(c.id, f"checkpoint {c.id}: run #{c.run_id} {c.run.name}{model(c.run)}, fold {c.fold}") for c in rows]
 
 
 def page_message(checkpoint: Checkpoint, frame: Frame) -> str | None:

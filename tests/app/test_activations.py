@@ -108,3 +108,10 @@ def test_the_frame_page_shows_a_small_models_maps_and_sends_a_large_one_to_the_c
     assert 'id="activations-figure"' not in page
     assert admin_client.get(f"/frames/{with_dhg.id}/activations/{large.id}.png").status_code == 409
     assert admin_client.get(f"/frames/{with_dhg.id}?checkpoint=999").status_code == 404
+    app.config["ACTIVATIONS_INLINE_MAX_PARAMS"] = 1_000_000  # below egonet-lite's 1.6 M: only a cached figure is shown
+    assert "too large to run in a page request" not in admin_client.get(f"/frames/{with_dhg.id}?checkpoint={small.id}").get_data(as_text=True)
+    page = admin_client.get(f"/frames/{without.id}?checkpoint={small.id}").get_data(as_text=True)
+    assert "egonet-lite (1.6 M parameters) is too large to run in a page request" not in page  # cached above
+    other = saved_checkpoint()
+    assert "egonet-lite (1.6 M parameters) is too large to run in a page request" in admin_client.get(
+        f"/frames/{without.id}?checkpoint={other.id}").get_data(as_text=True)
