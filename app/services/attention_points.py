@@ -39,7 +39,7 @@ from pathlib import Path
 
 from app.errors import Problem
 from app.extensions import db
-from app.models import Activity, Annotation, AttentionPoints, Frame, Sequence, Status
+from app.models import Activity, Annotation, AttentionPoints, Frame, Instance, Sequence, Status
 from app.services import ground_truth, media
 from app.services.importing import system_user
 from egonet import io
@@ -107,10 +107,9 @@ def import_points(path: Path, *, activity: str, sigma: float | None = None, auth
         user = system_user(author)
         existing = {a.frame_id: a for a in db.session.execute(
             db.select(Annotation).where(Annotation.author_id == user.id, Annotation.frame_id.in_([f.id for f in frames]))
-        ).scalars()} if user.id is not None else {}  # fmt: skip
+        ).scalars()}  # fmt: skip
         for frame in frames:
-            annotation = existing.get(frame.id)
-            if annotation is not None and annotation.attention_points is None:
+            if frame.id in existing and existing[frame.id].attention_points is None:
                 raise PointsProblem(
                     f"frame {frame.source_name!r} already has an annotation by {author!r} that did not come from points "
                     "(its masks were imported or drawn): give another --author", field="author")
@@ -122,35 +121,23 @@ def import_points(path: Path, *, activity: str, sigma: float | None = None, auth
             if annotation is None:
                 annotation = Annotation(frame=frame, author=user)
                 db.session.add(annotation)
-            else:
+            else:  # importing again: the same row, its old points and mask gone
                 report.replaced += 1
                 annotation.instances.clear()
                 db.session.delete(annotation.attention_points)
                 db.session.flush()
-            _fill(annotation, mask, written)
+            annotation.status, annotation.no_action_object, annotation.mask_path = Status.REVIEWED, not mine, None
+            if mine:
+                annotation.mask_path = media.store(io.encode_png(mask), ".png", written=written)
+                annotation.instances.append(Instance(position=0, mask_path=annotation.mask_path))
             annotation.attention_points = AttentionPoints(points=[list(p) for p in mine], sigma_px=frame_sigma,
                                                           sigma_scaled=scaled, source=path.name[:200])
             report.frames += 1
             report.with_points += bool(mine)
             report.points += len(mine)
-        widths = sorted({f.width for f in frames})
-        report.sigma = (sigma_words(scaled_sigma(widths[-1]), True).replace("frame)", "frame; on the widest)")
-                        if scaled and widths else sigma_words(float(sigma or 0), False))
+        widest = max(frames, key=lambda f: f.width)
+        report.sigma = sigma_words(scaled_sigma(widest.width) if scaled else float(sigma), scaled)
     return report
-
-
-def _fill(annotation: Annotation, mask, written: list[Path]) -> None:
-    """The annotation becomes the reviewed mask (one instance), or a reviewed "no action-object"."""
-    from app.models import Instance
-
-    empty = not mask.any()
-    annotation.status = Status.REVIEWED
-    annotation.no_action_object = empty
-    annotation.mask_path = None
-    if not empty:
-        stored = media.store(io.encode_png(mask), ".png", written=written)
-        annotation.mask_path = stored
-        annotation.instances.append(Instance(position=0, label=None, mask_path=stored))
 
 
 def read_points(path: Path, frames: list[Frame], *, activity: str) -> dict[int, list[tuple[float, float]]]:
