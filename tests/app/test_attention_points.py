@@ -158,5 +158,9 @@ def test_the_frame_page_and_every_report_say_the_ground_truth_is_attention_point
     assert json.loads(report.to_json())["ground_truth"] == {"kids": said["kids"]}
     assert "% Ground truth: kids: attention points, sigma 5 px" in report.to_latex()
     assert "The ground truth of kids is attention points, sigma 5 px" in report.to_methods()
+    assert report.provenance.empty_frames["kids"] == 1  # the frame without a point: no action-object
+    means = scoring.build_report(run_ids=[], study_ids=[], resamples=0, metric="ois-mean")  # policy leave-out
+    assert means.provenance.empty_frames["kids"] == 1
+    assert {c.n_frames for r in means.rows if (c := r.cells.get("kids")) is not None} == {2}
     html = admin_client.get("/scores/?chosen=1&baselines=1&resamples=0").get_data(as_text=True)
     assert "Ground truth" in html and "attention points, sigma 5 px" in html
