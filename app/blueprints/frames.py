@@ -1,13 +1,16 @@
 """Pages for browsing the dataset: activities, frame grids, the frame viewer, media."""
 
-from flask import Blueprint, abort, current_app, render_template, send_file, send_from_directory, url_for
+from flask import Blueprint, abort, current_app, flash, redirect, render_template, send_file, send_from_directory, url_for
 
+from app.errors import Problem
 from app.extensions import db
-from app.models import Activity, Frame
+from app.forms import PointsFileForm
+from app.models import Activity, Frame, Role
 from app.models.training import Checkpoint, Prediction
 from app.services import activations, attention_points, labelling, media
 from app.services import frames as frames_service
 from app.services import training as training_service
+from app.security import roles
 from app.validation import query_int
 
 bp = Blueprint("frames", __name__)
@@ -43,7 +46,21 @@ def activity(activity_id: int):
         statuses=statuses,
         page=page,
         pages=pages,
+        points_form=PointsFileForm(formdata=None),
     )
+
+
+@bp.post("/activities/<int:activity_id>/points")
+@roles(Role.ADMIN)
+def import_points(activity_id: int):
+    """Ground truth from attention points for the activity's frames (``flask egonet import-points`` from the page)."""
+    act = db.get_or_404(Activity, activity_id)
+    form = PointsFileForm()
+    if not form.validate_on_submit():
+        raise Problem("choose a CSV file of points (frame,x,y), and a sigma from 0.5 to 10,000 px or none",
+                      fields={name: "; ".join(errors) for name, errors in form.errors.items()})
+    flash(attention_points.import_upload(form.points.data, activity=act.name, sigma=form.sigma.data).summary())
+    return redirect(url_for("frames.activity", activity_id=act.id))
 
 
 @bp.get("/frames/<int:frame_id>")

@@ -32,10 +32,14 @@ from __future__ import annotations
 
 import csv
 import math
+import tempfile
 from collections import defaultdict
 from collections.abc import Iterable
 from dataclasses import dataclass
 from pathlib import Path
+
+from werkzeug.datastructures import FileStorage
+from werkzeug.utils import secure_filename
 
 from app.errors import Problem
 from app.extensions import db
@@ -138,6 +142,17 @@ def import_points(path: Path, *, activity: str, sigma: float | None = None, auth
         widest = max(frames, key=lambda f: f.width)
         report.sigma = sigma_words(scaled_sigma(widest.width) if scaled else float(sigma), scaled)
     return report
+
+
+def import_upload(upload: FileStorage, *, activity: str, sigma: float | None = None) -> PointsReport:
+    """:func:`import_points` of a file sent from the activity page (its name kept, made safe, for the messages)."""
+    if not isinstance(upload, FileStorage):
+        raise PointsProblem("choose a CSV file of points (frame,x,y)", field="points")
+    name = secure_filename(upload.filename or "") or "points.csv"
+    with tempfile.TemporaryDirectory(prefix="egonet-points-") as folder:
+        path = Path(folder) / name
+        upload.save(path)
+        return import_points(path, activity=activity, sigma=sigma)
 
 
 def read_points(path: Path, frames: list[Frame], *, activity: str) -> dict[int, list[tuple[float, float]]]:

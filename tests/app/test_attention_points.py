@@ -164,3 +164,27 @@ def test_the_frame_page_and_every_report_say_the_ground_truth_is_attention_point
     assert {c.n_frames for r in means.rows if (c := r.cells.get("kids")) is not None} == {2}
     html = admin_client.get("/scores/?chosen=1&baselines=1&resamples=0").get_data(as_text=True)
     assert "Ground truth" in html and "attention points, sigma 5 px" in html
+
+
+def test_admins_import_points_from_the_activity_page(app, ctx, admin_client, tmp_path):
+    import io as bytes_io
+
+    import_path(image_folder(tmp_path / "rec", n=2), activity="kids")
+    activity_id = frames()[0].sequence.activity_id
+    page = admin_client.get(f"/activities/{activity_id}").get_data(as_text=True)
+    assert 'id="points-import"' in page and f'action="/activities/{activity_id}/points"' in page
+    bad = admin_client.post(f"/activities/{activity_id}/points", content_type="multipart/form-data",
+                            data={"points": (bytes_io.BytesIO(b"frame,x,y\n00000,1,1\nzz,1,1\n"), "my points.csv")})
+    assert bad.status_code == 400 and "my_points.csv line 3: frame &#39;zz&#39; is not in activity &#39;kids&#39;" in bad.get_data(as_text=True)
+    assert db.session.scalar(db.select(db.func.count()).select_from(AttentionPoints)) == 0
+    done = admin_client.post(f"/activities/{activity_id}/points", content_type="multipart/form-data", follow_redirects=True,
+                             data={"points": (bytes_io.BytesIO(b"frame,x,y\n00001,20,20\n"), "p.csv"), "sigma": "6"})
+    assert done.status_code == 200 and "kids: 1 points on 1 frames, 1 frames without a point" in done.get_data(as_text=True)
+    f0, f1 = frames()
+    chosen = ground_truths([f0.id, f1.id])
+    assert np.array_equal(mask_of(chosen[f1.id]), disc((48, 64), [(20, 20)], 6)) and chosen[f0.id].no_action_object
+    assert chosen[f1.id].attention_points.source == "p.csv"
+    missing = admin_client.post(f"/activities/{activity_id}/points", data={"sigma": "0.1"})
+    assert missing.status_code == 400 and "choose a CSV file of points" in missing.get_data(as_text=True)
+    text = admin_client.post(f"/activities/{activity_id}/points", data={"points": "not a file"})  # a field, not a file
+    assert text.status_code == 400 and "choose a CSV file of points" in text.get_data(as_text=True)
