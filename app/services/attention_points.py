@@ -71,8 +71,12 @@ class PointsReport:
         return self.frames - self.with_points
 
     def summary(self) -> str:
-        return (f"{self.activity}: {self.points} points on {self.with_points} frames, {self.without_points} frames "
-                f"without a point (no action-object), {self.replaced} earlier point annotations replaced; {self.sigma}")
+        def count(n: int, noun: str) -> str:
+            return f"{n} {noun}{'' if n == 1 else 's'}"
+
+        return (f"{self.activity}: {count(self.points, 'point')} on {count(self.with_points, 'frame')}, "
+                f"{count(self.without_points, 'frame')} without a point (no action-object), "
+                f"{count(self.replaced, 'earlier point annotation')} replaced; {self.sigma}")
 
 
 def sigma_words(sigma_px: float, scaled: bool) -> str:

@@ -120,7 +120,7 @@ def test_masks_of_the_same_author_are_never_overwritten(ctx, runner, tmp_path):
     assert "frame '00000' already has an annotation by 'import' that did not come from points" in result.output
     result = runner.invoke(args=["egonet", "import-points", str(csv), "--activity", "kids", "--sigma", "3", "--author", "points"])
     assert result.exit_code == 0, result.output
-    assert "kids: 1 points on 1 frames, 1 frames without a point" in result.output
+    assert "kids: 1 point on 1 frame, 1 frame without a point" in result.output
     f0, f1 = frames()
     chosen = ground_truths([f0.id, f1.id])  # reviewed wins over the done masks
     assert {a.author.username for a in chosen.values()} == {"points"}
@@ -179,7 +179,7 @@ def test_admins_import_points_from_the_activity_page(app, ctx, admin_client, tmp
     assert db.session.scalar(db.select(db.func.count()).select_from(AttentionPoints)) == 0
     done = admin_client.post(f"/activities/{activity_id}/points", content_type="multipart/form-data", follow_redirects=True,
                              data={"points": (bytes_io.BytesIO(b"frame,x,y\n00001,20,20\n"), "p.csv"), "sigma": "6"})
-    assert done.status_code == 200 and "kids: 1 points on 1 frames, 1 frames without a point" in done.get_data(as_text=True)
+    assert done.status_code == 200 and "kids: 1 point on 1 frame, 1 frame without a point" in done.get_data(as_text=True)
     f0, f1 = frames()
     chosen = ground_truths([f0.id, f1.id])
     assert np.array_equal(mask_of(chosen[f1.id]), disc((48, 64), [(20, 20)], 6)) and chosen[f0.id].no_action_object
