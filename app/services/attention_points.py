@@ -170,18 +170,22 @@ def read_points(path: Path, frames: list[Frame], *, activity: str) -> dict[int, 
         text = path.read_text(encoding="utf-8-sig")
     except UnicodeDecodeError:
         raise PointsProblem(f"{name}: not UTF-8 text (save the CSV as UTF-8)", field="path") from None
+    if "\x00" in text:
+        raise PointsProblem(f"{name}: holds a NUL character: not a CSV file", field="path")
     by_stem: dict[str, list[Frame]] = defaultdict(list)
     for frame in frames:
         by_stem[frame.source_name].append(frame)
     reader = csv.reader(text.splitlines())
-    header = next(reader, None)
+    try:
+        rows = [(reader.line_num, cells) for cells in reader]
+    except csv.Error as exc:  # a field past csv's size limit
+        raise PointsProblem(f"{name} line {reader.line_num}: not readable as CSV ({exc})", field="path") from None
+    header = rows[0][1] if rows else None
     if header is None or [h.strip().lower() for h in header] != list(COLUMNS):
         raise PointsProblem(f"{name} line 1: the header must be {','.join(COLUMNS)}, got {','.join(header or [])!r}",
                             field="path")
     out: dict[int, list[tuple[float, float]]] = defaultdict(list)
-    rows = 0
-    for cells in reader:
-        line = reader.line_num
+    for line, cells in rows[1:]:
         if not any(c.strip() for c in cells):
             continue
         where = f"{name} line {line}"
@@ -201,8 +205,7 @@ def read_points(path: Path, frames: list[Frame], *, activity: str) -> dict[int, 
                 f"{where}: ({x:g}, {y:g}) lies outside frame {stem!r} ({frame.width}x{frame.height}: "
                 f"x in [-0.5, {frame.width - 0.5:g}], y in [-0.5, {frame.height - 0.5:g}])", field="path")
         out[frame.id].append((x, y))
-        rows += 1
-    if not rows:
+    if not out:
         raise PointsProblem(f"{name}: no points (only a header)", field="path")
     return dict(out)
 

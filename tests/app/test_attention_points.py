@@ -74,6 +74,8 @@ def test_without_sigma_the_click_studys_width_is_scaled_to_the_frame(ctx, tmp_pa
     ("frame,x,y\n00001,3\n", "points.csv line 2: 2 values, expected 3 (frame,x,y)"),
     ("name,col,row\n00001,3,4\n", "points.csv line 1: the header must be frame,x,y"),
     ("frame,x,y\n", "points.csv: no points"),
+    ("frame,x,y\n00000,1,1\n" + "a" * 200_000 + ",1,1\n", "points.csv line 3: not readable as CSV (field larger than"),
+    ("frame,x,y\n00000,1\x00,1\n", "points.csv: holds a NUL character"),
 ])
 def test_a_bad_row_names_its_line_and_nothing_is_imported(app, ctx, runner, tmp_path, text, message):
     import_path(image_folder(tmp_path / "rec", n=2), activity="kids")
