@@ -131,6 +131,10 @@ def _default_config(instance: Path) -> dict:
         # Scoring (app.services.scoring.fitting): learned baselines whose
         # fitting and maps would take longer than this are scored by the worker.
         BASELINE_INLINE_S=20.0,
+        # The frame page's fc7 activations (app.services.activations): drawn in
+        # the request for models of at most this many parameters (egonet-lite),
+        # by `flask egonet activations` for larger ones.
+        ACTIVATIONS_INLINE_MAX_PARAMS=5_000_000,
         QUEUE_URL=os.environ.get("EGONET_QUEUE_URL") or f"sqlite:///{instance / 'queue.sqlite3'}",
         MAX_CONTENT_LENGTH=64 * 1024 * 1024,
         SESSION_COOKIE_HTTPONLY=True,

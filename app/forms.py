@@ -228,6 +228,11 @@ class DefinitionFileForm(Form):
     definition = FileField("Definition file (JSON)", validators=[DataRequired(message="Choose a definition file.")])
 
 
+class PointsFileForm(Form):
+    points = FileField("Attention points (CSV: frame,x,y)", validators=[DataRequired(message="Choose a CSV file of points.")])
+    sigma = FloatField("Sigma (px; empty: 60 px at 1280 px wide, scaled to each frame)", validators=[Optional(), NumberRange(0.5, 10_000)])
+
+
 class ParticipantsForm(Form):
     count = IntegerField("How many", default=5, validators=[InputRequired(), NumberRange(1, 500)])
     entry = SelectField("Entry", choices=[SelectChoice("code", "access codes"), SelectChoice("link", "single-use links (and codes)")], default="code")

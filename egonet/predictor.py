@@ -29,11 +29,13 @@ from collections.abc import Mapping
 
 import numpy as np
 import torch
+import torch.nn.functional as F
 from torch import Tensor
 
 from egonet.checkpoint import model_from_checkpoint
 from egonet.data import MIN_SIDE, check_size, resize_frame, resize_probability
 from egonet.errors import EgonetError
+from egonet.network.activations import stream_activations
 from egonet.network.model import EgoNetModel
 
 __all__ = ["NetworkPredictor"]
@@ -122,6 +124,37 @@ class NetworkPredictor:
         x_dhg = self._to_tensor(dhg) if dhg is not None else None
         probability = self.model.predict(self._to_tensor(rgb), x_dhg)[0]  # (h, w) at the training size
         return resize_probability(probability.float().cpu().numpy(), rgb.shape[:2])
+
+    @torch.no_grad()
+    def activations(self, rgb: np.ndarray, dhg: np.ndarray | None = None) -> dict[str, np.ndarray]:
+        """Each pathway's fc7 averaged over channels, upsampled to the frame: the paper's Figure 3.
+
+        The frame is resized to the training size as for :meth:`predict`;
+        each map (:func:`egonet.network.activations.stream_activations`) is
+        upsampled from the network's grid to the frame bilinearly, corners
+        aligned (as the network's own output is).
+
+        Args:
+            rgb: ``(H, W, 3)`` uint8 RGB frame.
+            dhg: ``(H, W, 3)`` uint8 DHG image of the same frame, or ``None``
+                (then only the RGB pathway runs).
+
+        Returns:
+            ``{pathway: (H, W) float32}``, pathways ``rgb``/``dhg`` or ``joint``
+            (mean activations, >= 0, unbounded).
+
+        Raises:
+            EgonetError: As :meth:`predict`, but ``dhg`` may be missing when the model has an RGB stream.
+        """
+        _check_frame(rgb, "rgb")
+        if dhg is not None:
+            _check_frame(dhg, "dhg")
+            if dhg.shape != rgb.shape:
+                raise EgonetError(f"dhg must have the shape of rgb {rgb.shape}, got {dhg.shape}", field="dhg")
+        maps = stream_activations(self.model, self._to_tensor(rgb), self._to_tensor(dhg) if dhg is not None else None)
+        size = rgb.shape[:2]
+        return {name: F.interpolate(m[:, None].float(), size=size, mode="bilinear", align_corners=True)[0, 0].cpu().numpy()
+                for name, m in maps.items()}
 
     def _to_tensor(self, frame: np.ndarray) -> Tensor:
         """uint8 ``(H, W, 3)`` -> ``(1, 3, h, w)`` in ``[0, 1]`` at the training size, on the model's device."""

@@ -1,13 +1,16 @@
 """Pages for browsing the dataset: activities, frame grids, the frame viewer, media."""
 
-from flask import Blueprint, abort, current_app, render_template, send_file, send_from_directory, url_for
+from flask import Blueprint, abort, current_app, flash, redirect, render_template, send_file, send_from_directory, url_for
 
+from app.errors import Problem
 from app.extensions import db
-from app.models import Activity, Frame
-from app.models.training import Prediction
+from app.forms import PointsFileForm
+from app.models import Activity, Frame, Role
+from app.models.training import Checkpoint, Prediction
+from app.services import activations, attention_points, labelling, media
 from app.services import frames as frames_service
-from app.services import labelling, media
 from app.services import training as training_service
+from app.security import roles
 from app.validation import query_int
 
 bp = Blueprint("frames", __name__)
@@ -43,7 +46,21 @@ def activity(activity_id: int):
         statuses=statuses,
         page=page,
         pages=pages,
+        points_form=PointsFileForm(formdata=None),
     )
+
+
+@bp.post("/activities/<int:activity_id>/points")
+@roles(Role.ADMIN)
+def import_points(activity_id: int):
+    """Ground truth from attention points for the activity's frames (``flask egonet import-points`` from the page)."""
+    act = db.get_or_404(Activity, activity_id)
+    form = PointsFileForm()
+    if not form.validate_on_submit():
+        raise Problem("choose a CSV file of points (frame,x,y), and a sigma from 0.5 to 10,000 px or none",
+                      fields={name: "; ".join(errors) for name, errors in form.errors.items()})
+    flash(attention_points.import_upload(form.points.data, activity=act.name, sigma=form.sigma.data).summary())
+    return redirect(url_for("frames.activity", activity_id=act.id))
 
 
 @bp.get("/frames/<int:frame_id>")
@@ -53,6 +70,11 @@ def frame(frame_id: int):
     status = frames_service.frame_statuses([fr.id])[fr.id]
     prediction = training_service.latest_prediction(fr.id)
     spread = frames_service.prediction_range(prediction) if prediction else None
+    chosen = query_int("checkpoint")
+    figure = None
+    if chosen is not None:
+        checkpoint = db.get_or_404(Checkpoint, chosen)
+        figure = {"checkpoint": checkpoint, "message": activations.page_message(checkpoint, fr)}
     return render_template(
         "frames/frame.html",
         frame=fr,
@@ -63,13 +85,17 @@ def frame(frame_id: int):
         spread=spread,
         meta=frames_service.shown_meta(fr),
         viewer_config=viewer_config(fr, prediction, spread),
+        checkpoints=activations.checkpoint_choices(),
+        figure=figure,
     )
 
 
 def viewer_config(frame: Frame, prediction: Prediction | None, spread) -> dict:
     """What the viewer's script draws: every annotation's instances (colour, kind, mask URL) and the heat map's scales."""
     annotations, colour = [], 0
-    for annotation, shown in frames_service.viewer_annotations(frame):
+    listed = frames_service.viewer_annotations(frame)
+    sources = attention_points.sources_of(a for a, _ in listed)
+    for annotation, shown in listed:
         instances = []
         for instance in annotation.instances:
             instances.append({
@@ -80,8 +106,11 @@ def viewer_config(frame: Frame, prediction: Prediction | None, spread) -> dict:
                 "mask_url": url_for("label.instance_mask", annotation_id=annotation.id, position=instance.position),
             })
             colour += 1
+        points = sources.get(annotation.id)
         annotations.append({"id": annotation.id, "author": annotation.author.username, "status": annotation.status.value,
-                            "no_action_object": annotation.no_action_object, "shown": shown, "instances": instances})
+                            "no_action_object": annotation.no_action_object, "shown": shown, "instances": instances,
+                            "source": attention_points.describe(points) if points else None,
+                            "points": points.points if points else []})
     config = {"frame": {"width": frame.width, "height": frame.height}, "annotations": annotations, "prediction": None}
     if prediction is not None:
         config["prediction"] = {
@@ -99,6 +128,14 @@ def normalised_prediction(prediction_id: int):
     """The prediction's heat map stretched to its own range: for the eye only (the viewer's switch)."""
     prediction = db.get_or_404(Prediction, prediction_id)
     return send_file(frames_service.normalised_overlay(prediction), mimetype="image/png")
+
+
+@bp.get("/frames/<int:frame_id>/activations/<int:checkpoint_id>.png")
+def activations_figure(frame_id: int, checkpoint_id: int):
+    """The paper's Figure 3 for this checkpoint on this frame (drawn on first use for small models, then cached)."""
+    fr = db.get_or_404(Frame, frame_id)
+    checkpoint = db.get_or_404(Checkpoint, checkpoint_id)
+    return send_file(activations.figure_path(checkpoint, fr, in_request=True), mimetype="image/png", max_age=3600)
 
 
 @bp.get("/frames/colour-bar.png")

@@ -55,6 +55,27 @@ def import_command(path, activity, sequence, stride, depth_dir, dhg_dir, masks_d
     )
 
 
+@bp.cli.command("import-points")
+@click.argument("file", type=click.Path(dir_okay=False, path_type=Path))
+@click.option("--activity", required=True, help="The activity whose frames the points are for (imported already).")
+@click.option("--sigma", type=float, help="The Gaussian's standard deviation in the frames' pixels "
+              "[default: the click study's 60 px at 1280 px wide, scaled to each frame].")
+@click.option("--author", default="import", show_default=True, help="Author of the ground-truth annotations.")
+def import_points_command(file, activity, sigma, author):
+    """Make each frame's ground truth from attention points (the paper's Table 4).
+
+    FILE is a CSV with the header frame,x,y: the frame's file stem, then the
+    point in its pixels (x = column, y = row); several rows per frame are
+    allowed. Each frame's mask is a Gaussian around its points binarised
+    within one sigma; a frame without a row has no action-object. Importing
+    again replaces the author's earlier points. A bad row stops the import,
+    naming its line, and nothing is kept.
+    """
+    from app.services.attention_points import import_points
+
+    click.echo(import_points(file, activity=activity, sigma=sigma, author=author).summary())
+
+
 QUICK_START = {
     "model": "egonet-lite", "folds": "single", "epochs": 6, "size": (96, 72), "lr": 0.05,
     "name": "demo quick start (egonet-lite)",

@@ -161,6 +161,35 @@ def predict_command(checkpoint_id, activities, frames, device, queue):
     click.echo(f"checkpoint {checkpoint.id} ({checkpoint.fold}): {len(made)} predictions stored, {held_out} of held-out frames")
 
 
+@bp.cli.command("activations")
+@click.argument("checkpoint_id", type=int, metavar="CHECKPOINT")
+@click.argument("frame_id", type=int, metavar="FRAME")
+@click.option("--out", type=click.Path(dir_okay=False, path_type=Path), help="The PNG [default: activations-<checkpoint>-<frame>.png].")
+def activations_command(checkpoint_id, frame_id, out):
+    """Draw the paper's Figure 3 for checkpoint CHECKPOINT on frame FRAME (the id in the frame page's address).
+
+    Each pathway's fc7 (RGB, DHG; for egonet-lite the last feature map of
+    each stream), averaged over channels and upsampled to the frame, over
+    its input, with a colour bar. The frame page shows it afterwards.
+    """
+    from app.extensions import db
+    from app.models import Frame
+    from app.models.training import Checkpoint
+    from app.services.activations import figure_path
+
+    checkpoint = db.session.get(Checkpoint, checkpoint_id)
+    if checkpoint is None:
+        raise click.BadParameter(f"no checkpoint with id {checkpoint_id}", param_hint="CHECKPOINT")
+    frame = db.session.get(Frame, frame_id)
+    if frame is None:
+        raise click.BadParameter(f"no frame with id {frame_id}", param_hint="FRAME")
+    out = out or Path(f"activations-{checkpoint_id}-{frame_id}.png")
+    from egonet.io import write_atomic
+
+    write_atomic(out, figure_path(checkpoint, frame, in_request=False).read_bytes())
+    click.echo(f"{out}: checkpoint {checkpoint.id} ({checkpoint.run.model_name}) on frame {frame.id}")
+
+
 @bp.cli.command("import-weights")
 @click.argument("file", type=click.Path(exists=True, dir_okay=False, path_type=Path))
 @click.option("--name", help="Name of the run [default: the release and the file's name].")

@@ -1,6 +1,6 @@
 """SQLAlchemy models, one module per area; import them from here."""
 
-from app.models.annotations import FINISHED, HAND_LABEL, Annotation, Instance, InstanceKind, ObjectClass, Status, is_hand
+from app.models.annotations import FINISHED, HAND_LABEL, Annotation, AttentionPoints, Instance, InstanceKind, ObjectClass, Status, is_hand
 from app.models.base import Base, utcnow
 from app.models.frames import Activity, Frame, Sequence
 from app.models.users import Role, User
@@ -13,6 +13,7 @@ __all__ = [
     "HAND_LABEL",
     "Activity",
     "Annotation",
+    "AttentionPoints",
     "Base",
     "Frame",
     "Instance",

@@ -5,8 +5,8 @@ import enum
 import uuid
 from datetime import datetime
 
-from sqlalchemy import Float, ForeignKey, LargeBinary, String, Text, UniqueConstraint
-from sqlalchemy.orm import Mapped, mapped_column, relationship
+from sqlalchemy import JSON, Float, ForeignKey, LargeBinary, String, Text, UniqueConstraint
+from sqlalchemy.orm import Mapped, backref, mapped_column, relationship
 
 from app.models.base import Base, UTCDateTime, enum_type, utcnow
 from app.models.frames import Frame
@@ -151,6 +151,34 @@ class Instance(Base):
     def is_hand(self) -> bool:
         """Whether it outlines the wearer's hand rather than an action-object (``is_hand``)."""
         return is_hand(self.label)
+
+
+class AttentionPoints(Base):
+    """Where an annotation's mask came from when it was made from attention points (``flask egonet import-points``).
+
+    The paper's Table 4 takes as ground truth "a fixed size Gaussian around
+    the ground truth attention location"; the annotation's mask is that
+    Gaussian binarised (``egonet.clicks.points_mask``), and this row keeps the
+    points ((x, y) in the frame's pixels; empty: a "no action-object" frame),
+    the Gaussian's standard deviation in the frame's pixels, whether it was
+    the paper's click width scaled to the frame (``sigma_scaled``) or given,
+    and the file they came from. The frame page and every score report say
+    so (``app.services.attention_points``).
+    """
+
+    __tablename__ = "attention_points"
+
+    id: Mapped[int] = mapped_column(primary_key=True)
+    annotation_id: Mapped[int] = mapped_column(ForeignKey("annotation.id", ondelete="CASCADE"), unique=True)
+    points: Mapped[list[list[float]]] = mapped_column(JSON, default=list)
+    sigma_px: Mapped[float] = mapped_column(Float)
+    sigma_scaled: Mapped[bool] = mapped_column(default=False)
+    source: Mapped[str] = mapped_column(String(200))
+    created_at: Mapped[datetime] = mapped_column(UTCDateTime(), default=utcnow)
+
+    annotation: Mapped[Annotation] = relationship(
+        backref=backref("attention_points", uselist=False, cascade="all, delete-orphan", passive_deletes=True)
+    )
 
 
 class GrabCutState(Base):

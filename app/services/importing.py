@@ -329,7 +329,7 @@ def add_frames(
             else:
                 report.added += 1
                 if item.mask is not None:
-                    author = author or _system_user(mask_author)
+                    author = author or system_user(mask_author)
                     _add_mask_annotation(frame, item, author, mask_status, written)
                     report.annotations += 1
             if on_progress:
@@ -404,7 +404,7 @@ def _add_mask_annotation(frame: Frame, item: FrameItem, author: User, status: St
     db.session.add(annotation)
 
 
-def _system_user(name: str) -> User:
+def system_user(name: str) -> User:
     """The author of imported masks: an annotator account without a password."""
     user = db.session.execute(db.select(User).filter_by(username=name)).scalar_one_or_none()
     if user is None:

@@ -279,3 +279,23 @@ def test_the_region_cap_is_checked():
     with pytest.raises(ValueError, match="max_region_share does not apply"):
         regions(img, method="slic", max_region_share=0.5)
     assert len(regions(img, method="slic", n_segments=4).capped) == 0
+
+
+def test_points_mask_is_the_union_of_discs_of_radius_sigma():
+    from egonet.clicks import points_mask, scaled_sigma
+    from egonet.errors import EgonetError
+
+    m = points_mask((5, 7), [(3.0, 2.0)], sigma=1.0)  # by hand: the point and its four neighbours
+    expected = np.zeros((5, 7), bool)
+    expected[2, 2:5] = expected[1:4, 3] = True
+    assert np.array_equal(m, expected)
+    rows, cols = np.mgrid[:40, :50]
+    points = [(10.0, 10.0), (33.5, 20.25)]
+    direct = np.zeros((40, 50), bool)
+    for x, y in points:
+        direct |= (cols - x) ** 2 + (rows - y) ** 2 <= 7.3**2
+    assert np.array_equal(points_mask((40, 50), points, sigma=7.3), direct)
+    assert not points_mask((40, 50), [], sigma=3).any()
+    assert scaled_sigma(1280) == 60.0 and scaled_sigma(640) == 30.0
+    with pytest.raises(EgonetError, match="lies outside the 50x40 frame"):
+        points_mask((40, 50), [(50.0, 3.0)], sigma=3)

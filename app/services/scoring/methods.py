@@ -71,6 +71,9 @@ def paragraph(rows: Sequence[Row], provenance: Provenance, *, activities: Sequen
     p = provenance
     by_kind = {kind: [r for r in rows if r.kind == kind] for kind in (MODEL, BASELINE, HUMAN)}
     parts = [_metric_sentences(p), *_frame_sentences(rows, p, by_kind, activities, frames_per_activity), _empty_sentence(p)]
+    if p.ground_truth:  # the paper's Table 4: ground truth from attention points
+        parts.append("The ground truth of " + "; of ".join(f"{a} is {t}" for a, t in p.ground_truth.items())
+                     + "; that of the other activities is masks drawn by people.")
     if by_kind[MODEL]:
         parts.append(_model_sentence(by_kind[MODEL], p))
     if by_kind[BASELINE]:

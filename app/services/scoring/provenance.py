@@ -120,6 +120,9 @@ class Provenance:
         model_splits: For each model row (a run, and a group's runs), how
             it was split: ``loao``, ``single`` or ``released``.
         code_version: ``app.version.code_version()`` when the report was made.
+        ground_truth: For each activity whose ground truth was made from
+            attention points (``app.services.attention_points``), how, in words;
+            the others' is masks drawn (or imported) by people.
     """
 
     metric: str = "pooled"
@@ -134,6 +137,11 @@ class Provenance:
     human_maps: Sequence[HumanMaps] = ()
     model_splits: Mapping[str, str] = field(default_factory=dict)
     code_version: str = ""
+    ground_truth: Mapping[str, str] = field(default_factory=dict)
+
+    def ground_truth_text(self) -> str:
+        """Where the ground truth came from: ``kids: attention points, sigma 15 px, ...; other activities: drawn masks``."""
+        return "; ".join([*(f"{a}: {t}" for a, t in self.ground_truth.items()), "other activities: drawn masks"])
 
     def p_text(self, p: float | None) -> str:
         return p_text(p, self.resamples)
@@ -173,6 +181,8 @@ class Provenance:
             ("95% CI", self.ci_text()),
             ("Frames without action-object pixels", self.empty_text()),
         ]
+        if self.ground_truth:
+            out.append(("Ground truth", self.ground_truth_text()))
         out += [("People's maps", f"{m.study}: {m.regions}; click Gaussians of {m.sigma}") for m in self.human_maps]
         return [*out, ("Code", self.code_version or "unknown")]
 
@@ -189,6 +199,7 @@ class Provenance:
             "min frames": MIN_FRAMES,
             "paired": int(self.paired),
             "people's maps": " | ".join(f"{m.study}: {m.regions}; click Gaussians of {m.sigma}" for m in self.human_maps),
+            "ground truth": self.ground_truth_text() if self.ground_truth else "drawn masks",
             "code version": self.code_version,
         }
 
@@ -206,5 +217,6 @@ class Provenance:
                    "p_floor": p_floor(self.resamples) if self.resamples else None, "min_frames": MIN_FRAMES},  # fmt: skip
             "human_maps": [asdict(m) | {"rows": list(m.rows)} for m in self.human_maps],
             "model_splits": dict(self.model_splits),
+            "ground_truth": dict(self.ground_truth),
             "code_version": self.code_version,
         }

@@ -26,7 +26,9 @@ from sqlalchemy import func
 
 from app.extensions import db
 from app.models.studies import ANSWERED, EndReason, FrameKind, Outcome, Participant, Study, StudyFrame, Trial
+from app.models import Annotation
 from app.models.training import Prediction, TrainingRun
+from app.services import attention_points, ground_truth
 from app.services import studies as studies_service
 from app.services import training
 from app.services.scoring import cache, sources
@@ -412,6 +414,7 @@ def build_report(
         metric=metric, thresholds=thresholds, frames=frames, empty=empty, empty_frames=frames_without_truth(found),
         answered_only=answered_only, resamples=resamples, seed=seed, code_version=code_version(),
         human_maps=_human_maps(found, exclude_failed_checks=exclude_failed_checks), model_splits=_model_splits(found),
+        ground_truth=attention_points.activity_sources(*_scored_truth(found)),
     )
     return _scored(found, notes + loaded, provenance, compare_keys=compare_keys)
 
@@ -425,6 +428,17 @@ def _scored(found: list[Source], notes: list[str], provenance: Provenance, *, co
     rows, activities, frame_notes = build_rows(found, frames=provenance.frames, scorer=scorer)
     comparison = compare(found, *compare_keys, scorer=scorer, provenance=provenance) if compare_keys else None
     return Report(activities=activities, rows=rows, provenance=provenance, notes=frame_notes + notes, comparison=comparison)
+
+
+def _scored_truth(found: list[Source]) -> tuple[dict[int, Annotation], dict[int, str]]:
+    """The ground-truth annotations of the frames the rows are scored on, and those frames' activities."""
+    activity: dict[int, str] = {}
+    for source in found:
+        activity.update(zip(source.stats.ids.tolist(), source.stats.activities.tolist()))
+    ids, truths = sorted(activity), {}
+    for start in range(0, len(ids), 5000):  # keep IN lists well under SQLite's variable limit
+        truths.update(ground_truth.ground_truths(ids[start : start + 5000]))
+    return truths, activity
 
 
 def _model_splits(found: list[Source]) -> dict[str, str]:

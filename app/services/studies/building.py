@@ -44,8 +44,7 @@ OPTION_RULES = {
     "scale": (SUPERPIXEL_DEFAULTS.scale, float, 1e-3, 1e5),
     "min_size": (SUPERPIXEL_DEFAULTS.min_size, int, 1, 100_000),
 }
-REFERENCE_WIDTH = 1280
-"""The paper's frames are 1280x960: its 60 px click width is at this width."""
+REFERENCE_WIDTH = egonet_clicks.REFERENCE_WIDTH
 MAX_PRACTICE = 50
 MAX_CATCH = 20
 # What a duplicate copies from the study it copies (besides frames and conditions).
@@ -114,9 +113,7 @@ def check_superpixels(settings: dict[str, Any]) -> dict[str, Any]:
     return out
 
 
-def scaled_sigma(width: int) -> float:
-    """The paper's click width (60 px at 1280 px wide) scaled to a frame ``width`` px wide."""
-    return round(egonet_clicks.DEFAULT_SIGMA * width / REFERENCE_WIDTH, 2)
+scaled_sigma = egonet_clicks.scaled_sigma
 
 
 def sigma_for(study: Study, frame: Frame) -> float:

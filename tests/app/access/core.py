@@ -27,6 +27,9 @@ RULES = {
     "frames.media_file": (STAFF, 200),
     "frames.normalised_prediction": (STAFF, 200),
     "frames.colour_bar": (STAFF, 200),
+    # the access fixture's checkpoint file is not a checkpoint: staff get the 400 that says so
+    "frames.activations_figure": (STAFF, 400),
+    "frames.import_points": (ADMIN, 400),  # no file sent: the 400 that asks for one
     "api.activities": (STAFF, 200),
     "api.activity_frames": (STAFF, 200),
     "api.frame": (STAFF, 200),
