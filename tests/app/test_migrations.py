@@ -98,11 +98,11 @@ def test_0007_gives_stored_dhg_images_the_authors_order(ctx):
     assert stored()["authors"] == paths["authors"]
 
 
-def test_0021_annotations_of_proposals_only_claim_nothing(ctx, make_user):
-    """On a database at 0016: in-progress annotations holding only proposals become "todo", and back."""
+def test_0018_annotations_of_proposals_only_claim_nothing(ctx, make_user):
+    """On a database at 0017: in-progress annotations holding only proposals become "todo", and back."""
     from app.models import Activity, Annotation, Frame, Instance, Sequence, Status
 
-    downgrade(revision="0016")
+    downgrade(revision="0017")
     try:
         ann = make_user("annotator", "ann")
         sequence = Sequence(activity=Activity(name="a"), name="s")
@@ -125,7 +125,7 @@ def test_0021_annotations_of_proposals_only_claim_nothing(ctx, make_user):
 
         upgrade()
         assert statuses() == {"proposals": "todo", "own": "in_progress", "empty-no-object": "in_progress", "done": "done"}
-        downgrade(revision="0016")
+        downgrade(revision="0017")
         assert statuses()["proposals"] == "in_progress"
     finally:
         upgrade()

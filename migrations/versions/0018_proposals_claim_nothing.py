@@ -7,15 +7,15 @@ them "todo" (``app.services.labelling.annotations._next_status``); this
 brings the ones already there in line. Downgrade puts every "todo"
 annotation back in progress, as the code before wrote them.
 
-Revision ID: 0021
-Revises: 0016
+Revision ID: 0018
+Revises: 0017
 """
 
 from alembic import op
 import sqlalchemy as sa
 
-revision = "0021"
-down_revision = "0016"
+revision = "0018"
+down_revision = "0017"
 branch_labels = None
 depends_on = None
 
