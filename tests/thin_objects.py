@@ -6,10 +6,11 @@ Frames, every one 1408x1408 (the app's egocentric frame size):
 
 * ``utensil_cases``: the three real first-person frames of
   ``../shared/data/egonet-samples/rgb`` (skipped when absent) with a metal
-  utensil laid in: a fork (four tines), a knife, a spoon, shaded along their
-  width like metal, the edge softened as a camera's. The pasted shape is the
-  true mask, exact to the pixel, so the thin parts (tines 9 px wide, 8 px
-  apart; handles 18-24 px) are scored as they are;
+  utensil laid in: a fork (four tines), a knife, a spoon, and a pair of
+  chopsticks on the third frame again, shaded across their width like
+  metal, the edge softened as a camera's. The pasted shape is the true mask,
+  exact to the pixel, so the thin parts (chopsticks 8-10 px wide; tines 9 px
+  wide, 8 px apart; handles 18-24 px) are scored as they are;
 * ``davis_cases``: the first frame of each window of ``tests/data/real_video``
   (real video with person-drawn masks: a camel's, a goat's, a dog's and
   cows' legs, a soapbox with its wheels and driver), upscaled.
@@ -19,8 +20,9 @@ interaction; each next one is a click at the interior-most point (the
 distance transform's peak) of the largest error region, foreground if it is
 missed object, background if it is a false positive; up to 20 interactions.
 A click is a short brush stroke there (what a labeller drags in the
-browser): along the region's long axis, at most 12 px each way and radius at
-most 5 px, staying inside the region.
+browser): the labelling page's brush (radius 1/80 of the frame's short side,
+18 px at 1408x1408), narrowed to fit inside the region, dragged along the
+region's long axis at most two radii each way while it stays inside.
 """
 
 from __future__ import annotations
@@ -80,6 +82,9 @@ def _utensil(kind: str, h: int, w: int, cx: float, cy: float, angle: float) -> n
     elif kind == "spoon":
         cv2.line(local, (80, y), (520, y), 1, 18)  # handle
         cv2.ellipse(local, (600, y), (85, 38), 0, 0, 360, 1, -1)  # bowl
+    elif kind == "chopsticks":  # a pair, 8-10 px wide, their tips 10 px apart
+        cv2.line(local, (60, y - 40), (740, y - 6), 1, 10)
+        cv2.line(local, (60, y + 36), (740, y + 4), 1, 8)
     else:
         raise ValueError(kind)
     rot = cv2.getRotationMatrix2D((400, 100), np.degrees(angle), 1.0)
@@ -104,7 +109,9 @@ def utensil_cases() -> list[Case]:
     if not folder.is_dir():
         return []
     cases = []
-    for (kind, seed), path in zip((("fork", 1), ("knife", 2), ("spoon", 3)), sorted(folder.glob("*.jpg"))):
+    frames = sorted(folder.glob("*.jpg"))
+    for kind, seed, path in (("fork", 1, frames[0]), ("knife", 2, frames[1]), ("spoon", 3, frames[2]),
+                             ("chopsticks", 4, frames[2])):
         rng = np.random.default_rng(seed)
         rgb = cv2.cvtColor(cv2.imread(str(path), cv2.IMREAD_COLOR), cv2.COLOR_BGR2RGB)
         img = cv2.resize(rgb, (SIZE, SIZE), interpolation=cv2.INTER_CUBIC).astype(np.float32)
@@ -150,8 +157,10 @@ def loose_box(truth: np.ndarray, pad: float = 0.05) -> tuple[int, int, int, int]
             min(h, int(ys.max() + 1 + py)))
 
 
-def click(mask: np.ndarray, truth: np.ndarray, max_radius: float = 5.0, max_half_length: int = 12) -> Click | None:
+def click(mask: np.ndarray, truth: np.ndarray) -> Click | None:
     """The next click of the protocol, or None when the mask is exact."""
+    max_radius = max(3, round(min(truth.shape) / 80))  # the labelling page's brush (static/js/label_state.js)
+    max_half_length = 2 * max_radius
     best = None
     for label, err in (("fg", truth & ~mask), ("bg", mask & ~truth)):
         n, lab, stats, _ = cv2.connectedComponentsWithStats(err.view(np.uint8), connectivity=8)

@@ -20,22 +20,20 @@ energy:
   the full grid, starting from the coarse label, and only within
   ``_FINE_BAND`` grid pixels of its edge (a banded cut: the rest keeps the
   coarse label);
-* a stroke re-cuts only the side of the label it can change; its models
-  are re-estimated from the whole ROI.
+* a stroke re-cuts only the side of the label it can change, and only near
+  the stroke (``_STROKE_REACH``); its models are re-estimated from the
+  whole ROI.
 
 What a stroke changes is local (``_keep_connected``): only pixels within
 ``_NEAR_GRID`` of the stroke, or joined to it through pixels that changed
 too, take a new label; every other pixel keeps its own, so re-estimated
 models never drop a far part (the tip of a handle) that the labeller did
-not touch. Within that, the stroke's side also explains the colours under
-the stroke (``_with_stroke_colours``), so one short stroke takes in the
-stretch of similar pixels joined to it (a handle along its length) instead
-of the stroke alone.
+not touch.
 
 On the real frames of ``bench/bench_grabcut.py --real-only`` the box's cut
 matches ``cv2.grabCut``'s label exactly when run the same way (all five
-iterations on the full grid); the coarse start is what changes it (see
-docs/benchmarks.md).
+iterations on the full grid); the coarse start and the stroke's reach are
+what change it (see the README's Benchmarks).
 """
 
 from __future__ import annotations
@@ -59,9 +57,8 @@ _CONVERGED = 0.005  # stop iterating when a cut changes at most this fraction of
 _SPARSE = 0.25  # a box whose first cut keeps less than this fraction of it is cut again (``_rescue``)
 _OUTSIDE_SAMPLES = 100_000  # most frame pixels read for the background model of that cut
 _COARSE_MIN = 32  # a box's first iterations run at half the grid when that is at least this many pixels a side
+_STROKE_REACH = 56  # a stroke re-cuts the label within this many grid pixels of itself (a fifth of the work size)
 _NEAR_GRID = 2  # a stroke changes the grid's label only within this many grid pixels of itself, or connected to that
-_STROKE_WEIGHT = 2.0  # weight of the stroke's own colours beside its side's mixture (``_with_stroke_colours``)
-_STROKE_VAR = 25.0  # added to the stroke colours' covariance (8-bit colours squared)
 _FINE_BAND = 6  # a box's cut on the full grid moves the coarse label's edge by at most this many grid pixels
 
 # The terms of one cut: ``learn(is_fg, models) -> models`` re-estimates both
@@ -351,8 +348,7 @@ def _stroke_labels(guide: _Guide, strokes: tuple[_Stroke, ...], prior: np.ndarra
 
 
 def _recut(terms: _Terms, guide: _Guide, models: np.ndarray, strokes: tuple[_Stroke, ...],
-           prior: np.ndarray, *, pixels: np.ndarray | None = None, stroke_colours: np.ndarray | None = None
-           ) -> tuple[np.ndarray, np.ndarray]:
+           prior: np.ndarray, *, reach: int | None = _STROKE_REACH) -> tuple[np.ndarray, np.ndarray]:
     """Cut again with ``strokes`` as hard labels, starting from the label ``prior``.
 
     The label only moves the last stroke's way (see ``GrabCutSession.stroke``),
@@ -366,11 +362,10 @@ def _recut(terms: _Terms, guide: _Guide, models: np.ndarray, strokes: tuple[_Str
         models: The current models.
         strokes: The object's strokes, the new one last.
         prior: The label before the stroke.
-        pixels: float32 ``(N, 3)``, the grid's colours (flat), with
-            ``stroke_colours`` (the frame's colours under the new stroke):
-            the stroke's side also explains those (``_with_stroke_colours``).
-            None: with depth, the models alone.
-        stroke_colours: ``(n, 3)``, see ``pixels``.
+        reach: Grid pixels around the stroke that may change, or None for
+            the whole box. Colour cuts on a white chair before a white wall
+            are slow to solve over the whole box; with depth the cut is
+            easy, and the whole box is cut.
 
     Returns:
         ``(label, models)``.
@@ -381,8 +376,14 @@ def _recut(terms: _Terms, guide: _Guide, models: np.ndarray, strokes: tuple[_Str
     else:
         gc[gc == cv2.GC_PR_BGD] = cv2.GC_BGD
     hit = guide.footprint(strokes[-1])
-    if pixels is not None and stroke_colours is not None and len(stroke_colours):
-        terms = _with_stroke_colours(terms, pixels, stroke_colours, strokes[-1].fg)
+    if hit is not None and reach is not None:
+        # Only near the stroke: further away the label stays as it was.
+        crop, (y0, x0) = hit
+        r = reach
+        far = np.ones(gc.shape, bool)
+        far[max(0, y0 - r) : y0 + crop.shape[0] + r, max(0, x0 - r) : x0 + crop.shape[1] + r] = False
+        gc[far & (gc == cv2.GC_PR_FGD)] = cv2.GC_FGD
+        gc[far & (gc == cv2.GC_PR_BGD)] = cv2.GC_BGD
     low, models = _cut(terms, gc, models, _STROKE_ITERATIONS)
     low = (low | prior) if strokes[-1].fg else (low & prior)
     if hit is not None:
@@ -390,40 +391,8 @@ def _recut(terms: _Terms, guide: _Guide, models: np.ndarray, strokes: tuple[_Str
     return low, models
 
 
-def _with_stroke_colours(terms: _Terms, pixels: np.ndarray, stroke_colours: np.ndarray, fg: bool) -> _Terms:
-    """``terms`` whose stroke side also explains the colours under the stroke (one more Gaussian).
-
-    A few stroke pixels barely move a mixture re-estimated from the whole
-    ROI, whose labels are what the stroke corrects; the stroke's own colours
-    (at full resolution: a short stroke covers a grid pixel or two) say what
-    the labeller pointed at. The side's cost becomes
-    ``-log(p_side(x) + _STROKE_WEIGHT * N(x; stroke))``.
-
-    Args:
-        terms: The cut's colour terms.
-        pixels: float32 ``(N, 3)``, the grid's colours (flat).
-        stroke_colours: ``(n, 3)``, the frame's colours under the stroke.
-        fg: The stroke's side.
-    """
-    x = stroke_colours.astype(np.float64)
-    mean = x.mean(axis=0)
-    cov = np.cov(x.T) if len(x) > 3 else np.zeros((3, 3))
-    cov = np.atleast_2d(cov) + _STROKE_VAR * np.eye(3)
-    inv, logdet = np.linalg.inv(cov), float(np.linalg.slogdet(cov)[1])
-
-    def costs(models: np.ndarray, free: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-        cost_bg, cost_fg = terms.costs(models, free)
-        d = pixels[free].astype(np.float64) - mean
-        own = 0.5 * (np.einsum("ni,ij,nj->n", d, inv, d) + logdet) + 3 * 0.9189385 - math.log(_STROKE_WEIGHT)
-        side = cost_fg if fg else cost_bg
-        side = np.minimum(side, own) - np.log1p(np.exp(-np.abs(side - own)))
-        return (cost_bg, side) if fg else (side, cost_fg)
-
-    return _Terms(terms.links, terms.learn, costs)
-
-
 def _keep_connected(new: np.ndarray, old: np.ndarray, crop: np.ndarray, origin: tuple[int, int],
-                    near: int) -> np.ndarray:
+                    near: int, reach: int | None = None) -> np.ndarray:
     """``new`` where it changed in a part connected to a stroke, ``old`` elsewhere.
 
     A stroke's effect is local: a pixel may take a new label only if it lies
@@ -439,42 +408,43 @@ def _keep_connected(new: np.ndarray, old: np.ndarray, crop: np.ndarray, origin: 
         crop: bool, the stroke's footprint on this grid.
         origin: ``(y, x)`` of ``crop`` on the grid.
         near: The stroke's neighbourhood, pixels beyond its footprint.
+        reach: Nothing further than this many pixels from the footprint
+            changes (None: no such limit).
 
     Returns:
         bool ``(h, w)`` (``new`` itself when nothing had to be kept).
     """
     changed = new != old
+    if reach is not None:
+        # Nothing further than ``reach`` from the stroke's footprint (a window around it) changes.
+        y0, x0 = origin
+        window = np.zeros_like(changed)
+        window[max(0, y0 - reach) : y0 + crop.shape[0] + reach, max(0, x0 - reach) : x0 + crop.shape[1] + reach] = True
+        changed &= window
+    kept = np.zeros_like(changed)
     rows, cols = np.flatnonzero(changed.any(axis=1)), np.flatnonzero(changed.any(axis=0))
-    if not len(rows):
+    if len(rows):
+        # Only the changed pixels' bounding box matters: no changed part leaves it.
+        r0, r1, c0, c1 = int(rows[0]), int(rows[-1]) + 1, int(cols[0]), int(cols[-1]) + 1
+        count, parts = cv2.connectedComponents(changed[r0:r1, c0:c1].view(np.uint8), connectivity=8)
+        # The footprint grown by ``near`` (a dilation), on that box padded by ``near``.
+        y0, x0 = origin
+        hh, ww = r1 - r0 + 2 * near, c1 - c0 + 2 * near
+        ys, xs = np.nonzero(crop)
+        ys, xs = ys + y0 - r0 + near, xs + x0 - c0 + near
+        inside = (ys >= 0) & (ys < hh) & (xs >= 0) & (xs < ww)
+        seed = np.zeros((hh, ww), np.uint8)
+        seed[ys[inside], xs[inside]] = 1
+        if near > 0:
+            seed = cv2.dilate(seed, cv2.getStructuringElement(cv2.MORPH_ELLIPSE, (2 * near + 1, 2 * near + 1)))
+        seed = seed[near : hh - near, near : ww - near].view(bool)
+        joined = np.zeros(count, bool)
+        joined[parts[seed]] = True
+        joined[0] = False
+        kept[r0:r1, c0:c1] = joined[parts]
+    if np.array_equal(kept, new != old):
         return new
-    # Only the changed pixels' bounding box matters: no changed part leaves it.
-    r0, r1, c0, c1 = int(rows[0]), int(rows[-1]) + 1, int(cols[0]), int(cols[-1]) + 1
-    count, parts = cv2.connectedComponents(changed[r0:r1, c0:c1].view(np.uint8), connectivity=8)
-    if count <= 1:
-        return new
-    # The footprint grown by ``near`` (a dilation), on the changed pixels' box padded by ``near``.
-    y0, x0 = origin
-    hh, ww = r1 - r0 + 2 * near, c1 - c0 + 2 * near
-    ys, xs = np.nonzero(crop)
-    ys, xs = ys + y0 - r0 + near, xs + x0 - c0 + near
-    inside = (ys >= 0) & (ys < hh) & (xs >= 0) & (xs < ww)
-    if not inside.any():
-        return np.where(changed, old, new)
-    seed = np.zeros((hh, ww), np.uint8)
-    seed[ys[inside], xs[inside]] = 1
-    if near > 0:
-        seed = cv2.dilate(seed, cv2.getStructuringElement(cv2.MORPH_ELLIPSE, (2 * near + 1, 2 * near + 1)))
-    seed = seed[near : hh - near, near : ww - near]
-    keep = np.zeros(count, bool)
-    keep[np.unique(parts[seed.view(bool)])] = True
-    keep[0] = False
-    lost = changed.copy()
-    lost[r0:r1, c0:c1] &= ~keep[parts]
-    if not lost.any():
-        return new
-    out = new.copy()
-    out[lost] = old[lost]
-    return out
+    return np.where(kept, new, old)
 
 
 # ------------------------------------------------------------- with depth

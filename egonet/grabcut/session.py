@@ -20,7 +20,7 @@ import numpy as np
 
 from egonet.errors import EgonetError
 from egonet.grabcut.colour import _first_models
-from egonet.grabcut.cut import (_NEAR_GRID, _box_cut, _box_labels, _depth_box_cut, _depth_first_models,
+from egonet.grabcut.cut import (_NEAR_GRID, _STROKE_REACH, _box_cut, _box_labels, _depth_box_cut, _depth_first_models,
                                _keep_connected, _recut, _seed_cut, _Terms)
 from egonet.grabcut.depth import _DepthGuide
 from egonet.grabcut.frame import GrabCutFrame
@@ -279,10 +279,9 @@ class GrabCutSession:
 
         Pixels under a ``"fg"`` stroke are in the returned mask, pixels under a
         ``"bg"`` stroke are out, exactly (later strokes win where strokes
-        overlap). The colour models are re-estimated with the stroke, and
-        the stroke's side also explains the colours under it, so similar
-        pixels joined to it follow it (a handle along its length), but only
-        in the stroke's direction: a foreground stroke never removes pixels
+        overlap). The colour models are re-estimated with the stroke, so
+        similar pixels near it can follow it, but only in the stroke's
+        direction: a foreground stroke never removes pixels
         from the mask and a background stroke never adds any. And its effect
         is local: a pixel changes only if it lies near the stroke (two grid
         pixels of the cut, a few frame pixels) or is joined to it through
@@ -323,12 +322,10 @@ class GrabCutSession:
         # In a new ROI the cut starts from the current mask (the models carry over either way).
         prior = _downsample(self._mask, guide.geom) if new_roi else prev.low
         if self._depth is None:
-            crop, (fy, fx) = footprint
-            under = self._image[fy : fy + crop.shape[0], fx : fx + crop.shape[1]][crop]
-            low, models = _recut(_Terms.colour(guide), guide, prev.models, strokes, prior, pixels=guide.pixels,
-                                 stroke_colours=under)
+            low, models = _recut(_Terms.colour(guide), guide, prev.models, strokes, prior)
         else:
-            low, models = _recut(_Terms.depth(self._depth_guide_for(guide)), guide, prev.models, strokes, prior)
+            low, models = _recut(_Terms.depth(self._depth_guide_for(guide)), guide, prev.models, strokes, prior,
+                                 reach=None)
         snap = _Snapshot(box=box, strokes=strokes, models=models, low=low)
         if new_roi:
             # Both masks honour every stroke, so their union does too.
@@ -337,8 +334,9 @@ class GrabCutSession:
             mask = self._refresh_changed(guide, snap, prev.low, new.fg)
             self._apply_strokes(mask, strokes)
         # Local at full resolution too: only what is joined to the stroke through the change moves.
-        near = math.ceil(_NEAR_GRID / min(guide.geom.sx, guide.geom.sy))
-        mask = _keep_connected(mask, self._mask, *footprint, near)
+        grid = min(guide.geom.sx, guide.geom.sy)
+        mask = _keep_connected(mask, self._mask, *footprint, math.ceil(_NEAR_GRID / grid),
+                               None if self._depth is not None else math.ceil(_STROKE_REACH / grid))
         self._commit(guide, snap, mask)
         return self.mask
 
