@@ -688,28 +688,49 @@ def noc_cases(before: str, figure: Path | None, figure_case: str) -> None:
 
 
 def _noc_figure(path: Path, old: dict, new: dict) -> None:
-    """Before (top) and after (bottom): the object after the box and after each of the first clicks."""
+    """Before (top row) and after (bottom row): the mask after the box and after four clicks.
+
+    The clicks are those where the older engine changed most pixels far
+    from the stroke (the same click numbers in both rows).
+
+    The truth's outline is red, the mask green, the click's stroke yellow
+    (object) or blue (background), and pixels the click changed far from
+    itself (``far_changes``) magenta.
+    """
     case = next(c for c in thin_objects.all_cases() if c.name == new["name"])
-    ys, xs = np.nonzero(case.truth)
-    pad = 40
+    ys, xs = np.nonzero(case.truth | new["masks"][0] | old["masks"][0])
+    pad = 30
     y0, y1 = max(0, ys.min() - pad), min(case.truth.shape[0], ys.max() + pad)
     x0, x1 = max(0, xs.min() - pad), min(case.truth.shape[1], xs.max() + pad)
     edge, _ = cv2.findContours(case.truth.view(np.uint8), cv2.RETR_LIST, cv2.CHAIN_APPROX_NONE)
-    columns = min(5, len(old["masks"]), len(new["masks"]))
+    # The box, then the clicks where the older engine changed most far from the stroke (in order).
+    count = min(len(old["masks"]), len(new["masks"]))
+    far = [far_changes(old["masks"][i - 1], old["masks"][i], stroke_footprint(
+        case.truth.shape, old["clicks"][i - 1].points, old["clicks"][i - 1].radius)) for i in range(1, count)]
+    columns = [0] + sorted(1 + int(i) for i in np.argsort(far)[::-1][:4])
     rows = []
     for kept in (old, new):
         tiles = []
-        for i in range(columns):
+        for i in columns:
             img = cv2.cvtColor(case.rgb, cv2.COLOR_RGB2BGR)
             mask = kept["masks"][i]
             img[mask] = (0.45 * img[mask] + np.array([0, 140, 0])).astype(np.uint8)
             cv2.drawContours(img, edge, -1, (0, 0, 255), 3)
-            if i < len(kept["clicks"]):
-                k = kept["clicks"][i]
+            if i > 0:
+                k = kept["clicks"][i - 1]
+                under = stroke_footprint(mask.shape, k.points, k.radius)
+                before, after = kept["masks"][i - 1], mask
+                far = (before != after).view(np.uint8)
+                if far_changes(before, after, under):
+                    _, parts = cv2.connectedComponents(far, connectivity=8)
+                    near = cv2.dilate(under.view(np.uint8), cv2.getStructuringElement(
+                        cv2.MORPH_ELLIPSE, (2 * FAR + 1,) * 2)) > 0
+                    far_px = (far > 0) & ~np.isin(parts, np.unique(parts[near & (far > 0)]))
+                    img[cv2.dilate(far_px.view(np.uint8), np.ones((5, 5), np.uint8)) > 0] = (255, 0, 255)
                 cv2.polylines(img, [np.round(np.array(k.points)).astype(np.int32)], False,
-                              (255, 200, 0) if k.label == "fg" else (255, 0, 255), 14)
+                              (0, 255, 255) if k.label == "fg" else (255, 128, 0), max(6, round(2 * k.radius)))
             tile = img[y0:y1, x0:x1]
-            scale = 260 / max(tile.shape[:2])
+            scale = 230 / max(tile.shape[:2])
             tile = cv2.resize(tile, None, fx=scale, fy=scale, interpolation=cv2.INTER_AREA)
             tiles.append(np.pad(tile, ((2, 2), (2, 2), (0, 0)), constant_values=255))
         rows.append(np.hstack(tiles))
@@ -740,7 +761,7 @@ def main(argv: list[str] | None = None) -> int:
                         help="only NoC@90 on thin objects, this tree's engine against --before's")
     parser.add_argument("--before", default="main", help="git revision of the engine to compare with (--noc)")
     parser.add_argument("--figure", type=Path, help="--noc: write the before/after figure (PNG) here")
-    parser.add_argument("--figure-case", default="fork-00_007850_1", help="--noc: the object of the figure")
+    parser.add_argument("--figure-case", default="camel", help="--noc: the object of the figure")
     parser.add_argument("--noc-engine-only", type=Path, help=argparse.SUPPRESS)  # the subprocess of --noc
     args = parser.parse_args(argv)
     if args.noc_engine_only is not None:

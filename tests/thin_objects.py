@@ -127,17 +127,19 @@ def utensil_cases() -> list[Case]:
     return cases
 
 
+def davis_case(folder: Path) -> Case:
+    """The first frame of a real-video window, upscaled, with its person-drawn mask."""
+    first = sorted(folder.glob("*.jpg"))[0]
+    rgb = cv2.cvtColor(cv2.imread(str(first), cv2.IMREAD_COLOR), cv2.COLOR_BGR2RGB)
+    mask = cv2.imread(str(first.with_suffix(".png")), cv2.IMREAD_GRAYSCALE)
+    rgb = cv2.resize(rgb, (SIZE, SIZE), interpolation=cv2.INTER_CUBIC)
+    truth = cv2.resize(mask, (SIZE, SIZE), interpolation=cv2.INTER_LINEAR) >= 128
+    return Case(folder.name.split("-")[0], rgb, truth)
+
+
 def davis_cases() -> list[Case]:
-    """The first frame of each real-video window, upscaled, with its person-drawn mask."""
-    cases = []
-    for folder in sorted(p for p in REAL_VIDEO.iterdir() if p.is_dir()):
-        first = sorted(folder.glob("*.jpg"))[0]
-        rgb = cv2.cvtColor(cv2.imread(str(first), cv2.IMREAD_COLOR), cv2.COLOR_BGR2RGB)
-        mask = cv2.imread(str(first.with_suffix(".png")), cv2.IMREAD_GRAYSCALE)
-        rgb = cv2.resize(rgb, (SIZE, SIZE), interpolation=cv2.INTER_CUBIC)
-        truth = cv2.resize(mask, (SIZE, SIZE), interpolation=cv2.INTER_LINEAR) >= 128
-        cases.append(Case(folder.name.split("-")[0], rgb, truth))
-    return cases
+    """Every real-video window's first frame (``davis_case``)."""
+    return [davis_case(p) for p in sorted(p for p in REAL_VIDEO.iterdir() if p.is_dir())]
 
 
 def all_cases() -> list[Case]:
