@@ -730,7 +730,7 @@ def _noc_figure(path: Path, old: dict, new: dict) -> None:
                 cv2.polylines(img, [np.round(np.array(k.points)).astype(np.int32)], False,
                               (0, 255, 255) if k.label == "fg" else (255, 128, 0), max(6, round(2 * k.radius)))
             tile = img[y0:y1, x0:x1]
-            scale = 230 / max(tile.shape[:2])
+            scale = 170 / max(tile.shape[:2])
             tile = cv2.resize(tile, None, fx=scale, fy=scale, interpolation=cv2.INTER_AREA)
             tiles.append(np.pad(tile, ((2, 2), (2, 2), (0, 0)), constant_values=255))
         rows.append(np.hstack(tiles))
