@@ -650,7 +650,7 @@ def noc_cases(before: str, figure: Path | None, figure_case: str) -> None:
     import subprocess  # noqa: PLC0415
     import tempfile  # noqa: PLC0415
 
-    if not thin_objects.utensil_cases():
+    if not (thin_objects.EGONET_SAMPLES / "rgb").is_dir():
         print(f"(no first-person frames at {thin_objects.EGONET_SAMPLES}: the utensils are skipped)")
     with tempfile.TemporaryDirectory() as tmp:
         engine = _engine_at(before, Path(tmp) / "engine")
@@ -665,7 +665,8 @@ def noc_cases(before: str, figure: Path | None, figure_case: str) -> None:
     print(f"{'object':20s} {'NoC before':>10s} {'after':>6s}   {'box cpu ms':>12s}   {'stroke cpu p50':>14s}   "
           f"far strokes before/after")
     for a, b in zip(old["rows"], new["rows"]):
-        print(f"{a['name']:20s} {a['noc'] or '>20':>10} {b['noc'] or '>20':>6}   {a['box_cpu_ms']:5.0f} {b['box_cpu_ms']:5.0f}"
+        print(f"{a['name']:20s} {a['noc'] or '>20':>10} {b['noc'] or '>20':>6}   "
+              f"{a['box_cpu_ms']:5.0f} {b['box_cpu_ms']:5.0f}"
               f"   {_pct(a['stroke_cpu_ms'], 50):6.1f} {_pct(b['stroke_cpu_ms'], 50):6.1f}   "
               f"{sum(v > 0 for v in a['far'])}/{len(a['far'])} -> {sum(v > 0 for v in b['far'])}/{len(b['far'])}")
     summary = {}
@@ -681,7 +682,8 @@ def noc_cases(before: str, figure: Path | None, figure_case: str) -> None:
         print(f"{label:6s} mean NoC@90 {np.mean(scores):5.2f} over {len(rows)} objects, {summary[label]['missed']} not "
               f"within {thin_objects.MAX_CLICKS} | box cpu p50 {summary[label]['box_cpu_p50']:.0f} ms | stroke cpu "
               f"p50 {summary[label]['stroke_cpu_p50']:.1f} / p95 {summary[label]['stroke_cpu_p95']:.1f} ms | strokes "
-              f"with far changes {summary[label]['far_strokes']} of {len(far)} (largest {summary[label]['far_max']} px)")
+              f"with far changes {summary[label]['far_strokes']} of {len(far)} "
+              f"(largest {summary[label]['far_max']} px)")
     print("json " + json.dumps(summary))
     if figure is not None and old["kept"] and new["kept"]:
         _noc_figure(figure, old["kept"], new["kept"])
