@@ -24,6 +24,10 @@ energy:
   the stroke (``_STROKE_REACH``); its models are re-estimated from the
   whole ROI.
 
+A colour stroke also flips the error region it lands in up to the image's
+edges (``_flooded``: a watershed from the stroke against what surely has
+the other label), not only what the re-cut's colour models move.
+
 What a stroke changes is local (``_keep_connected``): only pixels within
 ``_NEAR_GRID`` of the stroke, or joined to it through pixels that changed
 too, take a new label; every other pixel keeps its own, so re-estimated
@@ -43,6 +47,7 @@ from collections.abc import Callable
 
 import cv2
 import numpy as np
+from skimage.segmentation import watershed
 
 from egonet.grabcut.colour import _costs, _first_models, _fit_model, _learn
 from egonet.grabcut.depth import (_Z_SCALE, _depth_costs, _DepthGuide, _fallback_z, _first_model, _learn_depth)
@@ -59,6 +64,10 @@ _OUTSIDE_SAMPLES = 100_000  # most frame pixels read for the background model of
 _COARSE_MIN = 32  # a box's first iterations run at half the grid when that is at least this many pixels a side
 _STROKE_REACH = 56  # a stroke re-cuts the label within this many grid pixels of itself (a fifth of the work size)
 _NEAR_GRID = 2  # a stroke changes the grid's label only within this many grid pixels of itself, or connected to that
+_FLOOD_SCALE = 2.0  # a stroke floods at most this many times its depth in its region (``_flooded``)
+_FLOOD_MIN = 4  # ... or this many grid pixels, whichever is more
+_FLOOD_SMOOTH = 0.7  # Gaussian sigma of the colours before the flood's gradient, grid pixels
+_SURE_MARGIN = 4.0  # a pixel whose colour favours the other label by this much (-log p) stops the flood
 _FINE_BAND = 6  # a box's cut on the full grid moves the coarse label's edge by at most this many grid pixels
 
 # The terms of one cut: ``learn(is_fg, models) -> models`` re-estimates both
@@ -348,7 +357,8 @@ def _stroke_labels(guide: _Guide, strokes: tuple[_Stroke, ...], prior: np.ndarra
 
 
 def _recut(terms: _Terms, guide: _Guide, models: np.ndarray, strokes: tuple[_Stroke, ...],
-           prior: np.ndarray, *, reach: int | None = _STROKE_REACH) -> tuple[np.ndarray, np.ndarray]:
+           prior: np.ndarray, *, reach: int | None = _STROKE_REACH,
+           flood: bool = False) -> tuple[np.ndarray, np.ndarray]:
     """Cut again with ``strokes`` as hard labels, starting from the label ``prior``.
 
     The label only moves the last stroke's way (see ``GrabCutSession.stroke``),
@@ -366,6 +376,8 @@ def _recut(terms: _Terms, guide: _Guide, models: np.ndarray, strokes: tuple[_Str
             the whole box. Colour cuts on a white chair before a white wall
             are slow to solve over the whole box; with depth the cut is
             easy, and the whole box is cut.
+        flood: Also flip what the stroke floods up to the image's edges
+            (``_flooded``), within ``reach`` (``_STROKE_REACH`` if None).
 
     Returns:
         ``(label, models)``.
@@ -386,9 +398,85 @@ def _recut(terms: _Terms, guide: _Guide, models: np.ndarray, strokes: tuple[_Str
         gc[far & (gc == cv2.GC_PR_BGD)] = cv2.GC_BGD
     low, models = _cut(terms, gc, models, _STROKE_ITERATIONS)
     low = (low | prior) if strokes[-1].fg else (low & prior)
+    if hit is not None and flood:
+        last = strokes[-1]
+        hits = [(*hit, True)] + [(*guide.footprint(s), s.fg == last.fg) for s in strokes[:-1]
+                                 if guide.footprint(s) is not None]
+        # What surely is of the other label: the sure pixels, and those its colour model clearly prefers.
+        cost_bg, cost_fg = terms.costs(models, np.arange(gc.size))
+        favour = (cost_fg - cost_bg) if last.fg else (cost_bg - cost_fg)
+        sure = (gc == (cv2.GC_BGD if last.fg else cv2.GC_FGD)) | (favour.reshape(gc.shape) > _SURE_MARGIN)
+        region = _flooded(guide.image, ~prior if last.fg else prior, hits, _STROKE_REACH if reach is None else reach,
+                          _FLOOD_SMOOTH, sure)
+        low = (low | region) if last.fg else (low & ~region)
     if hit is not None:
         low = _keep_connected(low, prior, *hit, _NEAR_GRID)
     return low, models
+
+
+def _flooded(image: np.ndarray, against: np.ndarray, hits: list[tuple[np.ndarray, tuple[int, int], bool]],
+             reach: int, smooth: float, sure: np.ndarray | None = None) -> np.ndarray:
+    """The region of the last stroke's other side that it floods up to the image's edges (a watershed).
+
+    A click flips the whole error region it lands in when that region is
+    bounded by edges, not just the stroke's pixels (Bai & Sapiro 2007,
+    Gulshan et al. 2010: a competition between seeds over the image's
+    edges). Near the stroke, the pixels labelled against it (``against``)
+    are flooded over the colour gradient from two sides: from
+    the stroke (and the earlier strokes of its label), and from what is
+    surely of that other label: its pixels ``_FLOOD_SCALE`` times the
+    stroke's depth inside its region away (the depth: the distance from the
+    stroke to the nearest pixel of its own label), or ``reach`` away, the
+    other label's strokes, and ``sure`` pixels. The stroke keeps what it
+    reaches first, so the two meet on the strongest edge between them.
+
+    Args:
+        image: uint8 ``(h, w, 3)`` RGB of the grid.
+        against: bool ``(h, w)``, the pixels labelled against the stroke before it.
+        hits: Every stroke's footprint on the grid, ``(crop, (y, x), same)``,
+            the new stroke first; ``same``: of the new stroke's label.
+        reach: The flood's most distance from the stroke, grid pixels.
+        smooth: Gaussian sigma of the colours before the gradient, grid pixels.
+        sure: bool ``(h, w)`` pixels surely of the other label, or None.
+
+    Returns:
+        bool ``(h, w)``: the pixels the stroke floods (all labelled against it).
+    """
+    crop, (y0, x0), _ = hits[0]
+    h, w = against.shape
+    r0, r1 = max(0, y0 - reach), min(h, y0 + crop.shape[0] + reach)
+    c0, c1 = max(0, x0 - reach), min(w, x0 + crop.shape[1] + reach)
+    other = against[r0:r1, c0:c1]
+    markers = np.zeros(other.shape, np.int32)
+    frame = np.zeros(other.shape, bool)
+    frame[[0, -1], :] = frame[:, [0, -1]] = True
+    on = np.zeros(other.shape, np.uint8)
+    ys, xs = np.nonzero(crop)
+    ys, xs = ys + y0 - r0, xs + x0 - c0
+    inside = (ys >= 0) & (ys < other.shape[0]) & (xs >= 0) & (xs < other.shape[1])
+    on[ys[inside], xs[inside]] = 1
+    from_stroke = cv2.distanceTransform(1 - on, cv2.DIST_L2, 3)
+    depth = cv2.distanceTransform(np.pad(other, 1).view(np.uint8), cv2.DIST_L2, 3)[1:-1, 1:-1]
+    rho = float(depth[on.view(bool) | (from_stroke <= 1.5)].max())
+    frame |= from_stroke >= max(_FLOOD_MIN, _FLOOD_SCALE * rho)
+    markers[frame & other] = 2
+    if sure is not None:
+        markers[sure[r0:r1, c0:c1] & other] = 2
+    for sc, (sy, sx), same in hits[::-1]:
+        ys, xs = np.nonzero(sc)
+        ys, xs = ys + sy - r0, xs + sx - c0
+        inside = (ys >= 0) & (ys < other.shape[0]) & (xs >= 0) & (xs < other.shape[1])
+        markers[ys[inside], xs[inside]] = 1 if same else 2
+    region = np.zeros_like(against)
+    if not (markers == 2).any():
+        return region
+    lab = cv2.cvtColor(image[r0:r1, c0:c1], cv2.COLOR_RGB2LAB).astype(np.float32)
+    lab = cv2.GaussianBlur(lab, (0, 0), smooth)
+    gx, gy = cv2.Sobel(lab, cv2.CV_32F, 1, 0), cv2.Sobel(lab, cv2.CV_32F, 0, 1)
+    gradient = np.sqrt((gx * gx + gy * gy).sum(axis=2))
+    flood = watershed(gradient, markers, mask=other | (markers == 1))
+    region[r0:r1, c0:c1] = (flood == 1) & other
+    return region
 
 
 def _keep_connected(new: np.ndarray, old: np.ndarray, crop: np.ndarray, origin: tuple[int, int],

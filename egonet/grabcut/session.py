@@ -322,7 +322,7 @@ class GrabCutSession:
         # In a new ROI the cut starts from the current mask (the models carry over either way).
         prior = _downsample(self._mask, guide.geom) if new_roi else prev.low
         if self._depth is None:
-            low, models = _recut(_Terms.colour(guide), guide, prev.models, strokes, prior)
+            low, models = _recut(_Terms.colour(guide), guide, prev.models, strokes, prior, flood=True)
         else:
             low, models = _recut(_Terms.depth(self._depth_guide_for(guide)), guide, prev.models, strokes, prior,
                                  reach=None)
