@@ -42,6 +42,18 @@ with a pasted object, at 640x480 and 1408x1408, each with a loose box, a
 tight box (2 px each side) and a box through the object, then up to 5
 strokes; plain ``cv2.grabCut`` on the same boxes.
 
+And NoC@90 on thin objects (``--noc``): the protocol of interactive
+segmentation papers (RITM, SAM) on ``tests/thin_objects.py``'s frames (real
+first-person frames with a fork, a knife and a spoon laid in; real video
+with legs and wheels), 1408x1408: the box is the first interaction, each
+next one a short stroke at the interior-most point of the largest error
+region, up to 20. It runs the engine of this tree and, in a subprocess on
+the same frames, the engine of ``--before`` (a git revision, default
+``main``: its ``egonet/`` taken out with ``git archive``), and prints per
+object the interactions to IoU 0.9, the mean (a miss counts 20), CPU ms,
+and how many strokes changed pixels far from themselves (more than
+``FAR`` px from the stroke and not joined to it through changed pixels).
+
 Latency runs on one thread (``cv2.setNumThreads(1)``, one BLAS thread; the
 target is per core) and is reported twice: wall clock, and this process's CPU
 time, which other load on a shared machine inflates far less; the load
@@ -54,6 +66,7 @@ Run from the repository root::
     .venv/bin/python bench/bench_grabcut.py --quick    # 2 synthetic frames
     .venv/bin/python bench/bench_grabcut.py --no-plain # session only (seconds)
     .venv/bin/python bench/bench_grabcut.py --real-only --no-plain  # real frames, depth, speed targets
+    .venv/bin/python bench/bench_grabcut.py --noc      # NoC@90 on thin objects, this tree against main
 """
 
 from __future__ import annotations
@@ -77,8 +90,12 @@ import numpy as np
 ROOT = Path(__file__).resolve().parents[1]
 if str(ROOT) not in sys.path:
     sys.path.insert(0, str(ROOT))
+if os.environ.get("EGONET_BENCH_ENGINE"):
+    # ``--noc``'s run of the older engine: its egonet/ first, the tests' frames from this tree.
+    sys.path.insert(0, os.environ["EGONET_BENCH_ENGINE"])
 
 from egonet.grabcut import GrabCutSession, stroke_footprint  # noqa: E402
+from tests import thin_objects  # noqa: E402
 from tests.realdata import chair_truth  # noqa: E402
 
 SHARED = Path(__file__).resolve().parents[1].parent / "shared"
@@ -562,6 +579,168 @@ def real_cases(work_size: int, n_strokes: int, plain: bool, large: bool) -> None
               f"{np.mean([r.iou_final for _, r in pairs]):.3f} (colour only -> with depth)")
 
 
+# --------------------------------------------------------------------------
+# NoC@90 on thin objects, this tree's engine against an older one
+
+FAR = 16  # px: a stroke's neighbourhood, for counting changes far from it
+
+
+def far_changes(before: np.ndarray, after: np.ndarray, footprint: np.ndarray) -> int:
+    """Pixels that changed more than ``FAR`` px from the stroke and are not joined to it through changed pixels."""
+    changed = (before != after).view(np.uint8)
+    if not changed.any():
+        return 0
+    near = cv2.dilate(footprint.view(np.uint8), cv2.getStructuringElement(cv2.MORPH_ELLIPSE, (2 * FAR + 1,) * 2))
+    _, parts = cv2.connectedComponents(changed, connectivity=8)
+    joined = np.unique(parts[(near > 0) & (changed > 0)])
+    return int(np.count_nonzero(changed.view(bool) & ~np.isin(parts, joined)))
+
+
+def noc_engine(masks_of: str | None = None) -> dict:
+    """NoC@90 of the engine on ``sys.path`` over the thin-object frames: per object, and the masks of one."""
+    rows = []
+    kept = {}
+    for case in thin_objects.all_cases():
+        session = GrabCutSession(case.rgb)
+        box_cpu: list[float] = []
+        stroke_cpu: list[float] = []
+        far: list[int] = []
+        current = {}
+
+        def box(b, session=session, box_cpu=box_cpu, current=current):
+            c = time.process_time()
+            current["mask"] = session.box(*b)
+            box_cpu.append(1e3 * (time.process_time() - c))
+            return current["mask"]
+
+        def stroke(k, session=session, stroke_cpu=stroke_cpu, far=far, current=current):
+            c = time.process_time()
+            mask = session.stroke(k.points, k.label, k.radius)
+            stroke_cpu.append(1e3 * (time.process_time() - c))
+            far.append(far_changes(current["mask"], mask, stroke_footprint(mask.shape, k.points, k.radius)))
+            current["mask"] = mask
+            return mask
+
+        run = thin_objects.noc(box, stroke, case.truth, keep_masks=case.name == masks_of)
+        rows.append({"name": case.name, "noc": run.noc, "ious": run.ious, "box_cpu_ms": box_cpu[0],
+                     "stroke_cpu_ms": stroke_cpu, "far": far})
+        if run.masks:
+            kept = {"name": case.name, "masks": np.stack(run.masks), "clicks": run.clicks}
+        print(f"  {case.name:20s} NoC {run.noc if run.noc else '>20':>3} IoU " + " ".join(f"{v:.2f}" for v in run.ious),
+              flush=True)
+    return {"rows": rows, "kept": kept}
+
+
+def _engine_at(rev: str, into: Path) -> Path:
+    """``egonet/`` of git revision ``rev``, taken out under ``into``."""
+    import subprocess  # noqa: PLC0415
+    import tarfile  # noqa: PLC0415
+    import io  # noqa: PLC0415
+
+    tar = subprocess.run(["git", "-C", str(ROOT), "archive", rev, "egonet"], check=True, capture_output=True).stdout
+    with tarfile.open(fileobj=io.BytesIO(tar)) as t:
+        t.extractall(into, filter="data")
+    return into
+
+
+def noc_cases(before: str, figure: Path | None, figure_case: str) -> None:
+    """NoC@90 of this tree's engine and of ``before``'s, on the same frames, in one run."""
+    import json  # noqa: PLC0415
+    import pickle  # noqa: PLC0415
+    import subprocess  # noqa: PLC0415
+    import tempfile  # noqa: PLC0415
+
+    if not (thin_objects.EGONET_SAMPLES / "rgb").is_dir():
+        print(f"(no first-person frames at {thin_objects.EGONET_SAMPLES}: the utensils are skipped)")
+    with tempfile.TemporaryDirectory() as tmp:
+        engine = _engine_at(before, Path(tmp) / "engine")
+        out = Path(tmp) / "before.pkl"
+        print(f"NoC@90 on thin objects, engine of {before} (subprocess):", flush=True)
+        subprocess.run([sys.executable, __file__, "--noc-engine-only", str(out), "--figure-case", figure_case],
+                       check=True, env={**os.environ, "EGONET_BENCH_ENGINE": str(engine)})
+        old = pickle.loads(out.read_bytes())
+    print("NoC@90 on thin objects, this tree's engine:", flush=True)
+    new = noc_engine(figure_case)
+    print()
+    print(f"{'object':20s} {'NoC before':>10s} {'after':>6s}   {'box cpu ms':>12s}   {'stroke cpu p50':>14s}   "
+          f"far strokes before/after")
+    for a, b in zip(old["rows"], new["rows"]):
+        print(f"{a['name']:20s} {a['noc'] or '>20':>10} {b['noc'] or '>20':>6}   "
+              f"{a['box_cpu_ms']:5.0f} {b['box_cpu_ms']:5.0f}"
+              f"   {_pct(a['stroke_cpu_ms'], 50):6.1f} {_pct(b['stroke_cpu_ms'], 50):6.1f}   "
+              f"{sum(v > 0 for v in a['far'])}/{len(a['far'])} -> {sum(v > 0 for v in b['far'])}/{len(b['far'])}")
+    summary = {}
+    for label, res in (("before", old), ("after", new)):
+        rows = res["rows"]
+        scores = [thin_objects.MAX_CLICKS if r["noc"] is None else r["noc"] for r in rows]
+        strokes = [v for r in rows for v in r["stroke_cpu_ms"]]
+        far = [v for r in rows for v in r["far"]]
+        summary[label] = {"mean_noc": float(np.mean(scores)), "missed": sum(r["noc"] is None for r in rows),
+                          "box_cpu_p50": _pct([r["box_cpu_ms"] for r in rows], 50),
+                          "stroke_cpu_p50": _pct(strokes, 50), "stroke_cpu_p95": _pct(strokes, 95),
+                          "far_strokes": sum(v > 0 for v in far), "strokes": len(far), "far_max": max(far, default=0)}
+        print(f"{label:6s} mean NoC@90 {np.mean(scores):5.2f} over {len(rows)} objects, {summary[label]['missed']} not "
+              f"within {thin_objects.MAX_CLICKS} | box cpu p50 {summary[label]['box_cpu_p50']:.0f} ms | stroke cpu "
+              f"p50 {summary[label]['stroke_cpu_p50']:.1f} / p95 {summary[label]['stroke_cpu_p95']:.1f} ms | strokes "
+              f"with far changes {summary[label]['far_strokes']} of {len(far)} "
+              f"(largest {summary[label]['far_max']} px)")
+    print("json " + json.dumps(summary))
+    if figure is not None and old["kept"] and new["kept"]:
+        _noc_figure(figure, old["kept"], new["kept"])
+
+
+def _noc_figure(path: Path, old: dict, new: dict) -> None:
+    """Before (top row) and after (bottom row): the mask after the box and after four clicks.
+
+    The clicks are those where the older engine changed most pixels far
+    from the stroke (the same click numbers in both rows).
+
+    The truth's outline is red, the mask green, the click's stroke yellow
+    (object) or blue (background), and pixels the click changed far from
+    itself (``far_changes``) magenta.
+    """
+    case = next(c for c in thin_objects.all_cases() if c.name == new["name"])
+    ys, xs = np.nonzero(case.truth | new["masks"][0] | old["masks"][0])
+    pad = 30
+    y0, y1 = max(0, ys.min() - pad), min(case.truth.shape[0], ys.max() + pad)
+    x0, x1 = max(0, xs.min() - pad), min(case.truth.shape[1], xs.max() + pad)
+    edge, _ = cv2.findContours(case.truth.view(np.uint8), cv2.RETR_LIST, cv2.CHAIN_APPROX_NONE)
+    # The box, then the clicks where the older engine changed most far from the stroke (in order).
+    count = min(len(old["masks"]), len(new["masks"]))
+    far = [far_changes(old["masks"][i - 1], old["masks"][i], stroke_footprint(
+        case.truth.shape, old["clicks"][i - 1].points, old["clicks"][i - 1].radius)) for i in range(1, count)]
+    columns = [0] + sorted(1 + int(i) for i in np.argsort(far)[::-1][:4])
+    rows = []
+    for kept in (old, new):
+        tiles = []
+        for i in columns:
+            img = cv2.cvtColor(case.rgb, cv2.COLOR_RGB2BGR)
+            mask = kept["masks"][i]
+            img[mask] = (0.45 * img[mask] + np.array([0, 140, 0])).astype(np.uint8)
+            cv2.drawContours(img, edge, -1, (0, 0, 255), 3)
+            if i > 0:
+                k = kept["clicks"][i - 1]
+                under = stroke_footprint(mask.shape, k.points, k.radius)
+                before, after = kept["masks"][i - 1], mask
+                far = (before != after).view(np.uint8)
+                if far_changes(before, after, under):
+                    _, parts = cv2.connectedComponents(far, connectivity=8)
+                    near = cv2.dilate(under.view(np.uint8), cv2.getStructuringElement(
+                        cv2.MORPH_ELLIPSE, (2 * FAR + 1,) * 2)) > 0
+                    far_px = (far > 0) & ~np.isin(parts, np.unique(parts[near & (far > 0)]))
+                    img[cv2.dilate(far_px.view(np.uint8), np.ones((5, 5), np.uint8)) > 0] = (255, 0, 255)
+                cv2.polylines(img, [np.round(np.array(k.points)).astype(np.int32)], False,
+                              (0, 255, 255) if k.label == "fg" else (255, 128, 0), max(6, round(2 * k.radius)))
+            tile = img[y0:y1, x0:x1]
+            scale = 170 / max(tile.shape[:2])
+            tile = cv2.resize(tile, None, fx=scale, fy=scale, interpolation=cv2.INTER_AREA)
+            tiles.append(np.pad(tile, ((2, 2), (2, 2), (0, 0)), constant_values=255))
+        rows.append(np.hstack(tiles))
+    path.parent.mkdir(parents=True, exist_ok=True)
+    cv2.imwrite(str(path), np.vstack(rows), [cv2.IMWRITE_PNG_COMPRESSION, 9])
+    print(f"figure: {path}")
+
+
 def _pct(values: list[float], q: float) -> float:
     return float(np.percentile(values, q)) if values else float("nan")
 
@@ -580,7 +759,19 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument("--real-only", action="store_true",
                         help="only the real-frame cases (RGB-D chair, first-person frames; speed targets)")
     parser.add_argument("--no-real", action="store_true", help="skip the real-frame cases")
+    parser.add_argument("--noc", action="store_true",
+                        help="only NoC@90 on thin objects, this tree's engine against --before's")
+    parser.add_argument("--before", default="main", help="git revision of the engine to compare with (--noc)")
+    parser.add_argument("--figure", type=Path, help="--noc: write the before/after figure (PNG) here")
+    parser.add_argument("--figure-case", default="camel", help="--noc: the object of the figure")
+    parser.add_argument("--noc-engine-only", type=Path, help=argparse.SUPPRESS)  # the subprocess of --noc
     args = parser.parse_args(argv)
+    if args.noc_engine_only is not None:
+        import pickle  # noqa: PLC0415
+
+        cv2.setNumThreads(1)
+        args.noc_engine_only.write_bytes(pickle.dumps(noc_engine(args.figure_case)))
+        return 0
     cv2.setNumThreads(1)
     print(f"start: {_load()}")
     try:
@@ -594,6 +785,9 @@ def _load() -> str:
 
 
 def _run(args: argparse.Namespace) -> int:
+    if args.noc:
+        noc_cases(args.before, args.figure, args.figure_case)
+        return 0
     if args.real_only:
         real_cases(args.work_size, args.strokes, not args.no_plain, not args.no_large)
         return 0

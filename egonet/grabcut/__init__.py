@@ -19,7 +19,9 @@ it, ``undo`` steps back. The session is fast enough to feel interactive on
 * Strokes are hard constraints: pixels under a foreground stroke are in the
   returned mask and pixels under a background stroke are out, exactly. A
   stroke changes the mask only its own way (a foreground stroke only adds
-  pixels, a background stroke only removes them).
+  pixels, a background stroke only removes them), and only locally: a pixel
+  away from the stroke changes only if it is joined to the stroke through
+  pixels that changed too, so a stroke never drops the far end of a handle.
 
 With depth (``GrabCutSession(image, depth)``, metres, 0 or NaN where
 missing) the cut models colour and depth together and prefers to cut where

@@ -24,6 +24,16 @@ energy:
   the stroke (``_STROKE_REACH``); its models are re-estimated from the
   whole ROI.
 
+A colour stroke also flips the error region it lands in up to the image's
+edges (``_flooded``: a watershed from the stroke against what surely has
+the other label), not only what the re-cut's colour models move.
+
+What a stroke changes is local (``_keep_connected``): only pixels within
+``_NEAR_GRID`` of the stroke, or joined to it through pixels that changed
+too, take a new label; every other pixel keeps its own, so re-estimated
+models never drop a far part (the tip of a handle) that the labeller did
+not touch.
+
 On the real frames of ``bench/bench_grabcut.py --real-only`` the box's cut
 matches ``cv2.grabCut``'s label exactly when run the same way (all five
 iterations on the full grid); the coarse start and the stroke's reach are
@@ -37,6 +47,7 @@ from collections.abc import Callable
 
 import cv2
 import numpy as np
+from skimage.segmentation import watershed
 
 from egonet.grabcut.colour import _costs, _first_models, _fit_model, _learn
 from egonet.grabcut.depth import (_Z_SCALE, _depth_costs, _DepthGuide, _fallback_z, _first_model, _learn_depth)
@@ -52,6 +63,11 @@ _SPARSE = 0.25  # a box whose first cut keeps less than this fraction of it is c
 _OUTSIDE_SAMPLES = 100_000  # most frame pixels read for the background model of that cut
 _COARSE_MIN = 32  # a box's first iterations run at half the grid when that is at least this many pixels a side
 _STROKE_REACH = 56  # a stroke re-cuts the label within this many grid pixels of itself (a fifth of the work size)
+_NEAR_GRID = 2  # a stroke changes the grid's label only within this many grid pixels of itself, or connected to that
+_FLOOD_SCALE = 2.0  # a stroke floods at most this many times its depth in its region (``_flooded``)
+_FLOOD_MIN = 4  # ... or this many grid pixels, whichever is more
+_FLOOD_SMOOTH = 0.7  # Gaussian sigma of the colours before the flood's gradient, grid pixels
+_SURE_MARGIN = 4.0  # a pixel whose colour favours the other label by this much (-log p) stops the flood
 _FINE_BAND = 6  # a box's cut on the full grid moves the coarse label's edge by at most this many grid pixels
 
 # The terms of one cut: ``learn(is_fg, models) -> models`` re-estimates both
@@ -341,7 +357,8 @@ def _stroke_labels(guide: _Guide, strokes: tuple[_Stroke, ...], prior: np.ndarra
 
 
 def _recut(terms: _Terms, guide: _Guide, models: np.ndarray, strokes: tuple[_Stroke, ...],
-           prior: np.ndarray, *, reach: int | None = _STROKE_REACH) -> tuple[np.ndarray, np.ndarray]:
+           prior: np.ndarray, *, reach: int | None = _STROKE_REACH,
+           flood: bool = False) -> tuple[np.ndarray, np.ndarray]:
     """Cut again with ``strokes`` as hard labels, starting from the label ``prior``.
 
     The label only moves the last stroke's way (see ``GrabCutSession.stroke``),
@@ -359,6 +376,8 @@ def _recut(terms: _Terms, guide: _Guide, models: np.ndarray, strokes: tuple[_Str
             the whole box. Colour cuts on a white chair before a white wall
             are slow to solve over the whole box; with depth the cut is
             easy, and the whole box is cut.
+        flood: Also flip what the stroke floods up to the image's edges
+            (``_flooded``), within ``reach`` (``_STROKE_REACH`` if None).
 
     Returns:
         ``(label, models)``.
@@ -379,7 +398,141 @@ def _recut(terms: _Terms, guide: _Guide, models: np.ndarray, strokes: tuple[_Str
         gc[far & (gc == cv2.GC_PR_BGD)] = cv2.GC_BGD
     low, models = _cut(terms, gc, models, _STROKE_ITERATIONS)
     low = (low | prior) if strokes[-1].fg else (low & prior)
+    if hit is not None and flood:
+        last = strokes[-1]
+        hits = [(*hit, True)] + [(*guide.footprint(s), s.fg == last.fg) for s in strokes[:-1]
+                                 if guide.footprint(s) is not None]
+        # What surely is of the other label: the sure pixels, and those its colour model clearly prefers.
+        cost_bg, cost_fg = terms.costs(models, np.arange(gc.size))
+        favour = (cost_fg - cost_bg) if last.fg else (cost_bg - cost_fg)
+        sure = (gc == (cv2.GC_BGD if last.fg else cv2.GC_FGD)) | (favour.reshape(gc.shape) > _SURE_MARGIN)
+        region = _flooded(guide.image, ~prior if last.fg else prior, hits, _STROKE_REACH if reach is None else reach,
+                          _FLOOD_SMOOTH, sure)
+        low = (low | region) if last.fg else (low & ~region)
+    if hit is not None:
+        low = _keep_connected(low, prior, *hit, _NEAR_GRID)
     return low, models
+
+
+def _flooded(image: np.ndarray, against: np.ndarray, hits: list[tuple[np.ndarray, tuple[int, int], bool]],
+             reach: int, smooth: float, sure: np.ndarray | None = None) -> np.ndarray:
+    """The region of the last stroke's other side that it floods up to the image's edges (a watershed).
+
+    A click flips the whole error region it lands in when that region is
+    bounded by edges, not just the stroke's pixels (Bai & Sapiro 2007,
+    Gulshan et al. 2010: a competition between seeds over the image's
+    edges). Near the stroke, the pixels labelled against it (``against``)
+    are flooded over the colour gradient from two sides: from
+    the stroke (and the earlier strokes of its label), and from what is
+    surely of that other label: its pixels ``_FLOOD_SCALE`` times the
+    stroke's depth inside its region away (the depth: the distance from the
+    stroke to the nearest pixel of its own label), or ``reach`` away, the
+    other label's strokes, and ``sure`` pixels. The stroke keeps what it
+    reaches first, so the two meet on the strongest edge between them.
+
+    Args:
+        image: uint8 ``(h, w, 3)`` RGB of the grid.
+        against: bool ``(h, w)``, the pixels labelled against the stroke before it.
+        hits: Every stroke's footprint on the grid, ``(crop, (y, x), same)``,
+            the new stroke first; ``same``: of the new stroke's label.
+        reach: The flood's most distance from the stroke, grid pixels.
+        smooth: Gaussian sigma of the colours before the gradient, grid pixels.
+        sure: bool ``(h, w)`` pixels surely of the other label, or None.
+
+    Returns:
+        bool ``(h, w)``: the pixels the stroke floods (all labelled against it).
+    """
+    crop, (y0, x0), _ = hits[0]
+    h, w = against.shape
+    r0, r1 = max(0, y0 - reach), min(h, y0 + crop.shape[0] + reach)
+    c0, c1 = max(0, x0 - reach), min(w, x0 + crop.shape[1] + reach)
+    other = against[r0:r1, c0:c1]
+    markers = np.zeros(other.shape, np.int32)
+    frame = np.zeros(other.shape, bool)
+    frame[[0, -1], :] = frame[:, [0, -1]] = True
+    on = np.zeros(other.shape, np.uint8)
+    ys, xs = np.nonzero(crop)
+    ys, xs = ys + y0 - r0, xs + x0 - c0
+    inside = (ys >= 0) & (ys < other.shape[0]) & (xs >= 0) & (xs < other.shape[1])
+    on[ys[inside], xs[inside]] = 1
+    from_stroke = cv2.distanceTransform(1 - on, cv2.DIST_L2, 3)
+    depth = cv2.distanceTransform(np.pad(other, 1).view(np.uint8), cv2.DIST_L2, 3)[1:-1, 1:-1]
+    rho = float(depth[on.view(bool) | (from_stroke <= 1.5)].max())
+    frame |= from_stroke >= max(_FLOOD_MIN, _FLOOD_SCALE * rho)
+    markers[frame & other] = 2
+    if sure is not None:
+        markers[sure[r0:r1, c0:c1] & other] = 2
+    for sc, (sy, sx), same in hits[::-1]:
+        ys, xs = np.nonzero(sc)
+        ys, xs = ys + sy - r0, xs + sx - c0
+        inside = (ys >= 0) & (ys < other.shape[0]) & (xs >= 0) & (xs < other.shape[1])
+        markers[ys[inside], xs[inside]] = 1 if same else 2
+    region = np.zeros_like(against)
+    if not (markers == 2).any():
+        return region
+    lab = cv2.cvtColor(image[r0:r1, c0:c1], cv2.COLOR_RGB2LAB).astype(np.float32)
+    lab = cv2.GaussianBlur(lab, (0, 0), smooth)
+    gx, gy = cv2.Sobel(lab, cv2.CV_32F, 1, 0), cv2.Sobel(lab, cv2.CV_32F, 0, 1)
+    gradient = np.sqrt((gx * gx + gy * gy).sum(axis=2))
+    flood = watershed(gradient, markers, mask=other | (markers == 1))
+    region[r0:r1, c0:c1] = (flood == 1) & other
+    return region
+
+
+def _keep_connected(new: np.ndarray, old: np.ndarray, crop: np.ndarray, origin: tuple[int, int],
+                    near: int, reach: int | None = None) -> np.ndarray:
+    """``new`` where it changed in a part connected to a stroke, ``old`` elsewhere.
+
+    A stroke's effect is local: a pixel may take a new label only if it lies
+    within ``near`` pixels of the stroke's footprint (``crop`` placed at
+    ``origin``, ``(y, x)``), or is joined to such a pixel through pixels that
+    changed too (8-connected). Every other pixel keeps its label, so a
+    background stroke never drops a far part (the tip of a handle) whose
+    label the re-estimated models happen to flip.
+
+    Args:
+        new: bool ``(h, w)``, the label after the stroke.
+        old: bool ``(h, w)``, the label before it.
+        crop: bool, the stroke's footprint on this grid.
+        origin: ``(y, x)`` of ``crop`` on the grid.
+        near: The stroke's neighbourhood, pixels beyond its footprint.
+        reach: Nothing further than this many pixels from the footprint
+            changes (None: no such limit).
+
+    Returns:
+        bool ``(h, w)`` (``new`` itself when nothing had to be kept).
+    """
+    changed = new != old
+    if reach is not None:
+        # Nothing further than ``reach`` from the stroke's footprint (a window around it) changes.
+        y0, x0 = origin
+        window = np.zeros_like(changed)
+        window[max(0, y0 - reach) : y0 + crop.shape[0] + reach, max(0, x0 - reach) : x0 + crop.shape[1] + reach] = True
+        changed &= window
+    kept = np.zeros_like(changed)
+    rows, cols = np.flatnonzero(changed.any(axis=1)), np.flatnonzero(changed.any(axis=0))
+    if len(rows):
+        # Only the changed pixels' bounding box matters: no changed part leaves it.
+        r0, r1, c0, c1 = int(rows[0]), int(rows[-1]) + 1, int(cols[0]), int(cols[-1]) + 1
+        count, parts = cv2.connectedComponents(changed[r0:r1, c0:c1].view(np.uint8), connectivity=8)
+        # The footprint grown by ``near`` (a dilation), on that box padded by ``near``.
+        y0, x0 = origin
+        hh, ww = r1 - r0 + 2 * near, c1 - c0 + 2 * near
+        ys, xs = np.nonzero(crop)
+        ys, xs = ys + y0 - r0 + near, xs + x0 - c0 + near
+        inside = (ys >= 0) & (ys < hh) & (xs >= 0) & (xs < ww)
+        seed = np.zeros((hh, ww), np.uint8)
+        seed[ys[inside], xs[inside]] = 1
+        if near > 0:
+            seed = cv2.dilate(seed, cv2.getStructuringElement(cv2.MORPH_ELLIPSE, (2 * near + 1, 2 * near + 1)))
+        seed = seed[near : hh - near, near : ww - near].view(bool)
+        joined = np.zeros(count, bool)
+        joined[parts[seed]] = True
+        joined[0] = False
+        kept[r0:r1, c0:c1] = joined[parts]
+    if np.array_equal(kept, new != old):
+        return new
+    return np.where(kept, new, old)
 
 
 # ------------------------------------------------------------- with depth

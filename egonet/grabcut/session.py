@@ -20,7 +20,8 @@ import numpy as np
 
 from egonet.errors import EgonetError
 from egonet.grabcut.colour import _first_models
-from egonet.grabcut.cut import _box_cut, _box_labels, _depth_box_cut, _depth_first_models, _recut, _seed_cut, _Terms
+from egonet.grabcut.cut import (_NEAR_GRID, _STROKE_REACH, _box_cut, _box_labels, _depth_box_cut, _depth_first_models,
+                               _keep_connected, _recut, _seed_cut, _Terms)
 from egonet.grabcut.depth import _DepthGuide
 from egonet.grabcut.frame import GrabCutFrame
 from egonet.grabcut.geometry import _clip_to_box, _downsample, _Geometry, _grow_box
@@ -279,13 +280,15 @@ class GrabCutSession:
         Pixels under a ``"fg"`` stroke are in the returned mask, pixels under a
         ``"bg"`` stroke are out, exactly (later strokes win where strokes
         overlap). The colour models are re-estimated with the stroke, so
-        similar pixels elsewhere can follow it, but only in the stroke's
-        direction: a foreground stroke never removes pixels from the mask and
-        a background stroke never adds any. (Without that rule, re-estimating
-        the models can drop an unrelated part far from the stroke, such as a
-        thin part of the object the low-resolution cut finds costly.) A
-        foreground stroke that reaches outside the box grows the box to take
-        it in.
+        similar pixels near it can follow it, but only in the stroke's
+        direction: a foreground stroke never removes pixels
+        from the mask and a background stroke never adds any. And its effect
+        is local: a pixel changes only if it lies near the stroke (two grid
+        pixels of the cut, a few frame pixels) or is joined to it through
+        pixels that changed too; every other pixel keeps its label. (Without
+        those rules, re-estimating the models can drop an unrelated part far
+        from the stroke, such as the far end of a thin handle.) A foreground
+        stroke that reaches outside the box grows the box to take it in.
 
         Args:
             points: ``(x, y)`` pixel coordinates of the polyline, at least one
@@ -319,7 +322,7 @@ class GrabCutSession:
         # In a new ROI the cut starts from the current mask (the models carry over either way).
         prior = _downsample(self._mask, guide.geom) if new_roi else prev.low
         if self._depth is None:
-            low, models = _recut(_Terms.colour(guide), guide, prev.models, strokes, prior)
+            low, models = _recut(_Terms.colour(guide), guide, prev.models, strokes, prior, flood=True)
         else:
             low, models = _recut(_Terms.depth(self._depth_guide_for(guide)), guide, prev.models, strokes, prior,
                                  reach=None)
@@ -330,6 +333,10 @@ class GrabCutSession:
         else:
             mask = self._refresh_changed(guide, snap, prev.low, new.fg)
             self._apply_strokes(mask, strokes)
+        # Local at full resolution too: only what is joined to the stroke through the change moves.
+        grid = min(guide.geom.sx, guide.geom.sy)
+        mask = _keep_connected(mask, self._mask, *footprint, math.ceil(_NEAR_GRID / grid),
+                               None if self._depth is not None else math.ceil(_STROKE_REACH / grid))
         self._commit(guide, snap, mask)
         return self.mask
 

@@ -1,0 +1,151 @@
+"""Thin objects in GrabCut: a stroke's effect is local, and NoC@90 on real frames with thin objects.
+
+The NoC@90 protocol and the frames are ``tests/thin_objects.py``'s (the
+same as ``bench/bench_grabcut.py --noc``).
+"""
+
+import cv2
+import numpy as np
+import pytest
+
+from egonet.grabcut import GrabCutSession, stroke_footprint
+from egonet.grabcut.cut import _flooded
+from tests import thin_objects
+
+NEAR = 16  # px: a stroke's neighbourhood (the engine's is two grid pixels: 3-10 px here)
+
+
+def _far_changes(before: np.ndarray, after: np.ndarray, footprint: np.ndarray) -> np.ndarray:
+    """Changed pixels more than ``NEAR`` px from the stroke and not joined to it through changed pixels."""
+    changed = before != after
+    near = cv2.dilate(footprint.view(np.uint8), cv2.getStructuringElement(cv2.MORPH_ELLIPSE, (2 * NEAR + 1,) * 2))
+    _, parts = cv2.connectedComponents(changed.view(np.uint8), connectivity=8)
+    joined = np.unique(parts[(near > 0) & changed])
+    return changed & ~np.isin(parts, joined)
+
+
+def _fork_scene(seed: int = 0) -> tuple[np.ndarray, np.ndarray]:
+    """A 480x360 grey fork (a head with tines, a 4 px handle) on a brownish table with a grey patch."""
+    rng = np.random.default_rng(seed)
+    h, w = 360, 480
+    truth = np.zeros((h, w), np.uint8)
+    cv2.line(truth, (60, 180), (330, 180), 1, 4)  # handle
+    cv2.rectangle(truth, (330, 160), (360, 200), 1, -1)  # head
+    for k in range(4):
+        cv2.rectangle(truth, (360, 160 + 11 * k), (420, 164 + 11 * k), 1, -1)  # tines, 5 px wide
+    truth = truth.astype(bool)
+    image = np.empty((h, w, 3), np.float64)
+    image[...] = (150, 110, 80)
+    image[40:120, 300:440] = (175, 175, 180)  # a grey patch near the head, as the fork's colour
+    image[truth] = (185, 185, 190)
+    image += rng.normal(0, 8, image.shape)
+    return np.clip(image, 0, 255).astype(np.uint8), truth
+
+
+def test_background_stroke_keeps_the_far_end_of_a_handle():
+    image, truth = _fork_scene()
+    session = GrabCutSession(image)
+    mask = session.box(40, 30, 450, 215)  # takes the grey patch in with the fork
+    handle_end = np.zeros_like(truth)
+    handle_end[170:190, 60:120] = truth[170:190, 60:120]
+    assert mask[handle_end].mean() > 0.9  # the thin handle survives the box's cut
+    for points in ([(310, 60), (430, 60)], [(310, 100), (430, 100)], [(380, 215), (430, 210)]):
+        before = session.mask
+        after = session.stroke(points, "bg", 6)
+        assert not _far_changes(before, after, stroke_footprint(truth.shape, points, 6)).any()
+        np.testing.assert_array_equal(after[handle_end], before[handle_end])
+        assert not (after & ~before).any()  # a background stroke only removes
+    assert mask[40:120, 300:440].all() and session.mask[40:120, 300:440].mean() < 0.01  # the patch went
+    iou = np.count_nonzero(session.mask & truth) / np.count_nonzero(session.mask | truth)
+    assert iou > 0.99  # the fork, tines and the whole handle
+
+
+def test_foreground_stroke_changes_only_what_joins_it():
+    image, truth = _fork_scene(1)
+    session = GrabCutSession(image)
+    session.box(40, 150, 450, 215)
+    for points in ([(200, 180), (260, 180)], [(390, 171), (410, 171)]):
+        before = session.mask
+        after = session.stroke(points, "fg", 2)
+        assert not _far_changes(before, after, stroke_footprint(truth.shape, points, 2)).any()
+        assert not (before & ~after).any()  # a foreground stroke only adds
+
+
+def test_strokes_on_real_video_change_nothing_far():
+    """The camel (DAVIS, a real frame): every click of the NoC@90 run, to IoU 0.9, is local.
+
+    On main's engine before issue 36 every one of these strokes changed
+    pixels far from itself (up to 9,023 px).
+    """
+    case = thin_objects.davis_case(thin_objects.REAL_VIDEO / "camel-00024")
+    session = GrabCutSession(case.rgb)
+    far = []
+
+    def stroke(k):
+        before = session.mask
+        after = session.stroke(k.points, k.label, k.radius)
+        far.append(int(_far_changes(before, after, stroke_footprint(after.shape, k.points, k.radius)).sum()))
+        return after
+
+    run = thin_objects.noc(lambda b: session.box(*b), stroke, case.truth)
+    assert run.noc is not None and run.noc <= 12 and len(far) >= 5
+    assert far == [0] * len(far)
+
+
+def test_a_click_floods_the_coherent_region_it_lands_in():
+    """``_flooded``: an object stroke in a bright square labelled background takes the square, up to its edges."""
+    rng = np.random.default_rng(0)
+    image = np.full((100, 120, 3), 60.0)
+    image[30:60, 40:75] = (200, 190, 170)
+    image[70:90, 10:30] = (200, 190, 170)  # the same colour, but not joined to the square
+    image = np.clip(image + rng.normal(0, 6, image.shape), 0, 255).astype(np.uint8)
+    square = np.zeros((100, 120), bool)
+    square[30:60, 40:75] = True
+    crop = np.zeros((5, 5), bool)
+    crop[1:4, :] = True  # a short stroke at the square's centre
+    against = np.ones((100, 120), bool)  # everything labelled background
+    region = _flooded(image, against, [(crop, (43, 55), True)], 56, 0.7)
+    assert np.count_nonzero(region & square) / np.count_nonzero(region | square) > 0.9
+    near = cv2.dilate(square.view(np.uint8), np.ones((5, 5), np.uint8)).view(bool)
+    assert not (region & ~near).any()  # stops at the square's edges: nothing of the other patch
+    # What surely has the other label stops the flood: here the square's right part.
+    sure = np.zeros_like(square)
+    sure[30:60, 66:75] = True
+    region = _flooded(image, against, [(crop, (43, 45), True)], 56, 0.7, sure)
+    assert not (region & sure).any() and region[40:50, 40:48].all() and not (region & ~near).any()
+
+
+@pytest.mark.slow
+def test_noc90_on_real_frames_with_thin_objects():
+    """NoC@90 (the box first, then clicks at the largest error's interior-most point), as the bench runs it.
+
+    Mean over the real frames (DAVIS windows; with ``../shared`` the first-person
+    frames with a fork, knife, spoon and chopsticks), a miss counting 20, and
+    every stroke local.
+    """
+    cases = thin_objects.all_cases()
+    scores = {}
+    for case in cases:
+        session = GrabCutSession(case.rgb)
+        far = []
+
+        def stroke(k, session=session, far=far):
+            before = session.mask
+            after = session.stroke(k.points, k.label, k.radius)
+            far.append(int(_far_changes(before, after, stroke_footprint(after.shape, k.points, k.radius)).sum()))
+            return after
+
+        run = thin_objects.noc(lambda b, session=session: session.box(*b), stroke, case.truth)
+        scores[case.name] = thin_objects.noc_score(run)
+        assert not any(far), (case.name, far)
+    davis = [v for k, v in scores.items() if k in ("camel", "cows", "dog", "goat", "soapbox")]
+    assert len(davis) == 5
+    # 2026-12-04: 11.2 on the DAVIS frames and 9.56 on all nine (main's engine before issue 36: 11.6
+    # and 10.0); the goat takes all 20, the chopsticks miss (see docs/benchmarks.md). The goal of
+    # issue 36, 5, is not met.
+    assert np.mean(davis) <= 11.8, scores
+    assert sum(v < thin_objects.MAX_CLICKS for v in davis) >= 4, scores
+    if len(scores) > 5:
+        assert np.mean(list(scores.values())) <= 10.0, scores
+        assert scores["fork-00_007850_1"] <= 2 and scores["spoon-02_024150_3"] <= 3, scores
+        assert scores["knife-01_007750_6"] <= 8, scores
