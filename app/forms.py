@@ -12,6 +12,7 @@ from typing import Any
 
 from flask import request
 from flask_wtf import FlaskForm
+from flask_wtf.file import FileRequired
 from flask_wtf.form import _Auto
 from werkzeug.datastructures import CombinedMultiDict, ImmutableMultiDict
 from wtforms import (
@@ -225,11 +226,11 @@ def _method_options(method: str) -> tuple[str, ...]:
 
 
 class DefinitionFileForm(Form):
-    definition = FileField("Definition file (JSON)", validators=[DataRequired(message="Choose a definition file.")])
+    definition = FileField("Definition file (JSON)", validators=[FileRequired(message="Choose a definition file.")])
 
 
 class PointsFileForm(Form):
-    points = FileField("Attention points (CSV: frame,x,y)", validators=[DataRequired(message="Choose a CSV file of points.")])
+    points = FileField("Attention points (CSV: frame,x,y)", validators=[FileRequired(message="Choose a CSV file of points.")])
     sigma = FloatField("Sigma (px; empty: 60 px at 1280 px wide, scaled to each frame)", validators=[Optional(), NumberRange(0.5, 10_000)])
 
 

@@ -132,6 +132,8 @@ def test_the_downloaded_definition_creates_the_same_study_again(app, admin_clien
     bad = admin_client.post("/studies/import", data={"definition": (io.BytesIO(b'{"name": "x", "seed": -1}'), "x.json")},
                             content_type="multipart/form-data", headers={"Accept": "application/json"})  # fmt: skip
     assert bad.status_code == 400 and bad.get_json()["fields"] == {"seed": bad.get_json()["message"]}
+    text = admin_client.post("/studies/import", data={"definition": '{"name": "x"}'}, headers={"Accept": "application/json"})
+    assert text.status_code == 400 and text.get_json()["fields"] == {"definition": "required"}  # a text field, not a file
 
 
 def test_the_builder_takes_the_new_settings_and_shows_errors_at_their_fields(app, admin_client, tmp_path):
