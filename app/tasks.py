@@ -78,15 +78,18 @@ def build_export(export_id: int) -> int:
 
 
 @job
-def score_baselines(thresholds: int) -> int:
+def score_baselines(thresholds: int, trained_on: list[str] | None = None) -> int:
     """Fit the learned baselines per fold and score every baseline into the score cache (a request queued it); returns rows.
 
+    ``trained_on``: for a table of models trained on those activities, the
+    baselines fitted once on them and scored on the others.
     A baseline that could not be scored is kept as the error the page shows,
     so that the page does not queue the same failing work again.
     """
-    truth = sources.load_truth()
+    truth = sources.load_truth(trained_on or ())
     try:
-        found, notes = load_sources(run_ids=[], study_ids=[], baselines=True, thresholds=thresholds)
+        found, notes = load_sources(run_ids=[], study_ids=[], baselines=True, thresholds=thresholds,
+                                    trained_on=trained_on or None)
     except Exception as exc:
         fitting.worker_done(truth, thresholds, f"{type(exc).__name__}: {exc}")
         raise

@@ -118,7 +118,11 @@ class Provenance:
         paired: Whether the numbers are paired differences (a comparison).
         human_maps: For each study with rows, how it ran and how its clicks became maps.
         model_splits: For each model row (a run, and a group's runs), how
-            it was split: ``loao``, ``single`` or ``released``.
+            it was split: ``loao``, ``single``, ``released`` or ``all``.
+        trained_on: The table's training set: the activities every learned
+            row was trained on, none of them scored (the paper's Tables 3
+            and 4); () for leave-one-activity-out (Table 2).
+        training_frames: The labelled frames of each of those activities.
         code_version: ``app.version.code_version()`` when the report was made.
     """
 
@@ -133,6 +137,8 @@ class Provenance:
     paired: bool = False
     human_maps: Sequence[HumanMaps] = ()
     model_splits: Mapping[str, str] = field(default_factory=dict)
+    trained_on: Sequence[str] = ()
+    training_frames: Mapping[str, int] = field(default_factory=dict)
     code_version: str = ""
 
     def p_text(self, p: float | None) -> str:
@@ -164,12 +170,21 @@ class Provenance:
                     f"written {self.floor_text()} at its floor 1/(B+1)")  # fmt: skip
         return f"{text}; not paired: each cell's interval on its own frames"
 
+    def training_text(self) -> str:
+        """What the learned rows were trained on."""
+        if not self.trained_on:
+            return "leave-one-activity-out: each activity scored by models and baselines fitted without it"
+        frames = ", ".join(f"{a} {self.training_frames.get(a, 0)}" for a in self.trained_on)
+        return (f"trained on: {', '.join(self.trained_on)} ({sum(self.training_frames.values())} labelled frames: {frames}); "
+                "every model and learned baseline trained on those frames only, scored on the other activities")  # fmt: skip
+
     def facts(self) -> list[tuple[str, str]]:
         """``(label, sentence)`` pairs, in the order every format writes them."""
         people = "answered trials only" if self.answered_only else "a trial without an answer counts as an empty map"
         out = [
             ("Metric", f"{self.metric} - {METRIC_TITLES[self.metric]}; {self.grid()}"),
             ("Frames", f"{self.frames} - {FRAMES[self.frames]}; people: {people}"),
+            ("Training set", self.training_text()),
             ("95% CI", self.ci_text()),
             ("Frames without action-object pixels", self.empty_text()),
         ]
@@ -188,6 +203,7 @@ class Provenance:
             "ci": f"BCa {CI_LEVEL:.0%}" if self.resamples else "",
             "min frames": MIN_FRAMES,
             "paired": int(self.paired),
+            "trained on": ", ".join(self.trained_on) or "leave-one-activity-out",
             "people's maps": " | ".join(f"{m.study}: {m.regions}; click Gaussians of {m.sigma}" for m in self.human_maps),
             "code version": self.code_version,
         }
@@ -206,5 +222,6 @@ class Provenance:
                    "p_floor": p_floor(self.resamples) if self.resamples else None, "min_frames": MIN_FRAMES},  # fmt: skip
             "human_maps": [asdict(m) | {"rows": list(m.rows)} for m in self.human_maps],
             "model_splits": dict(self.model_splits),
+            "trained_on": {"activities": list(self.trained_on), "frames": dict(self.training_frames)} if self.trained_on else None,
             "code_version": self.code_version,
         }
