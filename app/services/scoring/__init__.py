@@ -62,7 +62,7 @@ The package, one module per concern:
 
 from app.services.scoring.perframe import FrameTable, frame_table
 from app.services.scoring.plots import PLOT_MARGIN, Plot, PlotLine, default_plot_rows, pr_figure, pr_plot
-from app.services.scoring.report import available_runs, available_studies, build_report, load_sources
+from app.services.scoring.report import available_runs, available_studies, build_report, load_sources, table_runs, training_sets
 from app.services.scoring.sources import baseline_rows
 from app.services.scoring.rows import ScoringProblem
 from app.services.scoring.cells import (
@@ -113,4 +113,6 @@ __all__ = [
     "p_text",
     "pr_figure",
     "pr_plot",
+    "table_runs",
+    "training_sets",
 ]

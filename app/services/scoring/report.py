@@ -53,7 +53,7 @@ from egonet.metrics import (
 )
 from egonet.metrics.frames import check_empty
 
-__all__ = ["ScoringProblem", "available_runs", "available_studies", "build_report", "load_sources", "training_sets"]
+__all__ = ["ScoringProblem", "available_runs", "available_studies", "build_report", "load_sources", "table_runs", "training_sets"]
 
 # Training options that do not change what a run learns: runs differing only in these (and the seed) are grouped.
 _NOT_THE_EXPERIMENT = ("seed", "device", "num_workers")
@@ -84,6 +84,13 @@ def training_sets() -> dict[tuple[str, ...], list[int]]:
     return out
 
 
+def table_runs(trained_on: Sequence[str] = (), runs: Sequence[TrainingRun] | None = None) -> list[TrainingRun]:
+    """The completed runs of the table trained on ``trained_on``: runs on every frame of exactly those activities;
+    for () (leave-one-activity-out, Table 2) every other completed run."""
+    wanted = tuple(sorted(trained_on))
+    return [run for run in (available_runs() if runs is None else runs) if tuple(training.trained_on(run)) == wanted]
+
+
 def _choose_runs(run_ids: Sequence[int] | None, trained_on: Sequence[str] | None, notes: list[str]) -> tuple[list[TrainingRun], tuple[str, ...]]:
     """The runs of the table and its training set: () for leave-one-activity-out (Table 2), else the activities
     the runs on every frame were trained on (Tables 3 and 4; given, or inferred from the runs chosen).
@@ -110,7 +117,7 @@ def _choose_runs(run_ids: Sequence[int] | None, trained_on: Sequence[str] | None
             if tuple(training.trained_on(run)) != (trained_on or ()):
                 raise ScoringProblem(_other_training_set(run, trained_on or ()), field="runs")
         return runs, trained_on or ()
-    chosen = [run for run in runs if tuple(training.trained_on(run)) == (trained_on or ())]
+    chosen = table_runs(trained_on or (), runs)
     if not trained_on:
         left = training_sets()
         notes += [f"Runs {', '.join(map(str, ids))} trained on every frame of {', '.join(names)} are in the table trained on "
