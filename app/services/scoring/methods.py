@@ -102,7 +102,8 @@ def _metric_sentences(p: Provenance) -> str:
 
 def _training_set(p: Provenance) -> str:
     """``"the 60 labelled frames of cooking and dining (cooking 30, dining 30)"``."""
-    return (f"the {frames_text(sum(p.training_frames.values()))} labelled frames of {_listed(list(p.trained_on))} "
+    n = sum(p.training_frames.values())
+    return (f"the {n} labelled frame{'' if n == 1 else 's'} of {_listed(list(p.trained_on))} "
             f"({_breakdown(p.training_frames)})")  # fmt: skip
 
 

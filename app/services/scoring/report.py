@@ -111,7 +111,11 @@ def _choose_runs(run_ids: Sequence[int] | None, trained_on: Sequence[str] | None
             raise ScoringProblem(f"run {unknown[0]} is not a completed training run", field="runs")
         runs = [by_id[i] for i in dict.fromkeys(run_ids)]
         sets = {tuple(training.trained_on(run)) for run in runs}
-        if trained_on is None and len(sets) == 1 and runs[0].folds is FoldsMode.ALL:
+        if trained_on is None and len(sets) > 1:
+            which = "; ".join(f"run {r.id}: {', '.join(training.trained_on(r)) or f'{r.folds} folds'}" for r in runs)
+            raise ScoringProblem(f"the runs chosen were trained on different activities ({which}): a table has one "
+                                 "training set, choose runs of one", field="runs")  # fmt: skip
+        if trained_on is None and runs and runs[0].folds is FoldsMode.ALL:
             trained_on = sets.pop()  # the runs chosen say what the table was trained on
         for run in runs:
             if tuple(training.trained_on(run)) != (trained_on or ()):
