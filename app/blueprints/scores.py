@@ -14,7 +14,8 @@ bookmarked and its downloads repeat it:
   the old ``per-image`` still works, with a note), ``frames`` (``shared``,
   ``each``), ``empty`` (frames without action-object pixels: ``leave-out``,
   ``zero``, ``one-if-empty``), ``answered_only``, ``exclude_failed_checks``,
-  ``by_condition``; the page always uses 1,000 resamples (more, from
+  ``by_condition``, ``columns`` (``activities``, or ``sequences``: each
+  activity's recordings); the page always uses 1,000 resamples (more, from
   ``flask egonet score --resamples``);
 * ``compare_a`` / ``compare_b``: two row keys to compare (the comparison
   downloads from ``/scores/comparison.<csv|tex|json>``);
@@ -80,6 +81,7 @@ def _view() -> dict:
         "answered_only": request.args.get("answered_only") == "1",
         "exclude_failed_checks": request.args.get("exclude_failed_checks") == "1",
         "by_condition": request.args.get("by_condition") == "1",
+        "columns": request.args.get("columns", "activities"),
     }
 
 
@@ -110,6 +112,8 @@ def _query(choice: dict, view: dict, runs: list, studies: list) -> dict:
         "frames": view["frames"],
         "empty": view["empty"],
     }
+    if view["columns"] != "activities":
+        query["columns"] = view["columns"]
     if choice["baselines"]:
         query["baselines"] = 1
     for flag in ("answered_only", "exclude_failed_checks", "by_condition"):
@@ -198,6 +202,7 @@ def _frame_table():
         answered_only=view["answered_only"],
         sort=request.args.get("sort") or None,
         fit_in_worker=True,
+        columns=view["columns"],
     )
 
 

@@ -37,6 +37,9 @@ REPORT_OPTIONS = (
                       "activities (train --folds all), the learned baselines fitted on them, scored on the other "
                       "activities (the paper's Tables 3 and 4) [default: leave-one-activity-out, Table 2; or the "
                       "training set of the --runs chosen]."),
+    click.option("--columns", type=click.Choice(["activities", "sequences"]), default="activities", show_default=True,
+                 help="The table's columns: activities, or each activity's recordings (sequences) as 'activity / sequence', "
+                      "e.g. a dataset's videos imported as one activity (Tables 3 and 4)."),
     click.option("--studies", callback=_ids, help="Study ids, comma-separated ('' for none) [default: every study]."),
     click.option("--baselines/--no-baselines", default=True, show_default=True,
                  help="Include the baselines: Table 2's Judd, GBVS, Handled+Viewed-Obj, AOP, FP-MCG and salObj+depth "

@@ -13,18 +13,20 @@ import io
 import json
 import re
 
+import numpy as np
 import pytest
 
 from app.extensions import db
-from app.models import Activity
+from app.models import Activity, Status
 from app.models.training import FoldsMode, Prediction, RunStatus, TrainingRun
 from app.services import scoring, training
 from app.services.demo import create_demo
+from app.services.importing import FrameItem, add_frames
 from app.services.scoring import fitting
 from app.services.scoring import sources as scoring_sources
 from egonet.baselines import BASELINES, ActionObjectPrior, TrainingFrame
 from egonet.metrics import score_maps
-from tests.app.test_scoring import add_activity, assert_cell, frames_by_activity, make_run, rgb_of, row, stored_prediction, truth_mask
+from tests.app.test_scoring import SIZE, add_activity, assert_cell, frames_by_activity, make_run, rgb_of, row, stored_prediction, truth_mask
 
 TRAINED_ON = ["cooking", "hotel"]
 
@@ -199,3 +201,40 @@ def test_the_score_page_shows_the_training_sets_and_the_table_of_one(app, admin_
     assert download.status_code == 200 and "cooking, hotel" in download.get_data(as_text=True)
     bad = admin_client.get("/scores/?trained_on=garden")
     assert bad.status_code == 400 and b"no activity named" in bad.data
+
+
+def add_videos(activity: str, videos: list[str], *, n: int = 3) -> None:
+    """``n`` labelled frames in each of the activity's recordings (sequences), a box a little further right in each."""
+    rng = np.random.default_rng(7)
+    for v, video in enumerate(videos):
+        items = []
+        for i in range(n):
+            mask = np.zeros(SIZE, bool)
+            mask[10 + i : 30, 10 + 8 * v : 30 + 8 * v] = True
+            rgb = rng.integers(0, 255, (*SIZE, 3), dtype=np.uint8)
+            rgb[mask] //= 3
+            items.append(FrameItem(f"{video}-{i}", i, f"test {video} {i}", rgb=rgb, mask=mask, meta={"kind": "visual"}))
+        add_frames(activity=activity, sequence=video, items=iter(items), mask_status=Status.REVIEWED)
+
+
+def test_a_datasets_videos_imported_as_one_activity_are_the_columns(ctx):
+    """Table 3's layout: the videos of a dataset imported as one activity, each a column, resampled on its own."""
+    for seed, name in enumerate(TRAINED_ON):
+        add_activity(name, seed=seed)
+    add_videos("gaze", ["video 1", "video 2"])
+    run = make_all_run("lite on two", trained_on=TRAINED_ON, seed=5)
+    report = scoring.build_report(trained_on=TRAINED_ON, study_ids=[], columns="sequences")
+    assert report.activities == ["gaze / video 1", "gaze / video 2"]
+    frames = {v: [f for f in frames_by_activity()["gaze"] if f.sequence.name == v] for v in ("video 1", "video 2")}
+    prior = ActionObjectPrior().fit_masks([truth_mask(f) for a in TRAINED_ON for f in frames_by_activity()[a]])
+    for video, fs in frames.items():
+        masks = [truth_mask(f) for f in fs]
+        assert_cell(row(report, f"egonet-lite (run {run.id})").cells[f"gaze / {video}"],
+                    score_maps([stored_prediction(run, f) for f in fs], masks), 3)
+        assert_cell(row(report, "AOP").cells[f"gaze / {video}"], score_maps([prior.predict(rgb_of(f)) for f in fs], masks), 3)
+    data = json.loads(report.to_json())
+    assert data["columns"] == "sequences" and "resampled within each column (recording)" in data["ci"]["method"]
+    assert "The table's columns are the recordings (sequences) of the activities" in report.to_methods()
+    with pytest.raises(scoring.ScoringProblem, match="columns must be one of activities, sequences") as err:
+        scoring.build_report(columns="videos")
+    assert err.value.field == "columns"

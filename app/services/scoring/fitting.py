@@ -157,7 +157,7 @@ def defer_to_worker(key: str, truth: Any, thresholds: int) -> str | None:
     if state is None or time.time() - state.get("queued", 0) > QUEUED_FOR_S:
         marker.parent.mkdir(parents=True, exist_ok=True)
         marker.write_text(json.dumps({"queued": time.time()}))
-        enqueue("score_baselines", thresholds, list(truth.trained_on))
+        enqueue("score_baselines", thresholds, list(truth.trained_on), truth.columns)
     return ("The learned baselines not shown are being fitted per fold and scored by the worker (`flask egonet worker`); "
             "reload when it is done, or run `flask egonet score` to do it now.")  # fmt: skip
 

@@ -108,10 +108,15 @@ def _training_set(p: Provenance) -> str:
 
 
 def _training_sentence(p: Provenance) -> list[str]:
-    """For a table of models scored where they were never trained (the paper's Tables 3 and 4): on what they learned."""
+    """For a table of models scored where they were never trained (the paper's Tables 3 and 4): on what they learned;
+    and what the columns are when they are recordings."""
+    out = []
+    if p.column_kind == "sequences":
+        out.append("The table's columns are the recordings (sequences) of the activities, written activity / sequence, each "
+                   "scored and resampled on its own where the rest of this paragraph says activity.")  # fmt: skip
     if not p.trained_on:
-        return []
-    return [f"Every model and learned baseline was trained on {_training_set(p)} only, with no frame held out, and is scored "
+        return out
+    return out + [f"Every model and learned baseline was trained on {_training_set(p)} only, with no frame held out, and is scored "
             "on the other activities, whose frames none of them saw (as in the paper's Tables 3 and 4)."]  # fmt: skip
 
 

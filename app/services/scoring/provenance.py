@@ -23,10 +23,11 @@ from collections.abc import Mapping, Sequence
 from dataclasses import asdict, dataclass, field
 from typing import Any
 
-from app.services.scoring.cells import FRAMES, METRIC_TITLES
+from app.services.scoring.cells import COLUMNS, FRAMES, METRIC_TITLES
 from egonet.metrics import DEFAULT_EMPTY, DEFAULT_RESAMPLES, DEFAULT_THRESHOLDS, MIN_FRAMES, PER_FRAME_MEANS, p_floor, threshold_values
 
 CI_METHOD = "BCa (bias-corrected and accelerated) bootstrap over frames, resampled within each activity"
+CI_METHOD_SEQUENCES = "BCa (bias-corrected and accelerated) bootstrap over frames, resampled within each column (recording)"
 CI_LEVEL = 0.95
 
 EMPTY_TITLES = {
@@ -123,6 +124,7 @@ class Provenance:
             row was trained on, none of them scored (the paper's Tables 3
             and 4); () for leave-one-activity-out (Table 2).
         training_frames: The labelled frames of each of those activities.
+        column_kind: What the columns are: ``activities`` or ``sequences`` (each activity's recordings).
         code_version: ``app.version.code_version()`` when the report was made.
     """
 
@@ -139,6 +141,7 @@ class Provenance:
     model_splits: Mapping[str, str] = field(default_factory=dict)
     trained_on: Sequence[str] = ()
     training_frames: Mapping[str, int] = field(default_factory=dict)
+    column_kind: str = "activities"
     code_version: str = ""
 
     def p_text(self, p: float | None) -> str:
@@ -160,10 +163,13 @@ class Provenance:
             return f"{count}; policy {self.empty}: {EMPTY_TITLES[self.empty]}"
         return f"{count}; {self.metric} counts their false positives (policy {self.empty} applies to the per-frame means only)"
 
+    def ci_method(self) -> str:
+        return CI_METHOD_SEQUENCES if self.column_kind == "sequences" else CI_METHOD
+
     def ci_text(self) -> str:
         if not self.resamples:
             return "none (0 resamples)"
-        text = (f"{CI_METHOD}, {self.resamples} resamples, seed {self.seed}; none (n too small) where an activity "
+        text = (f"{self.ci_method()}, {self.resamples} resamples, seed {self.seed}; none (n too small) where an activity "
                 f"has fewer than {MIN_FRAMES} frames")  # fmt: skip
         if self.paired:
             return (f"{text}; paired: both rows on the same resamples of the frames they share; p two-sided, "
@@ -185,6 +191,7 @@ class Provenance:
             ("Metric", f"{self.metric} - {METRIC_TITLES[self.metric]}; {self.grid()}"),
             ("Frames", f"{self.frames} - {FRAMES[self.frames]}; people: {people}"),
             ("Training set", self.training_text()),
+            ("Columns", f"{self.column_kind} - {COLUMNS[self.column_kind]}"),
             ("95% CI", self.ci_text()),
             ("Frames without action-object pixels", self.empty_text()),
         ]
@@ -204,6 +211,7 @@ class Provenance:
             "min frames": MIN_FRAMES,
             "paired": int(self.paired),
             "trained on": ", ".join(self.trained_on) or "leave-one-activity-out",
+            "columns": self.column_kind,
             "people's maps": " | ".join(f"{m.study}: {m.regions}; click Gaussians of {m.sigma}" for m in self.human_maps),
             "code version": self.code_version,
         }
@@ -218,10 +226,11 @@ class Provenance:
             "threshold_values": threshold_values(self.thresholds).tolist(),
             "empty_frames": {"policy": self.empty, "count": sum(self.empty_frames.values()), "by_activity": dict(self.empty_frames),
                              "applies": self.metric in PER_FRAME_MEANS, "means": EMPTY_TITLES[self.empty]},  # fmt: skip
-            "ci": {"level": CI_LEVEL, "method": CI_METHOD, "resamples": self.resamples, "seed": self.seed, "paired": self.paired,
+            "ci": {"level": CI_LEVEL, "method": self.ci_method(), "resamples": self.resamples, "seed": self.seed, "paired": self.paired,
                    "p_floor": p_floor(self.resamples) if self.resamples else None, "min_frames": MIN_FRAMES},  # fmt: skip
             "human_maps": [asdict(m) | {"rows": list(m.rows)} for m in self.human_maps],
             "model_splits": dict(self.model_splits),
+            "columns": self.column_kind,
             "trained_on": {"activities": list(self.trained_on), "frames": dict(self.training_frames)} if self.trained_on else None,
             "code_version": self.code_version,
         }

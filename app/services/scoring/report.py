@@ -31,7 +31,7 @@ from app.models.training import FoldsMode, Prediction, TrainingRun
 from app.services import studies as studies_service
 from app.services import training
 from app.services.scoring import cache, sources
-from app.services.scoring.cells import BASELINE, FRAMES, HUMAN, MODEL
+from app.services.scoring.cells import BASELINE, COLUMNS, FRAMES, HUMAN, MODEL
 from app.services.scoring.provenance import HumanMaps, Provenance
 from app.services.scoring.rows import Scorer, ScoringProblem, Source, build_rows, compare, frames_without_truth, without_frames_without_truth
 from app.services.scoring import fitting
@@ -305,12 +305,13 @@ def _jobs(
     by_condition: bool = False,
     fit_in_worker: bool = False,
     trained_on: Sequence[str] | None = None,
+    columns: str = "activities",
 ) -> tuple[list[_Job], Truth]:
     """Every job of the choice, in table order: models, baselines, people; and the ground truth (its ``trained_on``
     the table's training set)."""
     runs, trained_on = _choose_runs(run_ids, trained_on, notes)
     chosen_studies = _choose_studies(study_ids)
-    truth = sources.load_truth(trained_on)
+    truth = sources.load_truth(trained_on, columns)
     jobs = [_run_job(run, truth, thresholds) for run in runs]
     if baselines and truth.frames:
         jobs += _baseline_jobs(truth, thresholds, fit_in_worker=fit_in_worker)
@@ -337,6 +338,7 @@ def load_sources(
     on_start: Callable[[int], None] | None = None,
     on_progress: Callable[[int], None] | None = None,
     trained_on: Sequence[str] | None = None,
+    columns: str = "activities",
 ) -> tuple[list[Source], list[str]]:
     """Every chosen row's per-frame statistics, from the cache or scored now (and cached), and the notes.
 
@@ -347,7 +349,7 @@ def load_sources(
     found, notes, _ = _load_sources(
         run_ids=run_ids, study_ids=study_ids, baselines=baselines, thresholds=thresholds, answered_only=answered_only,
         exclude_failed_checks=exclude_failed_checks, by_condition=by_condition, use_cache=use_cache,
-        fit_in_worker=fit_in_worker, on_start=on_start, on_progress=on_progress, trained_on=trained_on,
+        fit_in_worker=fit_in_worker, on_start=on_start, on_progress=on_progress, trained_on=trained_on, columns=columns,
     )
     return found, notes
 
@@ -366,16 +368,19 @@ def _load_sources(
     on_start: Callable[[int], None] | None,
     on_progress: Callable[[int], None] | None,
     trained_on: Sequence[str] | None,
+    columns: str = "activities",
 ) -> tuple[list[Source], list[str], Truth]:
     """:func:`load_sources`, and the ground truth (its ``trained_on`` the table's training set, () for leave-one-activity-out)."""
     try:
         threshold_values(thresholds)
     except ValueError as exc:
         raise ScoringProblem(str(exc), field="thresholds") from None
+    if columns not in COLUMNS:
+        raise ScoringProblem(f"columns must be one of {', '.join(COLUMNS)}, got {columns!r}", field="columns")
     notes: list[str] = []
     jobs, truth = _jobs(
         run_ids, study_ids, baselines, thresholds, notes, exclude_failed_checks=exclude_failed_checks, by_condition=by_condition,
-        fit_in_worker=fit_in_worker, trained_on=trained_on,
+        fit_in_worker=fit_in_worker, trained_on=trained_on, columns=columns,
     )
     cached = [(cache.cache_path(job.cache_key), job) for job in jobs]
     cached = [(path, job, cache.read_cached(path, thresholds) if use_cache else None) for path, job in cached]
@@ -444,6 +449,7 @@ def build_report(
     on_start: Callable[[int], None] | None = None,
     on_progress: Callable[[int], None] | None = None,
     trained_on: Sequence[str] | None = None,
+    columns: str = "activities",
 ) -> Report:
     """Score the chosen runs, the baselines and the chosen studies' participants.
 
@@ -482,6 +488,9 @@ def build_report(
             the learned baselines are fitted once on them, and the columns are
             the other activities. ``None``: leave-one-activity-out (Table 2),
             unless ``run_ids`` are all runs on every frame of one set of activities.
+        columns: ``"activities"`` (default) or ``"sequences"``: each
+            activity's recordings as columns of their own (a dataset of videos
+            imported as one activity, as the paper's Tables 3 and 4 list them).
 
     Returns:
         The :class:`Report`, its ``provenance`` filled in.
@@ -499,13 +508,13 @@ def build_report(
     found, loaded, truth = _load_sources(
         run_ids=run_ids, study_ids=study_ids, baselines=baselines, thresholds=thresholds, answered_only=answered_only,
         exclude_failed_checks=exclude_failed_checks, by_condition=by_condition, use_cache=use_cache,
-        fit_in_worker=fit_in_worker, on_start=on_start, on_progress=on_progress, trained_on=trained_on,
+        fit_in_worker=fit_in_worker, on_start=on_start, on_progress=on_progress, trained_on=trained_on, columns=columns,
     )
     provenance = Provenance(
         metric=metric, thresholds=thresholds, frames=frames, empty=empty, empty_frames=frames_without_truth(found),
         answered_only=answered_only, resamples=resamples, seed=seed, code_version=code_version(),
         human_maps=_human_maps(found, exclude_failed_checks=exclude_failed_checks), model_splits=_model_splits(found),
-        trained_on=truth.trained_on, training_frames=_training_frames(truth),
+        trained_on=truth.trained_on, training_frames=_training_frames(truth), column_kind=columns,
     )
     return _scored(found, notes + loaded, provenance, compare_keys=compare_keys)
 

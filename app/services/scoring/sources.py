@@ -97,6 +97,13 @@ class Truth:
     fingerprint: str
     labels: dict[int, list[str]] = field(default_factory=dict)  # frame id -> its instances' labels
     trained_on: tuple[str, ...] = ()  # a table of models trained on these activities: they are not scored
+    sequence: dict[int, str] = field(default_factory=dict)  # frame id -> its sequence (recording, video) name
+    columns: str = "activities"  # the table's columns: "activities", or "sequences" (each activity's recordings)
+
+    def column(self, frame_id: int) -> str:
+        """The table column a frame is scored in: its activity, or ``"activity / sequence"``."""
+        activity = self.activity[frame_id]
+        return f"{activity} / {self.sequence[frame_id]}" if self.columns == "sequences" else activity
 
     def mask(self, frame_id: int) -> np.ndarray | None:
         annotation = self.annotations.get(frame_id)
@@ -132,12 +139,15 @@ class Truth:
         return digest.hexdigest()
 
 
-def load_truth(trained_on: Sequence[str] = ()) -> Truth:
+def load_truth(trained_on: Sequence[str] = (), columns: str = "activities") -> Truth:
     """Every labelled frame's ground truth; the fingerprint changes whenever an annotation does.
 
     With ``trained_on`` (a table of models trained on those activities), the
     frames of those activities are training frames, never scored, and the
-    fingerprint (every cache key of the report) says so.
+    fingerprint (every cache key of the report) says so. ``columns="sequences"``
+    scores each recording (sequence) of an activity as a column of its own
+    (a dataset of videos imported as one activity; the learned baselines'
+    folds stay by activity).
     """
     frames = ground_truth.labelled_frames()
     ids = [f.id for f in frames]
@@ -154,25 +164,28 @@ def load_truth(trained_on: Sequence[str] = ()) -> Truth:
         ):
             instances[aid].append(f"{label}={path}")
             labels[aid].append(label or "")
-    names = dict(
+    found = (
         db.session.execute(
-            db.select(Frame.id, Activity.name)
+            db.select(Frame.id, Activity.name, FrameSequence.name)
             .select_from(Frame)
             .join(FrameSequence, Frame.sequence)
             .join(Activity, FrameSequence.activity)
             .where(Frame.id.in_(db.select(Annotation.frame_id)))
         ).all()
     )
+    names = {fid: activity for fid, activity, _ in found}
+    sequences = {fid: sequence for fid, _, sequence in found}
     media_of = {f.id: f"{f.rgb_path}|{f.dhg_path}" for f in frames}
     entries = {}
     for fid, a in annotations.items():
         entries[fid] = (f"{fid}:{media_of.get(fid)}:{a.id}:{a.version}:{a.mask_path}:{a.updated_at.isoformat()}:"
                         f"{','.join(instances[a.id])};")  # fmt: skip
     truth = Truth(frames, annotations, {f.id: names[f.id] for f in frames}, entries, "",
-                  {fid: labels[a.id] for fid, a in annotations.items()}, tuple(sorted(trained_on)))
+                  {fid: labels[a.id] for fid, a in annotations.items()}, tuple(sorted(trained_on)),
+                  {f.id: sequences[f.id] for f in frames}, columns)  # fmt: skip
     truth.fingerprint = truth.digest(entries)
-    if truth.trained_on:
-        truth.fingerprint = hashlib.sha256(f"{truth.fingerprint}|trained on|{truth.trained_on!r}".encode()).hexdigest()
+    if truth.trained_on or columns != "activities":
+        truth.fingerprint = hashlib.sha256(f"{truth.fingerprint}|trained on|{truth.trained_on!r}|{columns}".encode()).hexdigest()
     return truth
 
 
@@ -193,7 +206,7 @@ def _accumulate(
         if mask is None:
             missing += 1
             continue
-        stats.add(frame.id, truth.activity[frame.id], count_stats(prob, mask, thresholds=thresholds, name=f"prob of frame {frame.id}"))
+        stats.add(frame.id, truth.column(frame.id), count_stats(prob, mask, thresholds=thresholds, name=f"prob of frame {frame.id}"))
         on_progress(1)
     return stats, missing
 
@@ -275,7 +288,7 @@ def participant_stats(
             missing += 1
             continue
         empty = np.zeros(mask.shape, np.float32)
-        stats.add(frame.id, truth.activity[frame.id], count_stats(empty, mask, thresholds=thresholds), answered=False)
+        stats.add(frame.id, truth.column(frame.id), count_stats(empty, mask, thresholds=thresholds), answered=False)
         on_progress(1)
     label = f"{participant.label} of study {participant.study_id}"
     notes = [f"{label}: {gone(missing)}"] if missing else []
