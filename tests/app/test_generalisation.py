@@ -24,6 +24,8 @@ from app.services.demo import create_demo
 from app.services.importing import FrameItem, add_frames
 from app.services.scoring import fitting
 from app.services.scoring import sources as scoring_sources
+from app.queue import current_huey
+from app.tasks import score_baselines
 from egonet.baselines import BASELINES, ActionObjectPrior, TrainingFrame
 from egonet.metrics import score_maps
 from tests.app.test_scoring import SIZE, add_activity, assert_cell, frames_by_activity, make_run, rgb_of, row, stored_prediction, truth_mask
@@ -42,6 +44,7 @@ def make_all_run(name: str, *, trained_on: list[str], seed: int = 0) -> Training
     return run
 
 
+@pytest.mark.slow  # fits the five learned baselines
 def test_a_table_trained_on_some_activities_scores_the_others_with_baselines_fitted_on_the_same(ctx):
     for seed, name in enumerate(("cooking", "hotel", "desk work")):
         add_activity(name, seed=seed)
@@ -136,6 +139,7 @@ def demo(app):
         create_demo(frames_per_activity=2, unlabelled_fraction=0, width=64, height=48)
 
 
+@pytest.mark.slow
 @pytest.mark.usefixtures("one_thread")
 def test_train_on_all_frames_predict_elsewhere_and_score_from_the_command_line(app, demo, runner):
     args = ["egonet", "train", "--folds", "all", "--epochs", "1", "--size", "32x24", "--batch-size", "2", "--device", "cpu",
@@ -158,6 +162,9 @@ def test_train_on_all_frames_predict_elsewhere_and_score_from_the_command_line(a
         predictions = db.session.execute(db.select(Prediction).where(Prediction.run_id == run.id)).scalars()
         held = {(p.frame.sequence.activity.name, p.held_out) for p in predictions}
         assert held == {("hotel", True), ("cooking", False)}  # its own training frames are never held out
+        scored = {p.held_out: p.f_score is not None for p in db.session.execute(
+            db.select(Prediction).where(Prediction.run_id == run.id)).scalars()}  # fmt: skip
+        assert scored == {True: True, False: False}  # held-out maps get their per-frame F (at 0.5: no fold threshold)
 
     result = runner.invoke(args=["egonet", "score", "--format", "json", "--studies", "", "--trained-on", "cooking",
                                  "--trained-on", "dining", "--resamples", "100"])  # fmt: skip
@@ -197,6 +204,7 @@ def test_the_score_page_shows_the_training_sets_and_the_table_of_one(app, admin_
     text = page.get_data(as_text=True)
     assert page.status_code == 200 and 'id="trained-on"' in text and "Trained on: <strong>cooking, hotel</strong>" in text
     assert f'data-row="run:{run_id}"' in text and '<input type="hidden" name="trained_on" value="hotel">' in text
+    assert '<input type="radio" name="columns" value="sequences">' in text  # recordings as columns, offered
     download = admin_client.get(f"/scores/table.csv?trained_on=cooking&trained_on=hotel&chosen=1&runs={run_id}&studies=")
     assert download.status_code == 200 and "cooking, hotel" in download.get_data(as_text=True)
     bad = admin_client.get("/scores/?trained_on=garden")
@@ -217,6 +225,7 @@ def add_videos(activity: str, videos: list[str], *, n: int = 3) -> None:
         add_frames(activity=activity, sequence=video, items=iter(items), mask_status=Status.REVIEWED)
 
 
+@pytest.mark.slow  # fits the five learned baselines
 def test_a_datasets_videos_imported_as_one_activity_are_the_columns(ctx):
     """Table 3's layout: the videos of a dataset imported as one activity, each a column, resampled on its own."""
     for seed, name in enumerate(TRAINED_ON):
@@ -238,3 +247,21 @@ def test_a_datasets_videos_imported_as_one_activity_are_the_columns(ctx):
     with pytest.raises(scoring.ScoringProblem, match="columns must be one of activities, sequences") as err:
         scoring.build_report(columns="videos")
     assert err.value.field == "columns"
+
+
+@pytest.mark.slow  # the worker fits the five learned baselines
+def test_the_worker_fits_a_training_sets_baselines_when_the_page_would_wait(app, admin_client):
+    app.config["BASELINE_INLINE_S"] = 0.0
+    with app.app_context():
+        for seed, name in enumerate(("cooking", "hotel", "desk work")):
+            add_activity(name, seed=seed)
+    url = "/scores/?trained_on=cooking&trained_on=hotel"
+    page = admin_client.get(url).get_data(as_text=True)
+    assert "being fitted per fold and scored by the worker" in page and 'data-row="baseline:aop"' not in page
+    with app.app_context():
+        (task,) = current_huey().pending()
+        assert task.name.endswith("score_baselines") and task.args == (99, TRAINED_ON, "activities")
+        current_huey().flush()
+        score_baselines.func(*task.args)  # what the worker runs
+    page = admin_client.get(url).get_data(as_text=True)
+    assert 'data-row="baseline:aop"' in page and 'title="trained on: cooking, hotel"' in page
