@@ -115,7 +115,8 @@ def train_command(model, folds, epochs, device, size, lr, batch_size, seed, pret
         return
     click.echo(f"run {run.id} ({run.name}): {run.status.value}")
     for fold, scores in run.metrics.get("folds", {}).items():
-        click.echo(_scores_line(fold, scores))
+        if scores.get("test_frames") != 0:  # a run on every frame has no held-out scores
+            click.echo(_scores_line(fold, scores))
     if run.metrics.get("mean"):
         click.echo(_scores_line("mean", run.metrics["mean"]))
     if run.folds.value == "all" and run.status.value == "done":

@@ -179,7 +179,8 @@ class Provenance:
     def training_text(self) -> str:
         """What the learned rows were trained on."""
         if not self.trained_on:
-            return "leave-one-activity-out: each activity scored by models and baselines fitted without it"
+            return ("per row: each model on its own held-out frames, the learned baselines fitted per "
+                    "leave-one-activity-out fold")  # fmt: skip
         frames = ", ".join(f"{a} {self.training_frames.get(a, 0)}" for a in self.trained_on)
         return (f"trained on: {', '.join(self.trained_on)} ({sum(self.training_frames.values())} labelled frames: {frames}); "
                 "every model and learned baseline trained on those frames only, scored on the other activities")  # fmt: skip
@@ -190,10 +191,10 @@ class Provenance:
         out = [
             ("Metric", f"{self.metric} - {METRIC_TITLES[self.metric]}; {self.grid()}"),
             ("Frames", f"{self.frames} - {FRAMES[self.frames]}; people: {people}"),
-            ("Training set", self.training_text()),
-            ("Columns", f"{self.column_kind} - {COLUMNS[self.column_kind]}"),
             ("95% CI", self.ci_text()),
             ("Frames without action-object pixels", self.empty_text()),
+            ("Training set", self.training_text()),
+            ("Columns", f"{self.column_kind} - {COLUMNS[self.column_kind]}"),
         ]
         out += [("People's maps", f"{m.study}: {m.regions}; click Gaussians of {m.sigma}") for m in self.human_maps]
         return [*out, ("Code", self.code_version or "unknown")]
