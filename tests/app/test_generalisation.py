@@ -141,7 +141,7 @@ def demo(app):
 
 @pytest.mark.slow
 @pytest.mark.usefixtures("one_thread")
-def test_train_on_all_frames_predict_elsewhere_and_score_from_the_command_line(app, demo, runner):
+def test_train_on_all_frames_predict_elsewhere_and_score_from_the_command_line(app, demo, runner, admin_client):
     args = ["egonet", "train", "--folds", "all", "--epochs", "1", "--size", "32x24", "--batch-size", "2", "--device", "cpu",
             "--activities", "cooking", "--activities", "dining", "--name", "on two"]  # fmt: skip
     result = runner.invoke(args=args)
@@ -154,6 +154,10 @@ def test_train_on_all_frames_predict_elsewhere_and_score_from_the_command_line(a
         assert training.trained_on(run) == ["cooking", "dining"] and run.metrics["mean"] == {}
         assert db.session.execute(db.select(Prediction).where(Prediction.run_id == run.id)).first() is None
     assert f"trained on: cooking, dining; no frame held out. Score it elsewhere: `flask egonet predict {checkpoint.id}" in result.output
+    assert "MF -" not in result.output  # no empty line of held-out scores
+    page = admin_client.get(f"/training/runs/{run.id}").get_data(as_text=True)
+    assert "Trained on every labelled frame of cooking, dining, none held out" in page
+    assert f"flask egonet predict {checkpoint.id} --activity NAME" in page and "/scores/?trained_on=cooking&amp;trained_on=dining" in page
 
     result = runner.invoke(args=["egonet", "predict", str(checkpoint.id), "--activity", "hotel", "--activity", "cooking", "--device", "cpu"])
     assert result.exit_code == 0, result.output
