@@ -11,12 +11,16 @@ Rows, in this order:
   learned ones are fitted per leave-one-activity-out fold (the frames of
   activity A are mapped by a model fitted on the labelled frames of every
   *other* activity; ``fitting``), in the worker when that takes long;
+  in a table of models trained on some activities (``trained_on``: the
+  runs trained on every frame of them, the paper's Tables 3 and 4) they are
+  fitted once on those activities and the columns are the other activities;
 * **people**: each participant of the chosen studies, scored on exactly the
   frames they saw and answered, their click soft masks against the same
   ground truth; MF only, as in the paper (AP says little about near-binary
   maps).
 
-Columns are the activities and their mean. Every cell holds the chosen
+Columns are the activities (or, with ``columns="sequences"``, each
+activity's recordings) and their mean. Every cell holds the chosen
 convention's statistics (``egonet.metrics.frames``: ``pooled``, the
 default, ``ois-mean``, ``mean-curve`` or ``ods-ois``), their 95 % bootstrap
 intervals (none below ``egonet.metrics.MIN_FRAMES`` frames in an activity:
