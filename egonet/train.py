@@ -4,7 +4,8 @@ Short and linear on purpose (after nanoGPT): :func:`train_one_epoch` runs
 the optimiser over a loader, :func:`evaluate` scores held-out frames (MF and
 AP, and the action-object prior beside them), :func:`fit` trains one fold
 with checkpoints, and :func:`cross_validate` is the outer loop, one model per
-held-out activity (``folds="loao"``) or one model on a single split::
+held-out activity (``folds="loao"``), one model on a single split, or one
+model on every frame, none held out (``folds="all"``: scored elsewhere)::
 
     >>> from egonet.checkpoint import TrainConfig
     >>> from egonet.train import cross_validate
