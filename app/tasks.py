@@ -78,15 +78,19 @@ def build_export(export_id: int) -> int:
 
 
 @job
-def score_baselines(thresholds: int) -> int:
+def score_baselines(thresholds: int, trained_on: list[str] | None = None, columns: str = "activities") -> int:
     """Fit the learned baselines per fold and score every baseline into the score cache (a request queued it); returns rows.
 
+    ``trained_on``: for a table of models trained on those activities, the
+    baselines fitted once on them and scored on the others; ``columns``: the
+    table's columns (activities, or each activity's recordings).
     A baseline that could not be scored is kept as the error the page shows,
     so that the page does not queue the same failing work again.
     """
-    truth = sources.load_truth()
+    truth = sources.load_truth(trained_on or (), columns)
     try:
-        found, notes = load_sources(run_ids=[], study_ids=[], baselines=True, thresholds=thresholds)
+        found, notes = load_sources(run_ids=[], study_ids=[], baselines=True, thresholds=thresholds,
+                                    trained_on=trained_on or None, columns=columns)
     except Exception as exc:
         fitting.worker_done(truth, thresholds, f"{type(exc).__name__}: {exc}")
         raise

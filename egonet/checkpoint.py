@@ -43,7 +43,7 @@ DEFAULT_LR: dict[str, float] = {name: 1e-3 for name in MODELS} | {"egonet-lite":
 #: The paper's learning rate, on Caffe's loss summed over each frame's pixels (see :func:`paper_lr`).
 PAPER_LR = 1e-6
 
-FOLD_MODES = ("loao", "single")
+FOLD_MODES = ("loao", "single", "all")
 DEVICES = ("auto", "cpu", "cuda")
 
 
@@ -62,7 +62,9 @@ class TrainConfig:
         folds: ``"loao"``, one model per held-out activity, or ``"single"``,
             one model tested on the last ``test_fraction`` of every activity's
             frames (a contiguous block: neighbouring video frames stay on one
-            side, which a random draw would not ensure).
+            side, which a random draw would not ensure), or ``"all"``, one model
+            on every frame, none held out (scored on other activities later:
+            the paper's Tables 3 and 4).
         test_fraction: Share of each activity held out by ``"single"``.
         epochs: Passes over the training frames, per fold.
         batch_size: Frames per optimiser step (over all processes).

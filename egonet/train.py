@@ -4,7 +4,8 @@ Short and linear on purpose (after nanoGPT): :func:`train_one_epoch` runs
 the optimiser over a loader, :func:`evaluate` scores held-out frames (MF and
 AP, and the action-object prior beside them), :func:`fit` trains one fold
 with checkpoints, and :func:`cross_validate` is the outer loop, one model per
-held-out activity (``folds="loao"``) or one model on a single split::
+held-out activity (``folds="loao"``), one model on a single split, or one
+model on every frame, none held out (``folds="all"``: scored elsewhere)::
 
     >>> from egonet.checkpoint import TrainConfig
     >>> from egonet.train import cross_validate
@@ -95,9 +96,9 @@ class Fold:
     """One train/test split: positions in the sample list.
 
     Attributes:
-        name: The held-out activity, or ``"single"``.
+        name: The held-out activity, ``"single"`` or ``"all"``.
         train: Positions of the training samples.
-        test: Positions of the held-out samples.
+        test: Positions of the held-out samples (none for ``"all"``).
     """
 
     name: str
@@ -114,6 +115,8 @@ def make_folds(groups: Sequence[str], *, mode: str, test_fraction: float = 0.2) 
             appearance), testing on it and training on the others.
             ``"single"``: one fold, ``"single"``, testing on the last
             ``ceil(test_fraction * n)`` samples of each activity with ``n >= 2``.
+            ``"all"``: one fold, ``"all"``, training on every sample and
+            holding none out (a model for other datasets or activities).
         test_fraction: See ``mode``.
 
     Raises:
@@ -140,6 +143,10 @@ def make_folds(groups: Sequence[str], *, mode: str, test_fraction: float = 0.2) 
             Fold(name, [i for g, ids in by_group.items() if g != name for i in ids], list(test))
             for name, test in by_group.items()
         ]
+    if mode == "all":
+        if not groups:
+            raise EgonetError("training on every frame needs at least one labelled frame", field="groups")
+        return [Fold("all", list(range(len(groups))), [])]
     train, test = [], []
     for ids in by_group.values():
         n_test = math.ceil(test_fraction * len(ids)) if len(ids) >= 2 else 0
@@ -344,8 +351,11 @@ def evaluate(
 
     Returns:
         ``loss`` (mean cross-entropy at the training size), ``max_f``, ``ap``,
-        and with a prior ``aop_max_f`` and ``aop_ap``.
+        and with a prior ``aop_max_f`` and ``aop_ap``; ``{}`` for no frames
+        (a fold that holds none out).
     """
+    if len(dataset) == 0:
+        return {}
     model.eval()
     scores, prior_scores = ScoreAccumulator(), ScoreAccumulator()
     total, frames = 0.0, 0
@@ -537,7 +547,7 @@ class _FoldRun:
         self.tracker.update(fold=self.fold, epoch=self.epoch, phase="evaluate")
         final = evaluate(self.model, test_set, device=self.device, batch_size=batch_size, prior=prior, on_map=on_map)
         if self.history:
-            self.history[-1] |= {k: final[k] for k in ("loss", "max_f", "ap")}
+            self.history[-1] |= {k: final[k] for k in ("loss", "max_f", "ap") if k in final}
         train_loss = self.history[-1]["train_loss"] if self.history else None
         self.metrics = {**final, "train_loss": train_loss, "epochs": self.epoch, "train_frames": len(train_set),
                         "test_frames": len(test_set)}

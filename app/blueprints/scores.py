@@ -4,12 +4,18 @@ Everything travels in the query string (a GET form), so a table can be
 bookmarked and its downloads repeat it:
 
 * what to score: ``chosen``, ``runs``, ``studies``, ``baselines`` (without
-  ``chosen``: every completed run, every study and the baselines);
+  ``chosen``: every completed run of the table, every study and the baselines);
+* ``trained_on`` (repeated, an activity each): the table's training set, for
+  models scored where they were never trained (the paper's Tables 3 and 4):
+  its runs are those trained on every frame of exactly these activities, its
+  baselines are fitted on them, its columns are the other activities;
+  without it, leave-one-activity-out (Table 2);
 * how: ``metric`` (``pooled``, ``ois-mean``, ``mean-curve``, ``ods-ois``;
   the old ``per-image`` still works, with a note), ``frames`` (``shared``,
   ``each``), ``empty`` (frames without action-object pixels: ``leave-out``,
   ``zero``, ``one-if-empty``), ``answered_only``, ``exclude_failed_checks``,
-  ``by_condition``; the page always uses 1,000 resamples (more, from
+  ``by_condition``, ``columns`` (``activities``, or ``sequences``: each
+  activity's recordings); the page always uses 1,000 resamples (more, from
   ``flask egonet score --resamples``);
 * ``compare_a`` / ``compare_b``: two row keys to compare (the comparison
   downloads from ``/scores/comparison.<csv|tex|json>``);
@@ -51,12 +57,14 @@ def _sees_people() -> bool:
 
 def _choice() -> dict:
     """The runs, studies and baselines the query string asks for (defaults: everything the user may see)."""
+    trained_on = request.args.getlist("trained_on") or None
     if "chosen" not in request.args:
-        return {"run_ids": None, "study_ids": None if _sees_people() else [], "baselines": True}
+        return {"run_ids": None, "study_ids": None if _sees_people() else [], "baselines": True, "trained_on": trained_on}
     study_ids = query_ints("studies")
     if study_ids and not _sees_people():
         raise Problem("only admins see the scores of studies' participants", status=403)
-    return {"run_ids": query_ints("runs"), "study_ids": study_ids, "baselines": "baselines" in request.args}
+    return {"run_ids": query_ints("runs"), "study_ids": study_ids, "baselines": "baselines" in request.args,
+            "trained_on": trained_on}
 
 
 def _studies() -> list:
@@ -73,6 +81,7 @@ def _view() -> dict:
         "answered_only": request.args.get("answered_only") == "1",
         "exclude_failed_checks": request.args.get("exclude_failed_checks") == "1",
         "by_condition": request.args.get("by_condition") == "1",
+        "columns": request.args.get("columns", "activities"),
     }
 
 
@@ -96,12 +105,15 @@ def _query(choice: dict, view: dict, runs: list, studies: list) -> dict:
     """Query values that repeat this choice and view (for the forms' hidden fields and the download links)."""
     query = {
         "chosen": 1,
+        "trained_on": choice["trained_on"] or [],
         "runs": [run.id for run in runs] if choice["run_ids"] is None else choice["run_ids"],
         "studies": [study.id for study, _ in studies] if choice["study_ids"] is None else choice["study_ids"],
         "metric": view["metric"],
         "frames": view["frames"],
         "empty": view["empty"],
     }
+    if view["columns"] != "activities":
+        query["columns"] = view["columns"]
     if choice["baselines"]:
         query["baselines"] = 1
     for flag in ("answered_only", "exclude_failed_checks", "by_condition"):
@@ -117,8 +129,8 @@ def index():
     shown = _plot_rows()
     keys = [scoring.ALL, *report.activities] if report.rows else []
     plots = [scoring.pr_plot(report, key, rows=shown) for key in keys]
-    runs, studies = scoring.available_runs(), _studies()
-    query = _query(choice, view, runs, studies)
+    runs, studies = scoring.table_runs(report.provenance.trained_on), _studies()
+    query = _query(choice, view, runs, studies) | {"trained_on": list(report.provenance.trained_on)}
     return render_template(
         "scores/index.html",
         report=report,
@@ -126,6 +138,8 @@ def index():
         plot_rows=scoring.default_plot_rows(report) if shown is None else shown,
         best=report.best(),
         runs=runs,
+        training_sets=scoring.training_sets(),
+        trained_on=list(report.provenance.trained_on),
         studies=studies,
         sees_people=_sees_people(),
         chosen_runs=set(query["runs"]),
@@ -188,6 +202,7 @@ def _frame_table():
         answered_only=view["answered_only"],
         sort=request.args.get("sort") or None,
         fit_in_worker=True,
+        columns=view["columns"],
     )
 
 
@@ -196,7 +211,7 @@ def frames():
     """Per-frame scores: each frame of one activity with every row's own best F and AP on it (what ois-mean averages)."""
     table = _frame_table()
     choice, view = _choice(), _view()
-    query = _query(choice, view, scoring.available_runs(), _studies())
+    query = _query(choice, view, scoring.table_runs(choice["trained_on"] or ()), _studies())
     return render_template("scores/frames.html", table=table, query=query, view=view)
 
 

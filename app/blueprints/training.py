@@ -60,7 +60,8 @@ class RunForm(Form):
     model = SelectField("Model", choices=MODEL_CHOICES, default="egonet-lite")
     folds = SelectField(
         "Evaluation",
-        choices=[SelectChoice("loao", "leave one activity out (one model per activity)"), SelectChoice("single", "single split (last 20% of each activity)")],
+        choices=[SelectChoice("loao", "leave one activity out (one model per activity)"), SelectChoice("single", "single split (last 20% of each activity)"),
+                 SelectChoice("all", "all frames, none held out (score it on other activities: Tables 3 and 4)")],
         default="loao",
     )
     epochs = IntegerField("Epochs", default=10, validators=[InputRequired(), NumberRange(1, training.MAX_EPOCHS)])

@@ -32,6 +32,14 @@ def _metric(ctx, param, value: str) -> str:
 # The options that say what to score and how, shared by `score` and `report` (applied in this order).
 REPORT_OPTIONS = (
     click.option("--runs", callback=_ids, help="Training run ids, comma-separated ('' for none) [default: every completed run]."),
+    click.option("--trained-on", "trained_on", multiple=True, metavar="ACTIVITY",
+                 help="The table's training set (repeat the option): the runs trained on every frame of exactly these "
+                      "activities (train --folds all), the learned baselines fitted on them, scored on the other "
+                      "activities (the paper's Tables 3 and 4) [default: leave-one-activity-out, Table 2; or the "
+                      "training set of the --runs chosen]."),
+    click.option("--columns", type=click.Choice(["activities", "sequences"]), default="activities", show_default=True,
+                 help="The table's columns: activities, or each activity's recordings (sequences) as 'activity / sequence', "
+                      "e.g. a dataset's videos imported as one activity (Tables 3 and 4)."),
     click.option("--studies", callback=_ids, help="Study ids, comma-separated ('' for none) [default: every study]."),
     click.option("--baselines/--no-baselines", default=True, show_default=True,
                  help="Include the baselines: Table 2's Judd, GBVS, Handled+Viewed-Obj, AOP, FP-MCG and salObj+depth "
@@ -71,6 +79,7 @@ def _build_report(options: dict, compare: tuple[str, str] | None = None):
 
     options = dict(options)
     run_ids, study_ids, use_cache = options.pop("runs"), options.pop("studies"), not options.pop("no_cache")
+    options["trained_on"] = list(options["trained_on"]) or None
     with progress_bar("Scoring frames", file=sys.stderr) as (on_start, on_progress):
         return build_report(run_ids=run_ids, study_ids=study_ids, use_cache=use_cache, compare_keys=compare,
                             on_start=on_start, on_progress=on_progress, **options)  # fmt: skip
@@ -88,7 +97,9 @@ def score_command(fmt, compare, **options):
     the baselines (every labelled frame; the learned ones, Judd, AOP, FP-MCG
     and salObj+depth, fitted per leave-one-activity-out fold: fitting them
     takes a while the first time, then they are cached) and each participant of the studies (the frames of their trials; MF
-    only). Every cell has its number of frames and a 95% bootstrap interval;
+    only). With --trained-on A --trained-on B (Tables 3 and 4), the rows are
+    the runs trained on every frame of A and B (--folds all), on the frames
+    of other activities they predicted, and the baselines fitted on A and B. Every cell has its number of frames and a 95% bootstrap interval;
     every format says how the numbers were made (convention, thresholds,
     frames without action-object pixels, bootstrap, code version). The mean
     column is the unweighted mean of the per-activity values.

@@ -52,8 +52,9 @@ class TrainingBar:
 
 @bp.cli.command("train")
 @click.option("--model", default="egonet-lite", show_default=True, help="Network variant (egonet, egonet-lite, egonet-rgb, ...).")
-@click.option("--folds", type=click.Choice(["loao", "single"]), default="loao", show_default=True,
-              help="loao: one model per held-out activity; single: one model, last 20% of each activity held out.")
+@click.option("--folds", type=click.Choice(["loao", "single", "all"]), default="loao", show_default=True,
+              help="loao: one model per held-out activity; single: one model, last 20% of each activity held out; "
+                   "all: one model on every labelled frame, none held out (then predict other activities).")
 @click.option("--epochs", type=click.IntRange(min=1), default=10, show_default=True)
 @click.option("--device", type=click.Choice(["auto", "cpu", "cuda"]), default="auto", show_default=True)
 @click.option("--size", default="320x240", show_default=True, callback=_size, help="Training size WIDTHxHEIGHT.")
@@ -81,6 +82,7 @@ def train_command(model, folds, epochs, device, size, lr, batch_size, seed, pret
         RunRequest,
         start_run,
         train_in_foreground,
+        trained_on,
     )
 
     checkpoint = None
@@ -113,9 +115,13 @@ def train_command(model, folds, epochs, device, size, lr, batch_size, seed, pret
         return
     click.echo(f"run {run.id} ({run.name}): {run.status.value}")
     for fold, scores in run.metrics.get("folds", {}).items():
-        click.echo(_scores_line(fold, scores))
+        if scores.get("test_frames") != 0:  # a run on every frame has no held-out scores
+            click.echo(_scores_line(fold, scores))
     if run.metrics.get("mean"):
         click.echo(_scores_line("mean", run.metrics["mean"]))
+    if run.folds.value == "all" and run.status.value == "done":
+        click.echo(f"  trained on: {', '.join(trained_on(run))}; no frame held out. Score it elsewhere: "
+                   f"`flask egonet predict {run.checkpoints[0].id} --activity NAME`, then `flask egonet score`.")
     if run.status.value != "done":
         raise click.ClickException(run.message or f"run {run.id} {run.status.value}")
 

@@ -12,7 +12,10 @@ Each finished fold leaves a ``Checkpoint`` (the file under
 frame it held out. A prediction is a 16-bit PNG in the media store
 (probability x 65535). ``held_out`` is true when the frame was in the
 checkpoint's test set, which is what scoring reads; predictions made later
-on other frames (``flask egonet predict``) have it false. A held-out
+on other frames (``flask egonet predict``) have it false, except for a run
+that never saw them: the authors' released model (every frame), and a run
+trained on all frames of its activities (``FoldsMode.ALL``: every frame of
+another activity). A held-out
 prediction also keeps its frame's precision, recall and F at the fold's
 best threshold (the per-frame browser sorts by it).
 
@@ -51,6 +54,7 @@ class FoldsMode(enum.StrEnum):
     LOAO = "loao"  # leave one activity out: one model per held-out activity
     SINGLE = "single"  # one model, tested on the last part of every activity
     RELEASED = "released"  # the authors' released model, imported: not trained here, every frame held out
+    ALL = "all"  # one model on every labelled frame of its activities: held out are the frames of *other* activities
 
 
 class TrainingRun(Base):

@@ -130,7 +130,9 @@ def test_every_format_says_how_the_table_was_made():
     report = hand_report()
     report.provenance = PROVENANCE
     facts = dict(PROVENANCE.facts())
-    assert list(facts) == ["Metric", "Frames", "95% CI", "Frames without action-object pixels", "People's maps", "Code"]
+    assert list(facts) == ["Metric", "Frames", "95% CI", "Frames without action-object pixels", "Training set", "Columns",
+                           "People's maps", "Code"]
+    assert facts["Training set"].startswith("per row: each model on its own held-out frames") and facts["Columns"].startswith("activities")
     assert facts["Metric"].startswith("ois-mean - OIS-mean: the mean over frames") and "99 thresholds t_k = k/100" in facts["Metric"]
     assert facts["95% CI"].startswith("BCa (bias-corrected and accelerated) bootstrap over frames") and "1000 resamples, seed 7; none (n too small) where an activity has fewer than 10 frames; not paired" in facts["95% CI"]
     assert facts["Frames without action-object pixels"] == "2 (cooking 2); policy leave-out: left out of the per-frame means (our choice: the paper does not say)"

@@ -60,6 +60,19 @@ def test_a_single_split_holds_out_the_end_of_each_activity():
     assert fold.test == [4, 6] and fold.train == [0, 1, 2, 3, 5, 7]
 
 
+def test_all_trains_one_model_on_every_frame_and_holds_none_out(tmp_path):
+    (fold,) = make_folds(["a", "a", "b"], mode="all")
+    assert (fold.name, fold.train, fold.test) == ("all", [0, 1, 2], [])
+    maps = []
+    (result,) = cross_validate(tiny_samples(), TrainConfig(**(TINY | {"eval_every": 1}), folds="all", epochs=2),
+                               out_dir=tmp_path, on_map=lambda fold, sample, p: maps.append(sample.key))
+    assert maps == [] and result.test_keys == [] and sorted(result.train_keys) == [100, 101, 102, 103]
+    assert result.metrics["train_frames"] == 4 and result.metrics["test_frames"] == 0 and "max_f" not in result.metrics
+    state = load_checkpoint(tmp_path / "all.pt")
+    assert state["complete"] and state["fold"] == "all" and [h["epoch"] for h in state["history"]] == [1, 2]
+    assert all("max_f" not in h for h in state["history"])
+
+
 def test_folds_that_cannot_be_made_say_why():
     with pytest.raises(ValueError, match="at least two activities"):
         make_folds(["a", "a"], mode="loao")
@@ -73,7 +86,7 @@ def test_folds_that_cannot_be_made_say_why():
     ("options", "message"),
     [
         ({"model": "resnet"}, "unknown name 'resnet'; choose one of .*egonet-lite"),
-        ({"folds": "kfold"}, "folds must be one of loao, single"),
+        ({"folds": "kfold"}, "folds must be one of loao, single, all"),
         ({"epochs": 0}, "epochs must be an integer >= 1"),
         ({"lr": -1.0}, r"lr must be a number in \(0.0"),
         ({"device": "tpu"}, "device must be one of auto, cpu, cuda"),

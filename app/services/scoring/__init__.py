@@ -11,12 +11,16 @@ Rows, in this order:
   learned ones are fitted per leave-one-activity-out fold (the frames of
   activity A are mapped by a model fitted on the labelled frames of every
   *other* activity; ``fitting``), in the worker when that takes long;
+  in a table of models trained on some activities (``trained_on``: the
+  runs trained on every frame of them, the paper's Tables 3 and 4) they are
+  fitted once on those activities and the columns are the other activities;
 * **people**: each participant of the chosen studies, scored on exactly the
   frames they saw and answered, their click soft masks against the same
   ground truth; MF only, as in the paper (AP says little about near-binary
   maps).
 
-Columns are the activities and their mean. Every cell holds the chosen
+Columns are the activities (or, with ``columns="sequences"``, each
+activity's recordings) and their mean. Every cell holds the chosen
 convention's statistics (``egonet.metrics.frames``: ``pooled``, the
 default, ``ois-mean``, ``mean-curve`` or ``ods-ois``), their 95 % bootstrap
 intervals (none below ``egonet.metrics.MIN_FRAMES`` frames in an activity:
@@ -62,7 +66,7 @@ The package, one module per concern:
 
 from app.services.scoring.perframe import FrameTable, frame_table
 from app.services.scoring.plots import PLOT_MARGIN, Plot, PlotLine, default_plot_rows, pr_figure, pr_plot
-from app.services.scoring.report import available_runs, available_studies, build_report, load_sources
+from app.services.scoring.report import available_runs, available_studies, build_report, load_sources, table_runs, training_sets
 from app.services.scoring.sources import baseline_rows
 from app.services.scoring.rows import ScoringProblem
 from app.services.scoring.cells import (
@@ -113,4 +117,6 @@ __all__ = [
     "p_text",
     "pr_figure",
     "pr_plot",
+    "table_runs",
+    "training_sets",
 ]

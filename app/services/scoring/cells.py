@@ -19,6 +19,12 @@ MEAN = "mean"
 MODEL, BASELINE, HUMAN = "model", "baseline", "human"
 KIND_TITLES = {MODEL: "Models", BASELINE: "Baselines", HUMAN: "People (MF only)"}
 
+COLUMNS = {
+    "activities": "one column per activity",
+    "sequences": "one column per recording (sequence) of each activity, named activity / sequence",
+}
+"""What a table's columns can be (``build_report(columns=...)``); each column is resampled on its own."""
+
 FRAMES = {
     "shared": "each activity's frames that every row scored there has (their intersection)",
     "each": "all the frames each row has; best marked only among rows scored on the same frames",

@@ -4,7 +4,10 @@ Each learned baseline (``egonet.baselines``, a ``TrainedBaseline``) is
 fitted once per fold: the fold of activity A on the labelled frames of
 every *other* activity, so that a frame of A is only ever scored by a model
 that never saw A's masks (the paper: "All methods except GBVS were trained
-on our dataset using a leave-one-out cross validation").
+on our dataset using a leave-one-out cross validation"). A table of models
+trained on some activities (``Truth.trained_on``; the paper's Tables 3 and
+4) has one fold instead: every baseline fitted once on those activities'
+frames, as the models were, and scored on the others.
 
 A fitted fold is an ``.npz`` (``egonet.baselines.save_baseline``: settings
 and plain arrays, no pickle) under ``CACHE_ROOT/baselines/``, named by the
@@ -63,11 +66,12 @@ def _root() -> Path:
 
 
 def fold_key(key: str, truth: Any, held_out: str) -> dict[str, Any]:
-    """Everything fold ``held_out`` of baseline ``key`` depends on."""
+    """Everything fold ``held_out`` of baseline ``key`` depends on (in a table trained on some activities, one fold: theirs)."""
     cls = BASELINES[key]
-    training = [fid for fid in truth.entries if truth.activity[fid] != held_out]
+    training = [f.id for f in truth.training_frames(held_out)]
+    fold = {"trained_on": list(truth.trained_on)} if truth.trained_on else {"held_out": held_out}
     return {"baseline": key, "class": cls.__name__, "version": cls.version, "params": params(build_baseline(key)),
-            "held_out": held_out, "training": truth.digest(training), "frames": len(training)}  # fmt: skip
+            **fold, "training": truth.digest(training), "frames": len(training)}  # fmt: skip
 
 
 def fold_path(key: str, truth: Any, held_out: str) -> Path:
@@ -81,7 +85,7 @@ def cached_folds(key: str, truth: Any) -> tuple[dict[str, TrainedBaseline | None
     missing = []
     activities = truth.by_activity()
     for activity in activities:
-        if len(activities) == 1:
+        if not truth.training_frames(activity):  # nothing to fit on
             folds[activity] = None
             continue
         try:
@@ -101,12 +105,24 @@ def fit_missing(key: str, truth: Any, on_frame: Callable[[], None] | None = None
         for frame in frames:  # read lazily: one frame in memory at a time
             yield training_frame(frame, truth.annotations[frame.id])
 
+    if truth.trained_on:  # one model for every scored activity, fitted on the training activities
+        model = build_baseline(key).fit(_counted(frames_of(truth.training_frames(missing[0])), on_frame))
+        fitted = dict.fromkeys(missing, model)
+        media.write_atomic(fold_path(key, truth, missing[0]), lambda file: save_baseline(model, file))
+        return folds | fitted
     fitted = fit_folds(lambda: build_baseline(key), {a: frames_of(f) for a, f in truth.by_activity().items()},
                        folds=missing, on_frame=on_frame)  # fmt: skip
     for activity, model in fitted.items():
         if model is not None:
             media.write_atomic(fold_path(key, truth, activity), lambda file, model=model: save_baseline(model, file))
     return folds | fitted
+
+
+def _counted(frames: Iterator[TrainingFrame], on_frame: Callable[[], None] | None) -> Iterator[TrainingFrame]:
+    for frame in frames:
+        yield frame
+        if on_frame is not None:
+            on_frame()
 
 
 def seconds_needed(key: str, truth: Any) -> float:
@@ -141,7 +157,7 @@ def defer_to_worker(key: str, truth: Any, thresholds: int) -> str | None:
     if state is None or time.time() - state.get("queued", 0) > QUEUED_FOR_S:
         marker.parent.mkdir(parents=True, exist_ok=True)
         marker.write_text(json.dumps({"queued": time.time()}))
-        enqueue("score_baselines", thresholds)
+        enqueue("score_baselines", thresholds, list(truth.trained_on), truth.columns)
     return ("The learned baselines not shown are being fitted per fold and scored by the worker (`flask egonet worker`); "
             "reload when it is done, or run `flask egonet score` to do it now.")  # fmt: skip
 

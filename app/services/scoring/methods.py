@@ -23,6 +23,7 @@ SPLITS = {
     "loao": "trained with leave-one-activity-out cross-validation (each activity's frames predicted by the model trained on the other activities)",
     "single": "trained on a single split, its held-out frames the last part of every activity",
     "released": "imported from the authors' release, never trained on these frames",
+    "all": "trained on every labelled frame of the training activities, none held out",
 }
 """What each way of splitting a model's frames means (``TrainingRun.folds``)."""
 
@@ -70,7 +71,8 @@ def paragraph(rows: Sequence[Row], provenance: Provenance, *, activities: Sequen
     """
     p = provenance
     by_kind = {kind: [r for r in rows if r.kind == kind] for kind in (MODEL, BASELINE, HUMAN)}
-    parts = [_metric_sentences(p), *_frame_sentences(rows, p, by_kind, activities, frames_per_activity), _empty_sentence(p)]
+    parts = [_metric_sentences(p), *_training_sentence(p), *_frame_sentences(rows, p, by_kind, activities, frames_per_activity),
+             _empty_sentence(p)]
     if p.ground_truth:  # the paper's Table 4: ground truth from attention points
         parts.append("The ground truth of " + "; of ".join(f"{a} is {t}" for a, t in p.ground_truth.items())
                      + "; that of the other activities is masks drawn by people.")
@@ -99,6 +101,26 @@ def _metric_sentences(p: Provenance) -> str:
         "never normalised. F = 2PR/(P+R) and AP = sum_k (R_k - R_{k+1}) P_k. "
         f"The convention is {name.lower()}{'' if name.lower() == p.metric else f' ({p.metric})'}: {what[0].lower() + what[1:]}."
     )
+
+
+def _training_set(p: Provenance) -> str:
+    """``"the 60 labelled frames of cooking and dining (cooking 30, dining 30)"``."""
+    n = sum(p.training_frames.values())
+    return (f"the {n} labelled frame{'' if n == 1 else 's'} of {_listed(list(p.trained_on))} "
+            f"({_breakdown(p.training_frames)})")  # fmt: skip
+
+
+def _training_sentence(p: Provenance) -> list[str]:
+    """For a table of models scored where they were never trained (the paper's Tables 3 and 4): on what they learned;
+    and what the columns are when they are recordings."""
+    out = []
+    if p.column_kind == "sequences":
+        out.append("The table's columns are the recordings (sequences) of the activities, written activity / sequence, each "
+                   "scored and resampled on its own where the rest of this paragraph says activity.")  # fmt: skip
+    if not p.trained_on:
+        return out
+    return out + [f"Every model and learned baseline was trained on {_training_set(p)} only, with no frame held out, and is scored "
+            "on the other activities, whose frames none of them saw (as in the paper's Tables 3 and 4)."]  # fmt: skip
 
 
 def _frame_sentences(
@@ -170,6 +192,12 @@ def _baseline_sentence(rows: list[Row], p: Provenance) -> str:
     what = "the labelled frames" if p.frames == "shared" else "every labelled frame"
     text = f"Baselines: {_listed([r.name for r in rows])}, scored {_scored_on(rows, p, what)}"
     learned = [r.name for r in rows if is_trained(r.key.removeprefix("baseline:"))]
+    if learned and p.trained_on:
+        text += (f"; {_listed(learned)} {'was' if len(learned) == 1 else 'were'} fitted once, on the training activities' "
+                 "labelled frames, as the models were, the others are not trained")
+        if any(r.key == "baseline:aop" for r in rows):
+            text += "; the action-object prior (AOP) is the mean ground-truth mask of those frames"
+        return text + "."
     if learned:
         text += (f"; {_listed(learned)} {'was' if len(learned) == 1 else 'were'} fitted per fold under leave-one-activity-out "
                  "(a frame is mapped by a model fitted on the other activities' labelled frames only), the others are not trained")

@@ -93,11 +93,13 @@ def frame_table(
     thresholds: int = DEFAULT_THRESHOLDS,
     empty: str = DEFAULT_EMPTY,
     fit_in_worker: bool = False,
+    trained_on: Sequence[str] | None = None,
+    columns: str = "activities",
 ) -> FrameTable:
     """Every frame of one activity with each chosen row's own scores on it.
 
     Args:
-        run_ids, study_ids, baselines, answered_only, thresholds, fit_in_worker: As ``build_report``.
+        run_ids, study_ids, baselines, answered_only, thresholds, fit_in_worker, trained_on, columns: As ``build_report``.
         activity: The activity; None: the first one some row has.
         frames: ``"shared"`` or ``"each"`` (see the module).
         sort: A row key: frames by that row's best F, lowest first (where a
@@ -114,7 +116,7 @@ def frame_table(
 
     found, _ = load_sources(
         run_ids=run_ids, study_ids=study_ids, baselines=baselines, thresholds=thresholds, answered_only=answered_only,
-        fit_in_worker=fit_in_worker,
+        fit_in_worker=fit_in_worker, trained_on=trained_on, columns=columns,
     )
     by_activity = [(source, source.stats.by_activity()) for source in found]
     activities = sorted({a for _, own in by_activity for a in own})

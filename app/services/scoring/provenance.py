@@ -23,10 +23,11 @@ from collections.abc import Mapping, Sequence
 from dataclasses import asdict, dataclass, field
 from typing import Any
 
-from app.services.scoring.cells import FRAMES, METRIC_TITLES
+from app.services.scoring.cells import COLUMNS, FRAMES, METRIC_TITLES
 from egonet.metrics import DEFAULT_EMPTY, DEFAULT_RESAMPLES, DEFAULT_THRESHOLDS, MIN_FRAMES, PER_FRAME_MEANS, p_floor, threshold_values
 
 CI_METHOD = "BCa (bias-corrected and accelerated) bootstrap over frames, resampled within each activity"
+CI_METHOD_SEQUENCES = "BCa (bias-corrected and accelerated) bootstrap over frames, resampled within each column (recording)"
 CI_LEVEL = 0.95
 
 EMPTY_TITLES = {
@@ -118,7 +119,12 @@ class Provenance:
         paired: Whether the numbers are paired differences (a comparison).
         human_maps: For each study with rows, how it ran and how its clicks became maps.
         model_splits: For each model row (a run, and a group's runs), how
-            it was split: ``loao``, ``single`` or ``released``.
+            it was split: ``loao``, ``single``, ``released`` or ``all``.
+        trained_on: The table's training set: the activities every learned
+            row was trained on, none of them scored (the paper's Tables 3
+            and 4); () for leave-one-activity-out (Table 2).
+        training_frames: The labelled frames of each of those activities.
+        column_kind: What the columns are: ``activities`` or ``sequences`` (each activity's recordings).
         code_version: ``app.version.code_version()`` when the report was made.
         ground_truth: For each activity whose ground truth was made from
             attention points (``app.services.attention_points``), how, in words;
@@ -136,6 +142,9 @@ class Provenance:
     paired: bool = False
     human_maps: Sequence[HumanMaps] = ()
     model_splits: Mapping[str, str] = field(default_factory=dict)
+    trained_on: Sequence[str] = ()
+    training_frames: Mapping[str, int] = field(default_factory=dict)
+    column_kind: str = "activities"
     code_version: str = ""
     ground_truth: Mapping[str, str] = field(default_factory=dict)
 
@@ -162,15 +171,27 @@ class Provenance:
             return f"{count}; policy {self.empty}: {EMPTY_TITLES[self.empty]}"
         return f"{count}; {self.metric} counts their false positives (policy {self.empty} applies to the per-frame means only)"
 
+    def ci_method(self) -> str:
+        return CI_METHOD_SEQUENCES if self.column_kind == "sequences" else CI_METHOD
+
     def ci_text(self) -> str:
         if not self.resamples:
             return "none (0 resamples)"
-        text = (f"{CI_METHOD}, {self.resamples} resamples, seed {self.seed}; none (n too small) where an activity "
+        text = (f"{self.ci_method()}, {self.resamples} resamples, seed {self.seed}; none (n too small) where an activity "
                 f"has fewer than {MIN_FRAMES} frames")  # fmt: skip
         if self.paired:
             return (f"{text}; paired: both rows on the same resamples of the frames they share; p two-sided, "
                     f"written {self.floor_text()} at its floor 1/(B+1)")  # fmt: skip
         return f"{text}; not paired: each cell's interval on its own frames"
+
+    def training_text(self) -> str:
+        """What the learned rows were trained on."""
+        if not self.trained_on:
+            return ("per row: each model on its own held-out frames, the learned baselines fitted per "
+                    "leave-one-activity-out fold")  # fmt: skip
+        frames = ", ".join(f"{a} {self.training_frames.get(a, 0)}" for a in self.trained_on)
+        return (f"trained on: {', '.join(self.trained_on)} ({sum(self.training_frames.values())} labelled frames: {frames}); "
+                "every model and learned baseline trained on those frames only, scored on the other activities")  # fmt: skip
 
     def facts(self) -> list[tuple[str, str]]:
         """``(label, sentence)`` pairs, in the order every format writes them."""
@@ -180,6 +201,8 @@ class Provenance:
             ("Frames", f"{self.frames} - {FRAMES[self.frames]}; people: {people}"),
             ("95% CI", self.ci_text()),
             ("Frames without action-object pixels", self.empty_text()),
+            ("Training set", self.training_text()),
+            ("Columns", f"{self.column_kind} - {COLUMNS[self.column_kind]}"),
         ]
         if self.ground_truth:
             out.append(("Ground truth", self.ground_truth_text()))
@@ -198,6 +221,8 @@ class Provenance:
             "ci": f"BCa {CI_LEVEL:.0%}" if self.resamples else "",
             "min frames": MIN_FRAMES,
             "paired": int(self.paired),
+            "trained on": ", ".join(self.trained_on) or "leave-one-activity-out",
+            "columns": self.column_kind,
             "people's maps": " | ".join(f"{m.study}: {m.regions}; click Gaussians of {m.sigma}" for m in self.human_maps),
             "ground truth": self.ground_truth_text() if self.ground_truth else "drawn masks",
             "code version": self.code_version,
@@ -213,10 +238,12 @@ class Provenance:
             "threshold_values": threshold_values(self.thresholds).tolist(),
             "empty_frames": {"policy": self.empty, "count": sum(self.empty_frames.values()), "by_activity": dict(self.empty_frames),
                              "applies": self.metric in PER_FRAME_MEANS, "means": EMPTY_TITLES[self.empty]},  # fmt: skip
-            "ci": {"level": CI_LEVEL, "method": CI_METHOD, "resamples": self.resamples, "seed": self.seed, "paired": self.paired,
+            "ci": {"level": CI_LEVEL, "method": self.ci_method(), "resamples": self.resamples, "seed": self.seed, "paired": self.paired,
                    "p_floor": p_floor(self.resamples) if self.resamples else None, "min_frames": MIN_FRAMES},  # fmt: skip
             "human_maps": [asdict(m) | {"rows": list(m.rows)} for m in self.human_maps],
             "model_splits": dict(self.model_splits),
+            "columns": self.column_kind,
+            "trained_on": {"activities": list(self.trained_on), "frames": dict(self.training_frames)} if self.trained_on else None,
             "ground_truth": dict(self.ground_truth),
             "code_version": self.code_version,
         }

@@ -15,7 +15,7 @@ A new kind of row registers in :func:`_jobs`: a function that returns
 from __future__ import annotations
 
 import json
-from collections import defaultdict
+from collections import Counter, defaultdict
 from collections.abc import Callable, Sequence
 from dataclasses import dataclass, field
 from datetime import timedelta
@@ -26,13 +26,13 @@ from sqlalchemy import func
 
 from app.extensions import db
 from app.models.studies import ANSWERED, EndReason, FrameKind, Outcome, Participant, Study, StudyFrame, Trial
-from app.models import Annotation
-from app.models.training import Prediction, TrainingRun
+from app.models import Activity, Annotation
+from app.models.training import FoldsMode, Prediction, TrainingRun
 from app.services import attention_points, ground_truth
 from app.services import studies as studies_service
 from app.services import training
 from app.services.scoring import cache, sources
-from app.services.scoring.cells import BASELINE, FRAMES, HUMAN, MODEL
+from app.services.scoring.cells import BASELINE, COLUMNS, FRAMES, HUMAN, MODEL
 from app.services.scoring.provenance import HumanMaps, Provenance
 from app.services.scoring.rows import Scorer, ScoringProblem, Source, build_rows, compare, frames_without_truth, without_frames_without_truth
 from app.services.scoring import fitting
@@ -54,7 +54,7 @@ from egonet.metrics import (
 )
 from egonet.metrics.frames import check_empty
 
-__all__ = ["ScoringProblem", "available_runs", "available_studies", "build_report", "load_sources"]
+__all__ = ["ScoringProblem", "available_runs", "available_studies", "build_report", "load_sources", "table_runs", "training_sets"]
 
 # Training options that do not change what a run learns: runs differing only in these (and the seed) are grouped.
 _NOT_THE_EXPERIMENT = ("seed", "device", "num_workers")
@@ -76,15 +76,67 @@ def available_studies() -> list[tuple[Study, int]]:
     return [(s, counts.get(s.id, 0)) for s in chosen]
 
 
-def _choose_runs(run_ids: Sequence[int] | None) -> list[TrainingRun]:
+def training_sets() -> dict[tuple[str, ...], list[int]]:
+    """The activities completed runs on every frame (``folds="all"``) were trained on, each with its runs' ids, newest first."""
+    out: dict[tuple[str, ...], list[int]] = {}
+    for run in available_runs():
+        if run.folds is FoldsMode.ALL:
+            out.setdefault(tuple(training.trained_on(run)), []).append(run.id)
+    return out
+
+
+def table_runs(trained_on: Sequence[str] = (), runs: Sequence[TrainingRun] | None = None) -> list[TrainingRun]:
+    """The completed runs of the table trained on ``trained_on``: runs on every frame of exactly those activities;
+    for () (leave-one-activity-out, Table 2) every other completed run."""
+    wanted = tuple(sorted(trained_on))
+    return [run for run in (available_runs() if runs is None else runs) if tuple(training.trained_on(run)) == wanted]
+
+
+def _choose_runs(run_ids: Sequence[int] | None, trained_on: Sequence[str] | None, notes: list[str]) -> tuple[list[TrainingRun], tuple[str, ...]]:
+    """The runs of the table and its training set: () for leave-one-activity-out (Table 2), else the activities
+    the runs on every frame were trained on (Tables 3 and 4; given, or inferred from the runs chosen).
+
+    One table, one training set: the baselines are fitted on the same activities as its models.
+    """
     runs = available_runs()
-    if run_ids is None:
-        return runs
+    if trained_on is not None:
+        trained_on = tuple(sorted(dict.fromkeys(trained_on)))
+        known = set(db.session.execute(db.select(Activity.name).where(Activity.name.in_(trained_on))).scalars())
+        if not trained_on or (unknown := [a for a in trained_on if a not in known]):
+            raise ScoringProblem(f"trained_on: no activity named {', '.join(map(repr, unknown)) if trained_on else 'given'}",
+                                 field="trained_on")  # fmt: skip
     by_id = {run.id: run for run in runs}
-    unknown = [i for i in run_ids if i not in by_id]
-    if unknown:
-        raise ScoringProblem(f"run {unknown[0]} is not a completed training run", field="runs")
-    return [by_id[i] for i in dict.fromkeys(run_ids)]
+    if run_ids is not None:
+        unknown = [i for i in run_ids if i not in by_id]
+        if unknown:
+            raise ScoringProblem(f"run {unknown[0]} is not a completed training run", field="runs")
+        runs = [by_id[i] for i in dict.fromkeys(run_ids)]
+        sets = {tuple(training.trained_on(run)) for run in runs}
+        if trained_on is None and len(sets) > 1:
+            which = "; ".join(f"run {r.id}: {', '.join(training.trained_on(r)) or f'{r.folds} folds'}" for r in runs)
+            raise ScoringProblem(f"the runs chosen were trained on different activities ({which}): a table has one "
+                                 "training set, choose runs of one", field="runs")  # fmt: skip
+        if trained_on is None and runs and runs[0].folds is FoldsMode.ALL:
+            trained_on = sets.pop()  # the runs chosen say what the table was trained on
+        for run in runs:
+            if tuple(training.trained_on(run)) != (trained_on or ()):
+                raise ScoringProblem(_other_training_set(run, trained_on or ()), field="runs")
+        return runs, trained_on or ()
+    chosen = table_runs(trained_on or (), runs)
+    if not trained_on:
+        left = training_sets()
+        notes += [f"Runs {', '.join(map(str, ids))} trained on every frame of {', '.join(names)} are in the table trained on "
+                  f"{'them' if len(names) > 1 else 'it'}, not in this one." for names, ids in left.items()]  # fmt: skip
+    return chosen, trained_on or ()
+
+
+def _other_training_set(run: TrainingRun, trained_on: tuple[str, ...]) -> str:
+    """Why ``run`` is not a row of a table trained on ``trained_on`` (one table, one training set)."""
+    table = f"trained on {', '.join(trained_on)}" if trained_on else "of leave-one-activity-out folds (Table 2)"
+    if run.folds is FoldsMode.ALL:
+        return (f"run {run.id} was trained on every frame of {', '.join(training.trained_on(run))}: it is not a row of "
+                f"the table {table}; choose its training set (trained_on)")  # fmt: skip
+    return f"run {run.id} ({run.folds} folds) is not a row of the table {table}: it was not trained on exactly those activities"
 
 
 def _choose_studies(study_ids: Sequence[int] | None) -> list[int]:
@@ -146,7 +198,8 @@ def _run_job(run: TrainingRun, truth: Truth, thresholds: int) -> _Job:
         "",
         sources.run_row_name(run),
         MODEL,
-        f"{run.name}, {run.folds} folds, seed {run.seed}",
+        (f"{run.name}, trained on: {', '.join(training.trained_on(run))}, seed {run.seed}" if run.folds is FoldsMode.ALL
+         else f"{run.name}, {run.folds} folds, seed {run.seed}"),
         signature=_run_signature(run),
         label=sources.model_label(run),
         seed=run.seed,
@@ -161,11 +214,16 @@ def _run_job(run: TrainingRun, truth: Truth, thresholds: int) -> _Job:
 
 
 def _baseline_jobs(truth: Truth, thresholds: int, *, fit_in_worker: bool) -> list[_Job]:
-    """One job per baseline; a learned one's is fitted per leave-one-activity-out fold (``fitting``), in the worker when long."""
+    """One job per baseline; a learned one's is fitted per leave-one-activity-out fold (``fitting``), in the worker when long.
+
+    In a table trained on some activities, a learned one is fitted once, on those.
+    """
     jobs = []
+    fitted = (f"trained on: {', '.join(truth.trained_on)}" if truth.trained_on
+              else "fitted per fold under leave-one-activity-out")
     for key, cls in BASELINES.items():
         trained = is_trained(key)
-        detail = "fitted per fold under leave-one-activity-out" if trained else "not trained"
+        detail = fitted if trained else "not trained"
         jobs.append(
             _Job(
                 rows=[_RowSpec(f"baseline:{key}", "", sources.baseline_name(key, truth), BASELINE, detail)],
@@ -247,17 +305,20 @@ def _jobs(
     exclude_failed_checks: bool = False,
     by_condition: bool = False,
     fit_in_worker: bool = False,
-) -> list[_Job]:
-    """Every job of the choice, in table order: models, baselines, people."""
-    runs = _choose_runs(run_ids)
+    trained_on: Sequence[str] | None = None,
+    columns: str = "activities",
+) -> tuple[list[_Job], Truth]:
+    """Every job of the choice, in table order: models, baselines, people; and the ground truth (its ``trained_on``
+    the table's training set)."""
+    runs, trained_on = _choose_runs(run_ids, trained_on, notes)
     chosen_studies = _choose_studies(study_ids)
-    truth = sources.load_truth()
+    truth = sources.load_truth(trained_on, columns)
     jobs = [_run_job(run, truth, thresholds) for run in runs]
     if baselines and truth.frames:
         jobs += _baseline_jobs(truth, thresholds, fit_in_worker=fit_in_worker)
     return jobs + _participant_jobs(
         chosen_studies, truth, thresholds, notes, exclude_failed_checks=exclude_failed_checks, by_condition=by_condition
-    )
+    ), truth
 
 
 # --------------------------------------------------------------------------
@@ -277,6 +338,8 @@ def load_sources(
     fit_in_worker: bool = False,
     on_start: Callable[[int], None] | None = None,
     on_progress: Callable[[int], None] | None = None,
+    trained_on: Sequence[str] | None = None,
+    columns: str = "activities",
 ) -> tuple[list[Source], list[str]]:
     """Every chosen row's per-frame statistics, from the cache or scored now (and cached), and the notes.
 
@@ -284,14 +347,41 @@ def load_sources(
     (say, a run whose predictions do not match the frames' sizes) becomes a
     note instead of rows.
     """
+    found, notes, _ = _load_sources(
+        run_ids=run_ids, study_ids=study_ids, baselines=baselines, thresholds=thresholds, answered_only=answered_only,
+        exclude_failed_checks=exclude_failed_checks, by_condition=by_condition, use_cache=use_cache,
+        fit_in_worker=fit_in_worker, on_start=on_start, on_progress=on_progress, trained_on=trained_on, columns=columns,
+    )
+    return found, notes
+
+
+def _load_sources(
+    *,
+    run_ids: Sequence[int] | None,
+    study_ids: Sequence[int] | None,
+    baselines: bool,
+    thresholds: int,
+    answered_only: bool,
+    exclude_failed_checks: bool,
+    by_condition: bool,
+    use_cache: bool,
+    fit_in_worker: bool,
+    on_start: Callable[[int], None] | None,
+    on_progress: Callable[[int], None] | None,
+    trained_on: Sequence[str] | None,
+    columns: str = "activities",
+) -> tuple[list[Source], list[str], Truth]:
+    """:func:`load_sources`, and the ground truth (its ``trained_on`` the table's training set, () for leave-one-activity-out)."""
     try:
         threshold_values(thresholds)
     except ValueError as exc:
         raise ScoringProblem(str(exc), field="thresholds") from None
+    if columns not in COLUMNS:
+        raise ScoringProblem(f"columns must be one of {', '.join(COLUMNS)}, got {columns!r}", field="columns")
     notes: list[str] = []
-    jobs = _jobs(
+    jobs, truth = _jobs(
         run_ids, study_ids, baselines, thresholds, notes, exclude_failed_checks=exclude_failed_checks, by_condition=by_condition,
-        fit_in_worker=fit_in_worker,
+        fit_in_worker=fit_in_worker, trained_on=trained_on, columns=columns,
     )
     cached = [(cache.cache_path(job.cache_key), job) for job in jobs]
     cached = [(path, job, cache.read_cached(path, thresholds) if use_cache else None) for path, job in cached]
@@ -321,7 +411,7 @@ def load_sources(
                 continue
             unanswered = int(np.count_nonzero(~stats[spec.stats].answered)) if spec.kind == HUMAN else None
             out.append(Source(spec.key, spec.name, spec.kind, spec.detail, found, unanswered, spec.signature, spec.label, spec.seed))
-    return out, notes
+    return out, notes, truth
 
 
 def _check_view(metric: str, frames: str, empty: str, resamples: int, seed: int) -> tuple[str, list[str]]:
@@ -359,6 +449,8 @@ def build_report(
     fit_in_worker: bool = False,
     on_start: Callable[[int], None] | None = None,
     on_progress: Callable[[int], None] | None = None,
+    trained_on: Sequence[str] | None = None,
+    columns: str = "activities",
 ) -> Report:
     """Score the chosen runs, the baselines and the chosen studies' participants.
 
@@ -391,6 +483,15 @@ def build_report(
             a note (the pages); else fit and score them now (the CLI, the worker).
         on_start: Called once with the number of frames to score.
         on_progress: Called with the number of frames just scored.
+        trained_on: The table's training set, for models scored where they
+            were never trained (the paper's Tables 3 and 4): its rows are the
+            runs on every frame (``folds="all"``) of exactly these activities,
+            the learned baselines are fitted once on them, and the columns are
+            the other activities. ``None``: leave-one-activity-out (Table 2),
+            unless ``run_ids`` are all runs on every frame of one set of activities.
+        columns: ``"activities"`` (default) or ``"sequences"``: each
+            activity's recordings as columns of their own (a dataset of videos
+            imported as one activity, as the paper's Tables 3 and 4 list them).
 
     Returns:
         The :class:`Report`, its ``provenance`` filled in.
@@ -405,15 +506,16 @@ def build_report(
         print(report.to_table())
     """
     metric, notes = _check_view(metric, frames, empty, resamples, seed)
-    found, loaded = load_sources(
+    found, loaded, truth = _load_sources(
         run_ids=run_ids, study_ids=study_ids, baselines=baselines, thresholds=thresholds, answered_only=answered_only,
         exclude_failed_checks=exclude_failed_checks, by_condition=by_condition, use_cache=use_cache,
-        fit_in_worker=fit_in_worker, on_start=on_start, on_progress=on_progress,
+        fit_in_worker=fit_in_worker, on_start=on_start, on_progress=on_progress, trained_on=trained_on, columns=columns,
     )
     provenance = Provenance(
         metric=metric, thresholds=thresholds, frames=frames, empty=empty, empty_frames=frames_without_truth(found),
         answered_only=answered_only, resamples=resamples, seed=seed, code_version=code_version(),
         human_maps=_human_maps(found, exclude_failed_checks=exclude_failed_checks), model_splits=_model_splits(found),
+        trained_on=truth.trained_on, training_frames=_training_frames(truth), column_kind=columns,
         ground_truth=attention_points.activity_sources(*_scored_truth(found)),
     )
     return _scored(found, notes + loaded, provenance, compare_keys=compare_keys)
@@ -441,8 +543,14 @@ def _scored_truth(found: list[Source]) -> tuple[dict[int, Annotation], dict[int,
     return truths, activity
 
 
+def _training_frames(truth: Truth) -> dict[str, int]:
+    """The labelled frames of each training activity (what the table's learned baselines were fitted on)."""
+    counts = Counter(truth.activity[f.id] for f in truth.frames)
+    return {a: counts[a] for a in truth.trained_on}
+
+
 def _model_splits(found: list[Source]) -> dict[str, str]:
-    """How each model row's run was split (``loao``, ``single``, ``released``), by row key."""
+    """How each model row's run was split (``loao``, ``single``, ``released``, ``all``), by row key."""
     runs = {f"run:{i}": str(folds) for i, folds in db.session.execute(
         db.select(TrainingRun.id, TrainingRun.folds).where(TrainingRun.id.in_([int(s.key.split(":", 1)[1]) for s in found if s.kind == MODEL]))
     )}  # fmt: skip

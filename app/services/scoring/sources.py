@@ -22,7 +22,7 @@ from __future__ import annotations
 
 import hashlib
 from collections import Counter, defaultdict
-from collections.abc import Callable, Iterable, Iterator
+from collections.abc import Callable, Iterable, Iterator, Sequence
 from dataclasses import dataclass, field
 
 import numpy as np
@@ -60,7 +60,10 @@ def _hands_of(truth: Truth, min_frames: int) -> str:
     """
     per_activity = Counter(truth.activity[fid] for fid, labels in truth.labels.items() if any(map(is_hand, labels)))
     total = sum(per_activity.values())
-    folds = [total - per_activity[a] for a in truth.by_activity()] if len(truth.by_activity()) > 1 else [0]
+    if truth.trained_on:  # one fit, on the training activities
+        folds = [sum(per_activity[a] for a in truth.trained_on)]
+    else:
+        folds = [total - per_activity[a] for a in truth.by_activity()] if len(truth.by_activity()) > 1 else [0]
     learned = sorted(n for n in folds if n >= min_frames)
     if not learned:
         return "skin colour"
@@ -93,17 +96,40 @@ class Truth:
     entries: dict[int, str]
     fingerprint: str
     labels: dict[int, list[str]] = field(default_factory=dict)  # frame id -> its instances' labels
+    trained_on: tuple[str, ...] = ()  # a table of models trained on these activities: they are not scored
+    sequence: dict[int, str] = field(default_factory=dict)  # frame id -> its sequence (recording, video) name
+    columns: str = "activities"  # the table's columns: "activities", or "sequences" (each activity's recordings)
+
+    def column(self, frame_id: int) -> str:
+        """The table column a frame is scored in: its activity, or ``"activity / sequence"``."""
+        activity = self.activity[frame_id]
+        return f"{activity} / {self.sequence[frame_id]}" if self.columns == "sequences" else activity
 
     def mask(self, frame_id: int) -> np.ndarray | None:
         annotation = self.annotations.get(frame_id)
         return ground_truth.mask_of(annotation) if annotation is not None else None
 
+    def scored(self, frame_id: int) -> bool:
+        """Whether the frame is one of the table's (not of the training activities of a table trained on some)."""
+        return self.activity.get(frame_id) not in self.trained_on
+
     def by_activity(self) -> dict[str, list[Frame]]:
-        """The frames of each activity, in the frames' order."""
+        """The frames of each scored activity, in the frames' order."""
         out: dict[str, list[Frame]] = defaultdict(list)
         for frame in self.frames:
-            out[self.activity[frame.id]].append(frame)
+            if self.scored(frame.id):
+                out[self.activity[frame.id]].append(frame)
         return dict(out)
+
+    def training_frames(self, held_out: str) -> list[Frame]:
+        """The frames that the learned baselines mapping ``held_out`` are fitted on.
+
+        Leave-one-activity-out: every other activity's. In a table trained on
+        some activities: theirs, whichever activity is scored.
+        """
+        if self.trained_on:
+            return [f for f in self.frames if self.activity[f.id] in self.trained_on]
+        return [f for f in self.frames if self.activity[f.id] != held_out]
 
     def digest(self, frame_ids: Iterable[int]) -> str:
         """A fingerprint of these frames and their ground truth (a fold's training frames)."""
@@ -113,8 +139,16 @@ class Truth:
         return digest.hexdigest()
 
 
-def load_truth() -> Truth:
-    """Every labelled frame's ground truth; the fingerprint changes whenever an annotation does."""
+def load_truth(trained_on: Sequence[str] = (), columns: str = "activities") -> Truth:
+    """Every labelled frame's ground truth; the fingerprint changes whenever an annotation does.
+
+    With ``trained_on`` (a table of models trained on those activities), the
+    frames of those activities are training frames, never scored, and the
+    fingerprint (every cache key of the report) says so. ``columns="sequences"``
+    scores each recording (sequence) of an activity as a column of its own
+    (a dataset of videos imported as one activity; the learned baselines'
+    folds stay by activity).
+    """
     frames = ground_truth.labelled_frames()
     ids = [f.id for f in frames]
     annotations: dict[int, Annotation] = {}
@@ -130,23 +164,28 @@ def load_truth() -> Truth:
         ):
             instances[aid].append(f"{label}={path}")
             labels[aid].append(label or "")
-    names = dict(
+    found = (
         db.session.execute(
-            db.select(Frame.id, Activity.name)
+            db.select(Frame.id, Activity.name, FrameSequence.name)
             .select_from(Frame)
             .join(FrameSequence, Frame.sequence)
             .join(Activity, FrameSequence.activity)
             .where(Frame.id.in_(db.select(Annotation.frame_id)))
         ).all()
     )
+    names = {fid: activity for fid, activity, _ in found}
+    sequences = {fid: sequence for fid, _, sequence in found}
     media_of = {f.id: f"{f.rgb_path}|{f.dhg_path}" for f in frames}
     entries = {}
     for fid, a in annotations.items():
         entries[fid] = (f"{fid}:{media_of.get(fid)}:{a.id}:{a.version}:{a.mask_path}:{a.updated_at.isoformat()}:"
                         f"{','.join(instances[a.id])};")  # fmt: skip
     truth = Truth(frames, annotations, {f.id: names[f.id] for f in frames}, entries, "",
-                  {fid: labels[a.id] for fid, a in annotations.items()})
+                  {fid: labels[a.id] for fid, a in annotations.items()}, tuple(sorted(trained_on)),
+                  {f.id: sequences[f.id] for f in frames}, columns)  # fmt: skip
     truth.fingerprint = truth.digest(entries)
+    if truth.trained_on or columns != "activities":
+        truth.fingerprint = hashlib.sha256(f"{truth.fingerprint}|trained on|{truth.trained_on!r}|{columns}".encode()).hexdigest()
     return truth
 
 
@@ -161,11 +200,13 @@ def _accumulate(
     stats = StatsBuilder(thresholds)
     missing = 0
     for frame, prob in pairs:
+        if not truth.scored(frame.id):  # a training activity's frame: not a column of this table
+            continue
         mask = truth.mask(frame.id)
         if mask is None:
             missing += 1
             continue
-        stats.add(frame.id, truth.activity[frame.id], count_stats(prob, mask, thresholds=thresholds, name=f"prob of frame {frame.id}"))
+        stats.add(frame.id, truth.column(frame.id), count_stats(prob, mask, thresholds=thresholds, name=f"prob of frame {frame.id}"))
         on_progress(1)
     return stats, missing
 
@@ -247,7 +288,7 @@ def participant_stats(
             missing += 1
             continue
         empty = np.zeros(mask.shape, np.float32)
-        stats.add(frame.id, truth.activity[frame.id], count_stats(empty, mask, thresholds=thresholds), answered=False)
+        stats.add(frame.id, truth.column(frame.id), count_stats(empty, mask, thresholds=thresholds), answered=False)
         on_progress(1)
     label = f"{participant.label} of study {participant.study_id}"
     notes = [f"{label}: {gone(missing)}"] if missing else []
@@ -255,11 +296,12 @@ def participant_stats(
 
 
 def baseline_maps(key: str, truth: Truth, notes: list[str], on_progress: Callable[[int], None]) -> Iterator[tuple[Frame, np.ndarray]]:
-    """Baseline ``key``'s map of every labelled frame, activity by activity.
+    """Baseline ``key``'s map of every scored labelled frame, activity by activity.
 
     A learned baseline maps the frames of activity A with the model of A's
     fold, fitted on the other activities only (``fitting``: cached, fitted
-    first when not); it is given the frame's DHG, the others only its colour.
+    first when not), or in a table trained on some activities with the one
+    model fitted on those; it is given the frame's DHG, the others only its colour.
     """
     trained = is_trained(key)
     folds = fitting.fit_missing(key, truth, on_frame=lambda: on_progress(1)) if trained else {}
@@ -267,7 +309,9 @@ def baseline_maps(key: str, truth: Truth, notes: list[str], on_progress: Callabl
     for activity, frames in truth.by_activity().items():
         predictor = folds.get(activity) if trained else shared
         if predictor is None:
-            notes.append(f"{BASELINES[key].name}: no other activity has labelled frames to fit the fold of {activity}.")
+            where = (f"no training activity ({', '.join(truth.trained_on)}) has labelled frames to fit it on" if truth.trained_on
+                     else f"no other activity has labelled frames to fit the fold of {activity}")
+            notes.append(f"{BASELINES[key].name}: {where}.")
             continue
         for frame in frames:
             rgb = io.read_image(media.absolute_path(frame.rgb_path))

@@ -33,6 +33,7 @@ from app.services.training.control import (
     resume_run,
     runs,
     start_run,
+    trained_on,
 )
 from app.services.training.frames import FramePage, frame_page, score_run_frames, unscored_count
 from app.services.training.history import MAX_COMPARED_RUNS, chart_data, parse_run_ids, runs_with_history
@@ -114,5 +115,6 @@ __all__ = [
     "start_run",
     "summarise",
     "train_in_foreground",
+    "trained_on",
     "unscored_count",
 ]

@@ -53,7 +53,9 @@ class RunRequest:
 
     ``width``/``height`` are the training size; ``lr`` ``None`` takes the
     model's default; ``activity_ids`` ``None`` uses every activity with
-    ground truth. ``resume_from`` continues a checkpoint's fold with its own
+    ground truth. ``folds="all"`` trains one model on every labelled frame
+    of those activities, holding none out: it is scored on frames of other
+    activities (``flask egonet predict``). ``resume_from`` continues a checkpoint's fold with its own
     configuration: only ``epochs``, ``device`` and ``name`` then apply.
     """
 
@@ -112,7 +114,9 @@ def create_run(request: RunRequest, *, created_by: User | None = None) -> Traini
         seed=config.seed,
         config={
             "train": config.to_dict() | {"lr": config.learning_rate},
-            "activity_ids": None if request.activity_ids is None else [a.id for a in activities],
+            # A run on every frame names its activities even when it took them all: what it never saw is held out.
+            "activity_ids": (sorted({f.sequence.activity_id for f in frames}) if config.folds == FoldsMode.ALL
+                             else None if request.activity_ids is None else [a.id for a in activities]),
             "activities": sorted({f.sequence.activity.name for f in frames}),
             "frames": len(frames),
         }
@@ -330,6 +334,11 @@ def runs(*, limit: int = 100) -> list[TrainingRun]:
 def checkpoints(*, limit: int = 200) -> list[Checkpoint]:
     """The newest checkpoints first."""
     return list(db.session.execute(db.select(Checkpoint).order_by(Checkpoint.id.desc()).limit(limit)).scalars())
+
+
+def trained_on(run: TrainingRun) -> list[str]:
+    """The activities a run on every frame (``folds="all"``) was trained on, by name; [] for other runs."""
+    return sorted(run.config.get("activities", [])) if run.folds is FoldsMode.ALL else []
 
 
 def completed_runs() -> list[TrainingRun]:

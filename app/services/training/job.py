@@ -296,7 +296,8 @@ def summarise(checkpoints: Iterable[Checkpoint]) -> dict:
     """A run's metrics: per fold, and the mean over folds (the paper reports each activity and the mean)."""
     keys = ("max_f", "ap", "aop_max_f", "aop_ap")
     folds = {c.fold: {k: c.metrics.get(k) for k in (*keys, "loss", "train_loss", "epochs", "test_frames")} for c in checkpoints}
-    mean = {k: float(np.mean([f[k] for f in folds.values()])) for k in keys} if folds else {}
+    # A run on every frame holds none out: it has no held-out scores to average.
+    mean = {k: float(np.mean(values)) for k in keys if (values := [f[k] for f in folds.values() if f[k] is not None])}
     return {"folds": folds, "mean": mean}
 
 

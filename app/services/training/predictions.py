@@ -209,7 +209,8 @@ def predict(
     """Run a checkpoint on frames and store a prediction for each (one transaction).
 
     A frame in the checkpoint's test set gets ``held_out=True`` (every frame,
-    for the authors' released model: it was not trained on ours) and its
+    for the authors' released model: it was not trained on ours; every frame
+    of an activity it was not trained on, for a run on all frames) and its
     per-frame scores at the fold's threshold (``scores_at``);
     predicting a frame again replaces that checkpoint's earlier prediction of it.
 
@@ -241,9 +242,11 @@ def predict(
             field="frames",
         )
     held_out = set(checkpoint.test_frame_ids)
-    every_frame_held_out = checkpoint.run.folds is FoldsMode.RELEASED
-    if every_frame_held_out:
+    if checkpoint.run.folds is FoldsMode.RELEASED:
         held_out = {frame.id for frame in frames}
+    elif checkpoint.run.folds is FoldsMode.ALL:  # trained on every frame of its activities: the others are held out
+        seen = set(checkpoint.run.config.get("activity_ids") or [])
+        held_out = {frame.id for frame in frames if frame.sequence.activity_id not in seen}
     truths = ground_truth.ground_truths([f.id for f in frames if f.id in held_out])
     existing = _existing_predictions(checkpoint, frames)
     out = []
