@@ -120,6 +120,8 @@ class Provenance:
         model_splits: For each model row (a run, and a group's runs), how
             it was split: ``loao``, ``single`` or ``released``.
         code_version: ``app.version.code_version()`` when the report was made.
+        predicted_depth: Per activity, the scored frames whose depth and DHG
+            a network predicted from the RGB (``flask egonet predict-depth``).
     """
 
     metric: str = "pooled"
@@ -134,6 +136,7 @@ class Provenance:
     human_maps: Sequence[HumanMaps] = ()
     model_splits: Mapping[str, str] = field(default_factory=dict)
     code_version: str = ""
+    predicted_depth: Mapping[str, int] = field(default_factory=dict)
 
     def p_text(self, p: float | None) -> str:
         return p_text(p, self.resamples)
@@ -174,7 +177,17 @@ class Provenance:
             ("Frames without action-object pixels", self.empty_text()),
         ]
         out += [("People's maps", f"{m.study}: {m.regions}; click Gaussians of {m.sigma}") for m in self.human_maps]
+        if depth := self.predicted_depth_text():
+            out.append(("Depth", depth))
         return [*out, ("Code", self.code_version or "unknown")]
+
+    def predicted_depth_text(self) -> str:
+        """``"DHG from predicted depth: 12 frames (gaze 12)"``, or ``""`` when every scored frame's depth was measured."""
+        total = sum(self.predicted_depth.values())
+        if not total:
+            return ""
+        where = ", ".join(f"{a} {n}" for a, n in self.predicted_depth.items() if n)
+        return f"DHG from predicted depth: {total} frame{'' if total == 1 else 's'} ({where}), depth predicted from RGB by a network"
 
     def columns(self) -> dict[str, Any]:
         """The facts as flat CSV columns (the same values on every line)."""
@@ -206,5 +219,6 @@ class Provenance:
                    "p_floor": p_floor(self.resamples) if self.resamples else None, "min_frames": MIN_FRAMES},  # fmt: skip
             "human_maps": [asdict(m) | {"rows": list(m.rows)} for m in self.human_maps],
             "model_splits": dict(self.model_splits),
+            "predicted_depth_frames": dict(self.predicted_depth),
             "code_version": self.code_version,
         }

@@ -25,6 +25,7 @@ import numpy as np
 from sqlalchemy import func
 
 from app.extensions import db
+from app.models.frames import Frame
 from app.models.studies import ANSWERED, EndReason, FrameKind, Outcome, Participant, Study, StudyFrame, Trial
 from app.models.training import Prediction, TrainingRun
 from app.services import studies as studies_service
@@ -412,6 +413,7 @@ def build_report(
         metric=metric, thresholds=thresholds, frames=frames, empty=empty, empty_frames=frames_without_truth(found),
         answered_only=answered_only, resamples=resamples, seed=seed, code_version=code_version(),
         human_maps=_human_maps(found, exclude_failed_checks=exclude_failed_checks), model_splits=_model_splits(found),
+        predicted_depth=_predicted_depth(found),
     )
     return _scored(found, notes + loaded, provenance, compare_keys=compare_keys)
 
@@ -425,6 +427,18 @@ def _scored(found: list[Source], notes: list[str], provenance: Provenance, *, co
     rows, activities, frame_notes = build_rows(found, frames=provenance.frames, scorer=scorer)
     comparison = compare(found, *compare_keys, scorer=scorer, provenance=provenance) if compare_keys else None
     return Report(activities=activities, rows=rows, provenance=provenance, notes=frame_notes + notes, comparison=comparison)
+
+
+def _predicted_depth(found: list[Source]) -> dict[str, int]:
+    """Per activity, the scored frames whose depth and DHG were predicted (``Frame.depth_predicted``)."""
+    ids = sorted({int(i) for s in found for i in s.stats.ids.tolist()})
+    counts: dict[str, int] = {}
+    for start in range(0, len(ids), 500):
+        for frame in db.session.execute(db.select(Frame).where(Frame.id.in_(ids[start:start + 500]))).scalars():
+            if frame.depth_predicted:
+                activity = frame.sequence.activity.name
+                counts[activity] = counts.get(activity, 0) + 1
+    return dict(sorted(counts.items()))
 
 
 def _model_splits(found: list[Source]) -> dict[str, str]:
