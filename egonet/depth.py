@@ -156,8 +156,8 @@ def assumed_intrinsics(width: int, height: int, *, hfov_deg: float = ASSUMED_HFO
 
 def intrinsics_record(K: np.ndarray, *, hfov_deg: float = ASSUMED_HFOV_DEG) -> dict:
     """Assumed intrinsics as plain data (for a frame's record): the field of view and ``fx, fy, cx, cy``."""
-    return {"hfov_deg": float(hfov_deg), "fx": float(K[0, 0]), "fy": float(K[1, 1]), "cx": float(K[0, 2]),
-            "cy": float(K[1, 2])}
+    return {"hfov_deg": float(hfov_deg), "fx": round(float(K[0, 0]), 2), "fy": round(float(K[1, 1]), 2),
+            "cx": float(K[0, 2]), "cy": float(K[1, 2])}
 
 
 @dataclass(frozen=True)
