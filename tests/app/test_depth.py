@@ -161,3 +161,18 @@ def test_score_reports_say_dhg_from_predicted_depth():
     assert with_predicted.as_dict()["predicted_depth_frames"] == {"gaze": 3}
     assert "DHG from predicted depth: 3 frames" in methods.paragraph([], with_predicted, activities=[], frames_per_activity={})
     assert "predicted depth" not in " ".join(t for _, t in Provenance().facts())
+
+
+def test_a_queued_depth_run_is_the_worker_s_train_run_job(app, demo, runner, monkeypatch):
+    queued = []
+    monkeypatch.setattr("app.tasks.train_run", lambda run_id: queued.append(run_id))
+    args = ["egonet", "train-depth", "--queue", "--epochs", "1", "--size", "32x24", "--device", "cpu"]
+    result = runner.invoke(args=args)
+    assert result.exit_code == 0 and "queued: start `flask egonet worker`" in result.output
+    result = runner.invoke(args=args)  # a second one, cancelled before the worker gets to it
+    with app.app_context():
+        first, second = sorted(queued)
+        training.cancel_run(db.session.get(TrainingRun, second))
+        assert training.execute_run(second).status is RunStatus.CANCELLED  # left alone, never trained
+        run = training.execute_run(first)  # what the worker's job does
+        assert run.status is RunStatus.DONE and [c.fold for c in run.checkpoints] == ["depth"]
