@@ -3,12 +3,12 @@
 Usage::
 
     .venv/bin/python -m bench.bench_depth                       # from the repository root
-    .venv/bin/python -m bench.bench_depth --sizes 25,100 --steps 100 --threads 2
+    .venv/bin/python -m bench.bench_depth --sizes 25,100 --steps 100 --size 160x120
 
 For each training-set size N, renders N demo frames (``egonet.synth``, seed
 0, spread over the seven activities, RGB-D) and trains
-``egonet.depth.fit_depth`` for the same number of optimiser steps
-(``--steps``, batch 4, at ``--size``; the run holds out the last 20 % of each
+``egonet.depth.fit_depth`` for about the same number of optimiser steps
+(``--steps``, batch 4, whole epochs, at ``--size``; the run holds out the last 20 % of each
 activity as usual, so fewer frames train). Each network is then scored at full
 resolution on two held-out sets:
 
@@ -25,6 +25,7 @@ depth). CPU seconds (``time.process_time``) of each training are printed.
 from __future__ import annotations
 
 import argparse
+import math
 import platform
 import sys
 import time
@@ -37,6 +38,7 @@ from egonet import io
 from egonet.depth import DepthConfig, DepthErrors, DepthPredictor, DepthSample, depth_errors, fit_depth
 from egonet.checkpoint import load_checkpoint
 from egonet.synth import ACTIVITIES, render_activity
+from egonet.train import make_folds
 
 PRIMESENSE = Path(__file__).resolve().parents[1].parent / "shared" / "data" / "rgbd-primesense"
 
@@ -74,9 +76,10 @@ def score(predict, frames: list[DepthSample], constant: float) -> dict[str, floa
 def main(argv: list[str] | None = None) -> int:
     parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     parser.add_argument("--sizes", default="25,100,400", help="training-set sizes N (demo frames)")
-    parser.add_argument("--steps", type=int, default=300, help="optimiser steps per size (batch 4)")
-    parser.add_argument("--size", default="160x120", help="training size WIDTHxHEIGHT (default 160x120)")
-    parser.add_argument("--threads", type=int, default=2)
+    parser.add_argument("--steps", type=int, default=200, help="optimiser steps per size (batch 4), about")
+    parser.add_argument("--size", default="128x96", help="training size WIDTHxHEIGHT (default 128x96)")
+    parser.add_argument("--threads", type=int, default=1,
+                        help="torch threads (default 1: on a loaded machine a second thread spins and triples the CPU time)")
     parser.add_argument("--out", type=Path, default=Path("/tmp/bench_depth"), help="checkpoints go here")
     args = parser.parse_args(argv)
     torch.set_num_threads(args.threads)
@@ -92,7 +95,8 @@ def main(argv: list[str] | None = None) -> int:
     print("|---|---|---|---|---|---|---|---|---|---|")
     for n in sizes:
         train = demo_frames(n, seed=0, width=320, height=240)
-        epochs = max(1, round(args.steps * 4 / (0.8 * n)))
+        trained = len(make_folds([s.group for s in train], mode="single", test_fraction=0.2)[0].train)
+        epochs = max(1, round(args.steps / math.ceil(trained / 4)))  # about --steps steps whatever n
         config = DepthConfig(epochs=epochs, width=width, height=height, batch_size=4, device="cpu")
         out = args.out / f"depth-{n}.pt"
         cpu = time.process_time()
@@ -100,9 +104,10 @@ def main(argv: list[str] | None = None) -> int:
         cpu = time.process_time() - cpu
         predictor = DepthPredictor(load_checkpoint(out))
         constant = result.metrics["constant_depth_m"]
+        steps = epochs * math.ceil(trained / 4)
         for name, frames in sets:
             s = score(predictor.predict, frames, constant)
-            print(f"| {n} / {result.metrics['train_frames']} ({epochs} epochs) | {name} | {s['net'][0]:.3f} | {s['net'][1]:.3f} "
+            print(f"| {n} / {trained} ({epochs} epochs, {steps} steps) | {name} | {s['net'][0]:.3f} | {s['net'][1]:.3f} "
                   f"| {s['net_ms'][0]:.3f} | {s['net_ms'][1]:.3f} | {s['const'][0]:.3f} | {s['const'][1]:.3f} "
                   f"| {s['const_ms'][0]:.3f} / {s['const_ms'][1]:.3f} | {cpu:.0f} |", flush=True)
     return 0
