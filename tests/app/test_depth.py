@@ -176,3 +176,6 @@ def test_a_queued_depth_run_is_the_worker_s_train_run_job(app, demo, runner, mon
         assert training.execute_run(second).status is RunStatus.CANCELLED  # left alone, never trained
         run = training.execute_run(first)  # what the worker's job does
         assert run.status is RunStatus.DONE and [c.fold for c in run.checkpoints] == ["depth"]
+        resumed = training.resume_run(db.session.get(TrainingRun, second))  # queued again, trained from the start
+        assert resumed.status is RunStatus.QUEUED and queued[-1] == second
+        assert training.execute_run(second).status is RunStatus.DONE
