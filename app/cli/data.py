@@ -17,6 +17,8 @@ from app.models import Role, Status
 @click.option("--dhg", "dhg_dir", type=click.Path(path_type=Path), help="Folder of DHG images (3-channel 8-bit: gray, height, depth, as the authors' files).")
 @click.option("--masks", "masks_dir", type=click.Path(path_type=Path), help="Folder of binary mask PNGs (initial annotations).")
 @click.option("--intrinsics", type=click.Path(path_type=Path), help="Camera intrinsics JSON (fx, fy, cx, cy or a 3x3 matrix).")
+@click.option("--depth-source", type=click.Choice(["measured", "predicted"]), default="measured", show_default=True,
+              help="predicted: the depth (or DHG) was estimated from the RGB by some network, and is marked so.")
 @click.option("--mask-author", default="import", show_default=True, help="Author of imported masks.")
 @click.option(
     "--mask-status",
@@ -25,7 +27,8 @@ from app.models import Role, Status
     show_default=True,
     help="Status of imported masks.",
 )
-def import_command(path, activity, sequence, stride, depth_dir, dhg_dir, masks_dir, intrinsics, mask_author, mask_status):
+def import_command(path, activity, sequence, stride, depth_dir, dhg_dir, masks_dir, intrinsics, depth_source, mask_author,
+                   mask_status):
     """Import frames from PATH: a folder of images or a video file.
 
     A folder may hold the images directly or in rgb/ (or color/), with
@@ -44,6 +47,7 @@ def import_command(path, activity, sequence, stride, depth_dir, dhg_dir, masks_d
             dhg_dir=dhg_dir,
             masks_dir=masks_dir,
             intrinsics=intrinsics,
+            depth_source=depth_source,
             mask_author=mask_author,
             mask_status=Status(mask_status),
             on_start=on_start,

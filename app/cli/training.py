@@ -133,6 +133,70 @@ def _scores_line(name: str, scores: dict) -> str:
     return f"  {name:<14} MF {f('max_f')}  AP {f('ap')}   (action-object prior: MF {f('aop_max_f')}  AP {f('aop_ap')})"
 
 
+@bp.cli.command("train-depth")
+@click.option("--epochs", type=click.IntRange(min=1), default=10, show_default=True)
+@click.option("--size", default="160x120", show_default=True, callback=_size, help="Training size WIDTHxHEIGHT.")
+@click.option("--lr", type=click.FloatRange(min=0, min_open=True), default=1e-3, show_default=True, help="Adam's learning rate.")
+@click.option("--batch-size", type=click.IntRange(min=1), default=4, show_default=True)
+@click.option("--seed", type=click.IntRange(min=0), default=0, show_default=True)
+@click.option("--device", type=click.Choice(["auto", "cpu", "cuda"]), default="auto", show_default=True)
+@click.option("--activities", "activities", multiple=True, help="Train on these activities only (repeat the option; default: all).")
+@click.option("--name", help="Name of the run.")
+@click.option("--queue", is_flag=True, help="Queue the run for `flask egonet worker` instead of training here.")
+def train_depth_command(epochs, size, lr, batch_size, seed, device, activities, name, queue):
+    """Train a monocular depth network on every frame with measured depth.
+
+    A training run (model depth-lite) with its epochs; the last 20% of each
+    activity's frames are held out and scored (AbsRel, delta<1.25) against a
+    constant depth. `flask egonet predict-depth` then uses it.
+    """
+    from app.services.training import execute_run
+    from app.services.training.depth import DepthRequest, create_depth_run, start_depth_run
+
+    request = DepthRequest(epochs=epochs, width=size[0], height=size[1], lr=lr, batch_size=batch_size, seed=seed,
+                           device=device, activity_ids=_activity_ids(activities), name=name)
+    if queue:
+        run = start_depth_run(request)
+        click.echo(f"run {run.id} queued: start `flask egonet worker` to train it")
+        return
+    run = create_depth_run(request)
+    bar = TrainingBar()
+    try:
+        run = execute_run(run.id, on_progress=bar)
+    finally:
+        bar.close()
+    click.echo(f"run {run.id} ({run.name}): {run.status.value}")
+    m = run.metrics.get("depth")
+    if m:
+        click.echo(f"held-out ({m['test_frames']} frames): AbsRel {_number(m['abs_rel'])} delta<1.25 {_number(m['delta1'])}; "
+                   f"median-scaled {_number(m['abs_rel_median_scaled'])} / {_number(m['delta1_median_scaled'])}; "
+                   f"constant {m['constant_depth_m']:.2f} m: {_number(m['constant_abs_rel'])} / {_number(m['constant_delta1'])}")
+    if run.status.value != "done":
+        raise click.ClickException(run.message or f"run {run.id} {run.status.value}")
+
+
+def _number(value) -> str:
+    return "-" if value is None else f"{value:.3f}"
+
+
+@bp.cli.command("predict-depth")
+@click.option("--activity", required=True, help="The activity whose frames without depth get predicted depth and DHG.")
+@click.option("--checkpoint", "checkpoint_id", type=int, metavar="ID", help="A depth run's checkpoint [default: the newest].")
+@click.option("--device", type=click.Choice(["cpu", "cuda"]), default="cpu", show_default=True)
+def predict_depth_command(activity, checkpoint_id, device):
+    """Predict depth, and DHG from it, for every frame of an activity that has no depth.
+
+    Marked predicted wherever shown or used; measured depth is never replaced.
+    Frames without intrinsics get an assumed camera (60 degrees wide), and say so.
+    """
+    from app.services.training.depth import predict_depth
+
+    report = predict_depth(activity, checkpoint_id=checkpoint_id, device=device)
+    click.echo(f"checkpoint {report.checkpoint_id}: {report.predicted} frames given predicted depth and DHG"
+               f" ({report.assumed_intrinsics} with assumed intrinsics); kept {report.kept_measured} with measured depth"
+               f" and {report.kept_dhg} with imported DHG")
+
+
 @bp.cli.command("predict")
 @click.argument("checkpoint_id", type=int)
 @click.option("--activity", "activities", multiple=True, help="Predict the frames of this activity (repeatable).")

@@ -8,6 +8,9 @@ from sqlalchemy.orm import Mapped, WriteOnlyMapped, mapped_column, relationship
 
 from app.models.base import Base, UTCDateTime, utcnow
 
+DEPTH_PREDICTED = "predicted"
+"""``Frame.meta["depth_source"]`` of a frame whose depth (and DHG) a network predicted, not a sensor."""
+
 
 class Activity(Base):
     """One of the recorded activities ("scenes" in the paper): cooking, hotel..."""
@@ -77,6 +80,11 @@ class Frame(Base):
     annotations: Mapped[list["Annotation"]] = relationship(  # noqa: F821
         back_populates="frame", cascade="all, delete-orphan", passive_deletes=True
     )
+
+    @property
+    def depth_predicted(self) -> bool:
+        """Whether the frame's depth and DHG are predicted from its RGB (``meta["depth_source"]``), not measured."""
+        return (self.meta or {}).get("depth_source") == DEPTH_PREDICTED
 
     @property
     def intrinsics(self) -> list[list[float]] | None:

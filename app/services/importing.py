@@ -32,6 +32,7 @@ from sqlalchemy.exc import IntegrityError
 from app.errors import Problem
 from app.extensions import db
 from app.models import HAND_LABEL, Activity, Annotation, Frame, Instance, Role, Sequence, Status, User
+from app.models.frames import DEPTH_PREDICTED
 from app.services import media
 from egonet import io
 
@@ -43,6 +44,8 @@ ZIP_MAX_RATIO = 200  # a member inflating more than this is a zip bomb, not a ph
 # Sub-folders recognised inside an import folder.
 RGB_DIRS = ("rgb", "color", "colour", "images")
 DEPTH_DIRS = ("depth",)
+DEPTH_SOURCES = ("measured", DEPTH_PREDICTED)
+"""``--depth-source``: a sensor's depth, or one a network estimated from the RGB."""
 DHG_DIRS = ("dhg",)
 MASK_DIRS = ("masks", "mask")
 
@@ -156,6 +159,7 @@ def import_path(
     dhg_dir: Path | None = None,
     masks_dir: Path | None = None,
     intrinsics: Path | None = None,
+    depth_source: str = "measured",
     mask_author: str = "import",
     mask_status: Status = Status.DONE,
     on_start: Callable[[int], None] | None = None,
@@ -165,6 +169,10 @@ def import_path(
 
     Depth, DHG and mask files are matched to frames by file stem (for a
     video, by the frame number: ``12.png`` or ``000012.png`` is frame 12).
+    ``depth_source="predicted"`` marks the depth and DHG of the imported
+    frames as estimated from the RGB (``Frame.depth_predicted``); such
+    depth without intrinsics gets its DHG with assumed intrinsics
+    (``egonet.depth.assumed_intrinsics``), said in the frame's ``meta``.
 
     Raises:
         ImportProblem: bad options or layout, naming the option or path.
@@ -172,6 +180,9 @@ def import_path(
     """
     if stride < 1:
         raise ImportProblem(f"--stride must be >= 1, got {stride}", field="stride")
+    if depth_source not in DEPTH_SOURCES:
+        raise ImportProblem(f"--depth-source must be one of {', '.join(DEPTH_SOURCES)}, got {depth_source!r}",
+                            field="depth_source")
     path = Path(path)
     if path.suffix.lower() == ".zip":
         with unpacked(path) as folder:
@@ -184,6 +195,7 @@ def import_path(
                 dhg_dir=dhg_dir,
                 masks_dir=masks_dir,
                 intrinsics=intrinsics,
+                depth_source=depth_source,
                 mask_author=mask_author,
                 mask_status=mask_status,
                 on_start=on_start,
@@ -191,6 +203,8 @@ def import_path(
             )
     source = discover(path, depth_dir=depth_dir, dhg_dir=dhg_dir, masks_dir=masks_dir, intrinsics=intrinsics)
     total, items = _frame_items(source, path, stride)
+    if depth_source == DEPTH_PREDICTED:
+        items = _marked_predicted(items)
     if on_start:
         on_start(total)
     return add_frames(
@@ -202,6 +216,14 @@ def import_path(
         mask_status=mask_status,
         on_progress=on_progress,
     )
+
+
+def _marked_predicted(items: Iterator[FrameItem]) -> Iterator[FrameItem]:
+    """The items, those with depth or DHG marked as predicted (``--depth-source predicted``)."""
+    for item in items:
+        if item.depth_m is not None or item.dhg is not None:
+            item.meta["depth_source"] = DEPTH_PREDICTED
+        yield item
 
 
 def _frame_items(source: Source, path: Path, stride: int) -> tuple[int, Iterator[FrameItem]]:
@@ -369,11 +391,16 @@ def _add_frame(seq: Sequence, item: FrameItem, known: set[str], written: list[Pa
     if item.depth_m is not None:
         _check_size(item.depth_m, rgb, f"depth for {item.origin}")
         frame.depth_path = media.store(io.encode_depth_png(item.depth_m), ".png", written=written)
-    dhg = item.dhg
-    if dhg is None and item.depth_m is not None and item.K is not None:
+    dhg, K = item.dhg, item.K
+    if dhg is None and item.depth_m is not None and K is None and frame.depth_predicted:
+        from egonet.depth import assumed_intrinsics, intrinsics_record
+
+        K = assumed_intrinsics(width, height)
+        frame.meta = frame.meta | {"intrinsics_assumed": True, "assumed_intrinsics": intrinsics_record(K)}
+    if dhg is None and item.depth_m is not None and K is not None:
         from egonet.dhg import dhg_from_depth
 
-        dhg = dhg_from_depth(item.depth_m, item.K, rgb)
+        dhg = dhg_from_depth(item.depth_m, K, rgb)
     if dhg is not None:
         _check_size(dhg, rgb, f"DHG for {item.origin}")
         frame.dhg_path = media.store(io.encode_png(dhg), ".png", written=written)

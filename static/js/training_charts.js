@@ -45,7 +45,7 @@ function keepPolling(history, step) {
   if (history.active) setTimeout(step, POLL_MS);
 }
 
-// The run page: #run-chart holds two chart boxes, #chart-loss and #chart-mf.
+// The run page: #run-chart holds #chart-loss and, but for a depth run, #chart-mf; data-loss-label names the loss.
 export function runPage(section) {
   const runId = Number(section.dataset.run);
   const history = new History();
@@ -53,8 +53,9 @@ export function runPage(section) {
     try {
       await load(section.dataset.historyUrl, [runId], history);
       const charts = runCharts(history, runId);
-      draw(section.querySelector("#chart-loss"), charts.loss, { xLabel: "epoch", yLabel: "cross-entropy" });
-      draw(section.querySelector("#chart-mf"), charts.mf, { xLabel: "epoch", yLabel: "held-out MF", yMin: 0, yMax: 1 });
+      draw(section.querySelector("#chart-loss"), charts.loss, { xLabel: "epoch", yLabel: section.dataset.lossLabel || "cross-entropy" });
+      const mf = section.querySelector("#chart-mf"); // a depth run has no MF chart
+      if (mf) draw(mf, charts.mf, { xLabel: "epoch", yLabel: "held-out MF", yMin: 0, yMax: 1 });
       section.dataset.loaded = String(history.rows.size);
     } catch (error) {
       console.warn("training history:", error.message);

@@ -133,8 +133,13 @@ def _coco_image(image_id: int, group: FrameExport, name: str, records: list[dict
         "source_name": frame.source_name,
         "index": frame.index,
         "content_hash": frame.content_hash,
+        # Where the frame's depth and DHG came from: "measured", "predicted" (a network's, from the RGB), or None.
+        "depth": ("predicted" if frame.depth_predicted else "measured") if frame.depth_path or frame.dhg_path else None,
         "annotations": records,
     }
+    if frame.depth_predicted:
+        meta["depth_model"] = frame.meta.get("depth_model")
+        meta["intrinsics_assumed"] = bool(frame.meta.get("intrinsics_assumed"))
     if "mask_file" in records[0]:  # PNG masks were written
         meta["mask_file"] = f"{MASKS_DIR}/{name}.png"
     return {"id": image_id, "file_name": _image_name(frame, name), "width": frame.width, "height": frame.height,

@@ -275,11 +275,13 @@ def _hint(frame: Frame, run: TrainingRun | None, reason: str, auto: str, others:
 
 
 def suggestion_runs(*, limit: int = 20) -> list[TrainingRun]:
-    """Finished runs with at least one checkpoint file, newest first (the page's choice of run)."""
+    """Finished action-object runs (not depth runs) with at least one checkpoint file, newest first (the page's choice of run)."""
+    from egonet.depth import DEPTH_MODEL
+
     root = training.checkpoint_root()
     query = (
         db.select(TrainingRun)
-        .where(TrainingRun.status == RunStatus.DONE)
+        .where(TrainingRun.status == RunStatus.DONE, TrainingRun.model_name != DEPTH_MODEL)
         .order_by(TrainingRun.finished_at.desc(), TrainingRun.id.desc())
     )
     out = []
@@ -303,8 +305,10 @@ def resolve_run(run_id: int | None, frame: Frame | None = None) -> TrainingRun:
     Raises:
         SuggestProblem: ``run_id``: no such run (404), a run not finished or
             without checkpoints (409), or no usable run at all (409, "Train a
-            model first").
+            model first"); a depth run (409).
     """
+    from egonet.depth import DEPTH_MODEL
+
     if run_id is None:
         run = latest_run(frame)
         if run is None:
@@ -319,6 +323,9 @@ def resolve_run(run_id: int | None, frame: Frame | None = None) -> TrainingRun:
     if run is None:
         raise SuggestProblem(f"run_id: there is no training run {run_id}", status=404,
                              fields={"run_id": "no such run"})
+    if run.model_name == DEPTH_MODEL:
+        raise SuggestProblem(f"run_id: run {run.id} predicts depth, not action-objects", status=409,
+                             fields={"run_id": "a depth run"})
     if run.status is not RunStatus.DONE:
         raise SuggestProblem(
             f"run_id: run {run.id} is {run.status.value}; only a finished (done) run can suggest",

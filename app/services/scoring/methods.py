@@ -86,6 +86,8 @@ def paragraph(rows: Sequence[Row], provenance: Provenance, *, activities: Sequen
             parts.append(_study_sentences(study, rows, p))
     if not rows:
         parts.append("The report has no rows.")
+    if depth := p.predicted_depth_text():
+        parts.append(f"{depth}.")
     parts.append(_interval_sentence(p))
     parts.append(f"Scores were computed with {p.code_version or 'EgoNet Studio'}.")
     return " ".join(parts) + "\n"

@@ -129,6 +129,8 @@ class Provenance:
         ground_truth: For each activity whose ground truth was made from
             attention points (``app.services.attention_points``), how, in words;
             the others' is masks drawn (or imported) by people.
+        predicted_depth: Per activity, the scored frames whose depth and DHG
+            a network predicted from the RGB (``flask egonet predict-depth``).
     """
 
     metric: str = "pooled"
@@ -151,6 +153,7 @@ class Provenance:
     def ground_truth_text(self) -> str:
         """Where the ground truth came from: ``kids: attention points, sigma 15 px, ...; other activities: drawn masks``."""
         return "; ".join([*(f"{a}: {t}" for a, t in self.ground_truth.items()), "other activities: drawn masks"])
+    predicted_depth: Mapping[str, int] = field(default_factory=dict)
 
     def p_text(self, p: float | None) -> str:
         return p_text(p, self.resamples)
@@ -207,7 +210,17 @@ class Provenance:
         if self.ground_truth:
             out.append(("Ground truth", self.ground_truth_text()))
         out += [("People's maps", f"{m.study}: {m.regions}; click Gaussians of {m.sigma}") for m in self.human_maps]
+        if depth := self.predicted_depth_text():
+            out.append(("Depth", depth))
         return [*out, ("Code", self.code_version or "unknown")]
+
+    def predicted_depth_text(self) -> str:
+        """``"DHG from predicted depth: 12 frames (gaze 12)"``, or ``""`` when every scored frame's depth was measured."""
+        total = sum(self.predicted_depth.values())
+        if not total:
+            return ""
+        where = ", ".join(f"{a} {n}" for a, n in self.predicted_depth.items() if n)
+        return f"DHG from predicted depth: {total} frame{'' if total == 1 else 's'} ({where}), depth predicted from RGB by a network"
 
     def columns(self) -> dict[str, Any]:
         """The facts as flat CSV columns (the same values on every line)."""
@@ -245,5 +258,6 @@ class Provenance:
             "columns": self.column_kind,
             "trained_on": {"activities": list(self.trained_on), "frames": dict(self.training_frames)} if self.trained_on else None,
             "ground_truth": dict(self.ground_truth),
+            "predicted_depth_frames": dict(self.predicted_depth),
             "code_version": self.code_version,
         }

@@ -25,6 +25,7 @@ import numpy as np
 from sqlalchemy import func
 
 from app.extensions import db
+from app.models.frames import Frame
 from app.models.studies import ANSWERED, EndReason, FrameKind, Outcome, Participant, Study, StudyFrame, Trial
 from app.models import Activity, Annotation
 from app.models.training import FoldsMode, Prediction, TrainingRun
@@ -511,12 +512,13 @@ def build_report(
         exclude_failed_checks=exclude_failed_checks, by_condition=by_condition, use_cache=use_cache,
         fit_in_worker=fit_in_worker, on_start=on_start, on_progress=on_progress, trained_on=trained_on, columns=columns,
     )
+    truths, frames_scored, column_of = _scored_frames(found)
     provenance = Provenance(
         metric=metric, thresholds=thresholds, frames=frames, empty=empty, empty_frames=frames_without_truth(found),
         answered_only=answered_only, resamples=resamples, seed=seed, code_version=code_version(),
         human_maps=_human_maps(found, exclude_failed_checks=exclude_failed_checks), model_splits=_model_splits(found),
         trained_on=truth.trained_on, training_frames=_training_frames(truth), column_kind=columns,
-        ground_truth=attention_points.activity_sources(*_scored_truth(found)),
+        ground_truth=attention_points.activity_sources(truths, column_of), predicted_depth=_predicted_depth(frames_scored, column_of),
     )
     return _scored(found, notes + loaded, provenance, compare_keys=compare_keys)
 
@@ -532,21 +534,28 @@ def _scored(found: list[Source], notes: list[str], provenance: Provenance, *, co
     return Report(activities=activities, rows=rows, provenance=provenance, notes=frame_notes + notes, comparison=comparison)
 
 
-def _scored_truth(found: list[Source]) -> tuple[dict[int, Annotation], dict[int, str]]:
-    """The ground-truth annotations of the frames the rows are scored on, and those frames' activities."""
-    activity: dict[int, str] = {}
+def _scored_frames(found: list[Source]) -> tuple[dict[int, Annotation], dict[int, Frame], dict[int, str]]:
+    """The frames the rows are scored on: their ground-truth annotations, the frames, and each frame's column."""
+    column_of: dict[int, str] = {}
     for source in found:
-        activity.update(zip(source.stats.ids.tolist(), source.stats.activities.tolist()))
-    ids, truths = sorted(activity), {}
+        column_of.update(zip(source.stats.ids.tolist(), source.stats.activities.tolist()))
+    ids, truths, frames = sorted(column_of), {}, {}
     for start in range(0, len(ids), 5000):  # keep IN lists well under SQLite's variable limit
-        truths.update(ground_truth.ground_truths(ids[start : start + 5000]))
-    return truths, activity
+        chunk = ids[start : start + 5000]
+        truths.update(ground_truth.ground_truths(chunk))
+        frames.update((f.id, f) for f in db.session.execute(db.select(Frame).where(Frame.id.in_(chunk))).scalars())
+    return truths, frames, column_of
 
 
 def _training_frames(truth: Truth) -> dict[str, int]:
     """The labelled frames of each training activity (what the table's learned baselines were fitted on)."""
     counts = Counter(truth.activity[f.id] for f in truth.frames)
     return {a: counts[a] for a in truth.trained_on}
+
+
+def _predicted_depth(frames: dict[int, Frame], column_of: dict[int, str]) -> dict[str, int]:
+    """Per column, the scored frames whose depth and DHG were predicted (``Frame.depth_predicted``)."""
+    return dict(sorted(Counter(column_of[i] for i, frame in frames.items() if frame.depth_predicted).items()))
 
 
 def _model_splits(found: list[Source]) -> dict[str, str]:

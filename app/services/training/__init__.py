@@ -17,6 +17,8 @@ A run is a ``TrainingRun`` row first, then a job that trains it with
 * ``history``: the per-epoch rows the job writes and the charts poll.
 * ``frames``: the per-frame browser of held-out predictions; scoring old runs' maps.
 * ``manage``: rename and tag runs, their downloads, deleting a run and all it made.
+* ``depth``: depth runs (``depth-lite``, trained by the same job) and
+  ``predict_depth``, predicted depth and DHG for frames without depth.
 
 Callers import from here: ``from app.services import training``.
 """

@@ -342,8 +342,10 @@ def trained_on(run: TrainingRun) -> list[str]:
 
 
 def completed_runs() -> list[TrainingRun]:
-    """Runs whose status is done, newest first (for scoring)."""
-    query = db.select(TrainingRun).where(TrainingRun.status == RunStatus.DONE)
+    """Runs whose status is done, newest first (for scoring): action-object models, not depth runs."""
+    from egonet.depth import DEPTH_MODEL
+
+    query = db.select(TrainingRun).where(TrainingRun.status == RunStatus.DONE, TrainingRun.model_name != DEPTH_MODEL)
     return list(db.session.execute(query.order_by(TrainingRun.created_at.desc(), TrainingRun.id.desc())).scalars())
 
 

@@ -25,6 +25,7 @@ from app.models import User, is_hand, utcnow
 from app.models.training import FINAL_STATUSES, Checkpoint, Prediction, RunStatus, TrainingRun
 from app.services import ground_truth, media
 from app.services.training.control import RunRequest, TrainingProblem, cancel_run, checkpoint_root, claim_run, create_run
+from app.services.training import depth
 from app.services.training.predictions import FoldScorer
 from app.services.training.history import record_epochs
 from egonet import io
@@ -156,6 +157,8 @@ def execute_run(run_id: int, *, on_progress: Callable | None = None) -> Training
     run = db.session.get(TrainingRun, run_id)
     if run is None:
         raise TrainingProblem(f"no training run with id {run_id}")
+    if depth.is_depth_run(run):
+        return _execute_depth_run(run, on_progress=on_progress)
     config = TrainConfig.from_dict(run.config["train"])
     try:
         rank, _ = setup_distributed(resolve_device(config.device))
@@ -183,6 +186,39 @@ def execute_run(run_id: int, *, on_progress: Callable | None = None) -> Training
         raise
     except Exception as exc:
         log.exception("training run %s failed", run_id)
+        _fail(run, exc)
+        raise
+    _finish(run)
+    return run
+
+
+def _execute_depth_run(run: TrainingRun, *, on_progress: Callable | None) -> TrainingRun:
+    """A depth run (``app.services.training.depth``): one network, the last 20 % of each activity held out.
+
+    Trained again from the start when resumed (it keeps no partial checkpoint).
+    """
+    from egonet.depth import fit_depth
+
+    if not claim_run(run, "loading frames"):
+        return run
+    recorder = _Recorder(run.id, checkpoint_root() / f"run-{run.id}", on_progress)
+    try:
+        result = fit_depth(
+            depth.depth_samples(run), depth.depth_config(run), out_path=depth.checkpoint_path(run),
+            on_progress=recorder.progress, on_epoch=lambda record: recorder.epoch("depth", record),
+        )
+        depth.record_depth_result(run, result)
+        db.session.commit()
+    except Cancelled:
+        db.session.rollback()
+        db.session.refresh(run)
+        return run
+    except KeyboardInterrupt:
+        db.session.rollback()
+        cancel_run(run)
+        raise
+    except Exception as exc:
+        log.exception("depth run %s failed", run.id)
         _fail(run, exc)
         raise
     _finish(run)

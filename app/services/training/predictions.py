@@ -226,10 +226,13 @@ def predict(
     from app.services import ground_truth
     from egonet.predictor import NetworkPredictor
     from egonet.checkpoint import load_checkpoint
+    from egonet.depth import DEPTH_MODEL
     from egonet.train import resolve_device
 
     if not frames:
         raise TrainingProblem("no frames to predict", field="frames")
+    if checkpoint.run.model_name == DEPTH_MODEL:
+        raise TrainingProblem(f"checkpoint {checkpoint.id} predicts depth: use `flask egonet predict-depth`", field="checkpoint")
     try:
         state = load_checkpoint(checkpoint_root() / checkpoint.path)
         predictor = NetworkPredictor.from_checkpoint(state, device=resolve_device(device))
