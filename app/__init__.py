@@ -132,6 +132,9 @@ def _default_config(instance: Path) -> dict:
         # fitting and maps would take longer than this are scored by the worker.
         BASELINE_INLINE_S=20.0,
         QUEUE_URL=os.environ.get("EGONET_QUEUE_URL") or f"sqlite:///{instance / 'queue.sqlite3'}",
+        # With the SQLite queue the app runs its jobs itself, in a thread (app.queue):
+        # no `flask egonet worker` needed on one machine. False: only a worker runs them.
+        QUEUE_IN_PROCESS=True,
         MAX_CONTENT_LENGTH=64 * 1024 * 1024,
         SESSION_COOKIE_HTTPONLY=True,
         SESSION_COOKIE_SAMESITE="Lax",

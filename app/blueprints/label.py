@@ -82,6 +82,8 @@ def stroke_schema() -> dict:
         "points": List(POINT, max_len=current_app.config["GRABCUT_MAX_STROKE_POINTS"]),
         "label": Str(choices=["fg", "bg"]),
         "radius": Float(),
+        # The object's mask as the page has it: GrabCut starts from it when the user has no session of the object.
+        "start": labelling.Rle(nullable=True, default=None),
     }
 
 
@@ -595,13 +597,15 @@ def grabcut_box():
 @roles(*EDITORS)
 @takes_json(MIB)
 def grabcut_stroke():
-    """``{frame_id, instance, points: [[x, y], ...], label: fg|bg, radius}`` -> the updated mask (PNG)."""
+    """``{frame_id, instance, points: [[x, y], ...], label: fg|bg, radius, start?}`` -> the updated mask (PNG);
+    ``start`` (RLE, the object's mask) starts GrabCut from it when the user has no session of the object."""
     started = _clock()
     data = json_body(stroke_schema())
     fr, key = _target(data)
     labelling.check_stroke(fr, data["points"], data["radius"])
+    start = None if data["start"] is None else labelling.decode_rle(data["start"], (fr.height, fr.width), field="start")
     result = labelling.grabcut_stroke(fr, me(), key, points=data["points"], label=data["label"],
-                                      radius=data["radius"])
+                                      radius=data["radius"], start=start)
     return png_response(result.mask, can_undo=result.can_undo, started=started)
 
 

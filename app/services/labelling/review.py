@@ -2,7 +2,8 @@
 reviewer's fix of its masks, which frames and annotations wait for whom, and
 the masks' thumbnails they show.
 
-A reviewer accepts a done annotation (reviewed; its GrabCut sessions go) or
+A reviewer accepts a done annotation (reviewed; its GrabCut sessions go, its
+author's undo history stays) or
 rejects it with a comment (rejected, back to its author). Before deciding, a
 reviewer may fix its masks on the review page (``fix_annotation``): the fix
 is saved into the author's annotation (it stays theirs, one per frame and
@@ -82,8 +83,8 @@ def review_annotation(annotation: Annotation, reviewer: User, *, version: int, d
     if user_annotation(annotation.frame, reviewer) is None:
         forget_sessions(annotation.frame, reviewer, keep=set())  # those of a fix
     if annotation.status is Status.REVIEWED:
+        # The author's undo history stays: reopened, the frame undoes as before.
         forget_sessions(annotation.frame, annotation.author, keep=set())
-        forget_histories(annotation)
     try:
         db.session.commit()
     except StaleDataError:
