@@ -394,6 +394,12 @@ def grabcut_seed(frame: Frame, user: User, key: str, mask: np.ndarray, *, band: 
                     use_depth=has_depth if use_depth is None else use_depth)
 
 
+START_BAND = 8
+"""Pixels a stroke's session started from a mask may move its edge (``grabcut_stroke``'s ``start``).
+With the edge fixed (0) the engine's models see too little background: a
+background stroke then emptied a hand-painted mask of a plain object."""
+
+
 def grabcut_stroke(frame: Frame, user: User, key: str, *, points: list, label: str, radius: float,
                    start: np.ndarray | None = None) -> GrabCutResult:
     """Add a corrective fg/bg stroke to the object ``key``; see ``check_stroke``.
@@ -403,9 +409,11 @@ def grabcut_stroke(frame: Frame, user: User, key: str, *, points: list, label: s
         start: The object's mask as the page has it (bool ``(H, W)``), for an
             object this user has no GrabCut session of: one painted by hand,
             fixed by a reviewer, or kept after its sessions went (marked done,
-            accepted). The session then starts from that mask exactly, as
-            ``grabcut_seed`` with ``band`` 0 does (its models learnt from it),
-            and the stroke corrects it. Ignored while a session exists.
+            accepted). The session then starts from that mask as GrabCut's
+            trimap (``grabcut_seed`` with ``START_BAND``: the mask eroded by
+            the band stays in, beyond it dilated by the band stays out, the
+            edge between is GrabCut's to place), and the stroke corrects it.
+            Ignored while a session exists.
     """
     if start is not None and (not start.any() or start.all()):
         raise Problem("start: the object's mask is empty or covers the whole frame; draw a box around the object first",
@@ -463,7 +471,7 @@ def _operate_locked(frame: Frame, user: User, key: str, apply: Callable[[GrabCut
                     raise Problem("box: draw a box around the object first", fields={"box": "no box yet for this object"})
                 session = _new_session(frame, use_depth=use_depth)
                 if not create:
-                    session.seed_mask(start)
+                    session.seed_mask(start, band=START_BAND)
             else:
                 session = _sessions.take(row.revision) or _load_session(frame, row.state)
                 if create and session.uses_depth != use_depth:
