@@ -29,13 +29,17 @@ export function showMessage(text, kind = "info") {
   messageTimer = setTimeout(() => (el.hidden = true), kind === "error" ? 7000 : 4000);
 }
 
-// The server's whole reason, with the fields it names when the message does not.
+// The server's reason in words: the API's "field: reason" messages lose
+// their field's name, and a field's note is added only when the message
+// does not already say it (no "(status: is reviewed)" after "this one is reviewed").
 export function errorText(err) {
-  if (err instanceof ApiError) {
-    const fields = Object.entries(err.body?.fields || {}).map(([k, v]) => `${k}: ${v}`);
-    return fields.length && !err.message.includes(fields[0].split(":")[0]) ? `${err.message} (${fields.join("; ")})` : err.message;
-  }
-  return err?.message || String(err);
+  if (!(err instanceof ApiError)) return err?.message || String(err);
+  const message = err.message;
+  const fields = Object.entries(err.body?.fields || {});
+  const named = fields.find(([k]) => /^[a-z_]+$/.test(k) && message.startsWith(`${k}: `));
+  const text = named ? message.charAt(named[0].length + 2).toUpperCase() + message.slice(named[0].length + 3) : message;
+  const extra = fields.filter(([k, v]) => !message.includes(k) && !message.includes(String(v)));
+  return extra.length ? `${text} (${extra.map(([k, v]) => `${k}: ${v}`).join("; ")})` : text;
 }
 
 export function updateControls() {
