@@ -150,6 +150,9 @@ def page_config(frame: Frame, *, mode: str, annotation: Annotation | None = None
             accept_proposal=url_for("label.accept_proposal", frame_id=frame.id),
         )
         config["suggest"] = labelling.source_choices(frame)
+        # Whether the sequence goes on either side: Propagate and Copy are disabled (with the reason) where not.
+        config["carry"] = {"next": labelling.adjacent_frame(frame, step=1) is not None,
+                           "previous": labelling.adjacent_frame(frame, step=-1) is not None}
     else:
         config["own"] = annotation.author_id == current_user.id
         config["urls"].update(

@@ -37,7 +37,8 @@ export function errorText(err) {
   const message = err.message;
   const fields = Object.entries(err.body?.fields || {});
   const named = fields.find(([k]) => /^[a-z_]+$/.test(k) && message.startsWith(`${k}: `));
-  const text = named ? message.charAt(named[0].length + 2).toUpperCase() + message.slice(named[0].length + 3) : message;
+  const reason = named ? message.slice(named[0].length + 2) : message;
+  const text = reason.charAt(0).toUpperCase() + reason.slice(1);
   const extra = fields.filter(([k, v]) => !message.includes(k) && !message.includes(String(v)));
   return extra.length ? `${text} (${extra.map(([k, v]) => `${k}: ${v}`).join("; ")})` : text;
 }

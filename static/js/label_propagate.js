@@ -13,7 +13,7 @@
 import { autosaver, leave } from "./label_save.js";
 import { errorText, setBusy, showMessage } from "./label_panel.js";
 import { carry } from "./label_server.js";
-import { $, config, reviewing } from "./label_state.js";
+import { $, config, doc, reviewing } from "./label_state.js";
 
 const WHAT = {
   propagate: { busy: "Propagating to the next frame…", target: "the next frame" },
@@ -25,6 +25,11 @@ let running = false;
 // kind: "propagate" or "copy_previous".
 async function run(kind, { replace = false, version = null } = {}) {
   if (reviewing || running || !config.urls[kind]) return; // a finished frame may be carried on, not onto
+  const button = $(kind === "propagate" ? "#propagate-next" : "#copy-previous");
+  if (button?.disabled) {
+    showMessage(button.title, "info"); // the key (Shift+arrow) says why, as the tooltip does
+    return;
+  }
   running = true;
   hideBanner();
   try {
@@ -64,6 +69,27 @@ function hideBanner() {
   $("#carry-conflict").hidden = true;
 }
 
+// Propagate and Copy, disabled with the reason as their tooltip when they
+// cannot work: no next (previous) frame in the sequence, nothing drawn to carry.
+const WHY_NOT = {
+  "#propagate-next": () =>
+    !config.carry?.next ? "This is the sequence's last frame: there is no next frame to propagate to."
+      : !doc.instances.some((i) => i.mask.includes(1)) ? "Nothing to propagate yet: draw an object first."
+        : null,
+  "#copy-previous": () => (!config.carry?.previous ? "This is the sequence's first frame: there is no previous frame to copy from." : null),
+};
+
+export function updateCarryButtons() {
+  for (const [selector, whyNot] of Object.entries(WHY_NOT)) {
+    const button = $(selector);
+    if (!button) continue;
+    button.dataset.title ??= button.title;
+    const reason = whyNot();
+    button.disabled = reason !== null;
+    button.title = reason ?? button.dataset.title;
+  }
+}
+
 export const propagateNext = () => run("propagate");
 export const copyPrevious = () => run("copy_previous");
 
@@ -76,4 +102,6 @@ export function wirePropagate() {
     run(banner.dataset.kind, { replace: true, version: Number(banner.dataset.version) });
   });
   $("#carry-cancel").addEventListener("click", hideBanner);
+  updateCarryButtons();
+  document.addEventListener("label:instances-rendered", updateCarryButtons);
 }

@@ -280,11 +280,11 @@ def check_box(frame: Frame, box: list[float]) -> tuple[int, int, int, int]:
     w, h = frame.width, frame.height
     if not (0 <= x0 < x1 <= w and 0 <= y0 < y1 <= h):
         raise Problem(
-            f"box: [{x0}, {y0}, {x1}, {y1}] is empty or outside the {w}x{h} frame",
+            f"box: the box [{x0}, {y0}, {x1}, {y1}] is empty or outside the {w}x{h} frame",
             fields={"box": f"must satisfy 0 <= x0 < x1 <= {w} and 0 <= y0 < y1 <= {h}"},
         )
     if (x0, y0, x1, y1) == (0, 0, w, h):
-        raise Problem("box: covers the whole frame; leave some background around the object",
+        raise Problem("box: the box covers the whole frame; leave some background around the object",
                       fields={"box": "covers the whole frame"})
     return x0, y0, x1, y1
 
