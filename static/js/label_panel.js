@@ -30,8 +30,9 @@ export function showMessage(text, kind = "info") {
 }
 
 // The server's reason in words: the API's "field: reason" messages lose
-// their field's name, and a field's note is added only when the message
-// does not already say it (no "(status: is reviewed)" after "this one is reviewed").
+// their field's name, and the notes on other fields are added only to a
+// message about fields (a request with several bad ones); a sentence stays
+// as it is (no "(status: is reviewed)" after "this one was accepted already").
 export function errorText(err) {
   if (!(err instanceof ApiError)) return err?.message || String(err);
   const message = err.message;
@@ -39,7 +40,8 @@ export function errorText(err) {
   const named = fields.find(([k]) => /^[a-z_]+$/.test(k) && message.startsWith(`${k}: `));
   const reason = named ? message.slice(named[0].length + 2) : message;
   const text = reason.charAt(0).toUpperCase() + reason.slice(1);
-  const extra = fields.filter(([k, v]) => !message.includes(k) && !message.includes(String(v)));
+  const aboutFields = fields.some(([k]) => message.includes(k));
+  const extra = aboutFields ? fields.filter(([k]) => !message.includes(k)) : [];
   return extra.length ? `${text} (${extra.map(([k, v]) => `${k}: ${v}`).join("; ")})` : text;
 }
 

@@ -13,7 +13,7 @@
 import { autosaver, leave } from "./label_save.js";
 import { errorText, setBusy, showMessage } from "./label_panel.js";
 import { carry } from "./label_server.js";
-import { $, config, doc, reviewing } from "./label_state.js";
+import { $, config, doc, editable, reviewing } from "./label_state.js";
 
 const WHAT = {
   propagate: { busy: "Propagating to the next frame…", target: "the next frame" },
@@ -79,13 +79,14 @@ const WHY_NOT = {
   "#copy-previous": () => (!config.carry?.previous ? "This is the sequence's first frame: there is no previous frame to copy from." : null),
 };
 
+// Called on every redraw of the objects and by updateLock (label_lock.js), which sets the edit-only controls.
 export function updateCarryButtons() {
   for (const [selector, whyNot] of Object.entries(WHY_NOT)) {
     const button = $(selector);
     if (!button) continue;
     button.dataset.title ??= button.title;
     const reason = whyNot();
-    button.disabled = reason !== null;
+    button.disabled = reason !== null || (button.classList.contains("edit-only") && !editable); // Copy writes here
     button.title = reason ?? button.dataset.title;
   }
 }

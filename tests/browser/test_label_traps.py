@@ -156,6 +156,7 @@ def test_the_page_speaks_in_words_and_disables_what_cannot_work(live_app, live_s
     page.wait_for_function("() => !document.querySelector('#propagate-next').disabled")
     assert "Carry your objects" in page.get_attribute("#propagate-next", "title")
     settle(page)
+    assert page.is_disabled("#copy-previous")  # still, after the saves that set the editing controls
     # The last frame: nothing to propagate to.
     open_frame(page, live_server, f2)
     assert page.is_disabled("#propagate-next") and page.is_enabled("#copy-previous")
@@ -183,8 +184,8 @@ def test_the_page_speaks_in_words_and_disables_what_cannot_work(live_app, live_s
     page.goto(f"{live_server}/label/annotations/{annotation_id}/review")
     page.wait_for_selector("#label-app[data-ready='1']")
     page.click("#accept")
-    page.wait_for_function("() => document.querySelector('#message').textContent.includes('reviewed')")
+    page.wait_for_function("() => document.querySelector('#message').textContent.includes('accepted already')")
     text = page.locator("#message").inner_text()
-    assert text == "Only done annotations can be reviewed; this one is reviewed", text
+    assert text == "Only done annotations can be reviewed; this one was accepted already", text
     screenshot(page, "traps-4-review-words")
     page.context.close()

@@ -116,10 +116,19 @@ def fix_annotation(annotation: Annotation, reviewer: User, data: dict) -> Annota
                   no_action_object=data["no_action_object"], status=None, time_delta_s=0.0, fixed_by=reviewer)
 
 
+NOT_DONE = {
+    Status.TODO: "is not started",
+    Status.IN_PROGRESS: "is still in progress with its author",
+    Status.REVIEWED: "was accepted already",
+    Status.REJECTED: "was rejected already and is back with its author",
+}
+"""Why an annotation waits for no decision, in words."""
+
+
 def _check_done(annotation: Annotation) -> None:
     if annotation.status is not Status.DONE:
         raise Problem(
-            f"only done annotations can be reviewed; this one is {annotation.status.value.replace('_', ' ')}",
+            f"only done annotations can be reviewed; this one {NOT_DONE[annotation.status]}",
             status=409,
             fields={"status": f"is {annotation.status.value}"},
         )
