@@ -133,6 +133,11 @@ class AppQueue:
     _stopping: threading.Event | None = None
     _starting = threading.Lock()
 
+    @cached_property
+    def consuming(self) -> threading.Event:
+        """Set while this process's in-process consumer holds the machine's lock and runs jobs."""
+        return threading.Event()
+
     def start_consumer(self) -> None:
         """Run this app's jobs in a thread of this process, once (the first request calls it)."""
         if self._consumer is not None:
@@ -162,6 +167,7 @@ class AppQueue:
                 except BlockingIOError:
                     if stopping.wait(HEARTBEAT_S):
                         return
+            self.consuming.set()
             try:
                 beating = threading.Thread(target=_beat, args=(self.huey, stopping),
                                            name="egonet-queue-heartbeat", daemon=True)
@@ -177,6 +183,7 @@ class AppQueue:
                         logger.exception("in-process queue consumer")
                         stopping.wait(HEARTBEAT_S)
             finally:
+                self.consuming.clear()
                 fcntl.flock(lock, fcntl.LOCK_UN)
 
 

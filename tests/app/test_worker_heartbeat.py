@@ -79,3 +79,26 @@ def test_on_one_machine_the_app_runs_its_queue_itself(app_with, make_user, tmp_p
         assert 'id="no-worker"' not in client.get(queued).get_data(as_text=True)
     finally:
         app.extensions[EXTENSION].stop_consumer()
+
+
+def test_one_process_of_a_machine_consumes_and_another_takes_over(app_with, runner, monkeypatch):
+    """Two app processes on one SQLite queue (gunicorn's workers): the lock elects one
+    consumer; when it stops, the other takes over. Commands start no consumer."""
+    from app import queue
+
+    monkeypatch.setattr(queue, "HEARTBEAT_S", 0.1)  # how often a waiting process tries for the lock
+    first, second = app_with(QUEUE_IN_PROCESS=True), app_with(QUEUE_IN_PROCESS=True)
+    assert first.config["QUEUE_URL"] == second.config["QUEUE_URL"]
+    one, other = first.extensions[queue.EXTENSION], second.extensions[queue.EXTENSION]
+    try:
+        assert first.test_cli_runner().invoke(args=["egonet", "classes", "list"]).exit_code == 0
+        assert one._consumer is None  # a command is no server
+        first.test_client().get("/login")
+        assert one.consuming.wait(10)
+        second.test_client().get("/login")
+        assert other._consumer.is_alive() and not other.consuming.wait(0.5)  # standing by
+        one.stop_consumer()
+        assert not one.consuming.is_set() and other.consuming.wait(10)
+    finally:
+        one.stop_consumer()
+        other.stop_consumer()
