@@ -6,7 +6,7 @@ refuses, a drag inside the selected object's box, and the page's words."""
 import pytest
 
 from app.extensions import db
-from app.models import Frame
+from app.models import Annotation, Frame
 from app.services import labelling
 from app.services.users import create_user, find_user
 from tests.app.test_labelling import rle
@@ -55,6 +55,30 @@ def test_a_stroke_corrects_a_mask_painted_by_hand_and_stays_in_sight(live_app, l
     drag(page, [(96, 165), (96, 100)])
     settle(page)
     assert "start" not in strokes[-1] and len(strokes) == 2
+
+
+def test_a_reviewer_corrects_someone_elses_mask_with_a_stroke(live_app, live_server, page):
+    frame_id, *_ = dark_frames(live_app, n=1)
+    with live_app.app_context():
+        ann, _ = create_user("ann", "annotator", "browser-test-password")
+        mask = labelling.empty_mask(db.session.get(Frame, frame_id))
+        mask[70:170, 100:250] = True  # the object and 20 columns of green right of it
+        done = labelling.save_annotation(db.session.get(Frame, frame_id), ann, {
+            "version": 0, "instances": [{"key": "a", "kind": None, "label": None, "mask": rle(mask)}],
+            "no_action_object": False, "status": "done", "time_spent_delta_s": 0.0}).id
+    sign_in(page, live_app, live_server, username="rev", role="reviewer")
+    page.goto(f"{live_server}/label/annotations/{done}/review")
+    page.wait_for_selector("#label-app[data-ready='1']")
+    page.click("#fix")
+    page.keyboard.press("g")
+    before = area(page)
+    drag(page, [(240, 80), (240, 160)])  # background, through the green the author took in
+    settle(page)
+    fixed = labelling.decode_rle(page.evaluate("window.labelPage.maskRle(0)"), (H, W), field="mask")
+    assert area(page) < before and not fixed[80:160, 236:244].any() and fixed[OBJECT].mean() > 0.9
+    with live_app.app_context():
+        saved = db.session.get(Annotation, done)
+        assert saved.fixed_by.username == "rev" and saved.status.value == "done"
 
 
 def test_mark_done_clicked_twice_marks_the_frame_done_once(live_app, live_server, page):
