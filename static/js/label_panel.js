@@ -38,8 +38,7 @@ export function errorText(err) {
   const message = err.message;
   const fields = Object.entries(err.body?.fields || {});
   const named = fields.find(([k]) => /^[a-z_]+$/.test(k) && message.startsWith(`${k}: `));
-  const reason = named ? message.slice(named[0].length + 2) : message;
-  const text = reason.charAt(0).toUpperCase() + reason.slice(1);
+  const text = named ? message.slice(named[0].length + 2) : message;
   const aboutFields = fields.some(([k]) => message.includes(k));
   const extra = aboutFields ? fields.filter(([k]) => !message.includes(k)) : [];
   return extra.length ? `${text} (${extra.map(([k, v]) => `${k}: ${v}`).join("; ")})` : text;

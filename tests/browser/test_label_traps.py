@@ -133,7 +133,7 @@ def test_a_refused_box_says_why_and_leaves_nothing_behind(live_app, live_server,
     page.wait_for_function("() => document.querySelector('#message').textContent.includes('covers the whole frame')")
     page.wait_for_selector("#busy", state="hidden")
     assert page.locator("#message").inner_text() == (
-        "GrabCut did not run: The box covers the whole frame; leave some background around the object")
+        "GrabCut did not run: the box covers the whole frame; leave some background around the object")
     assert instances(page) == [] and page.evaluate("window.labelPage.dropped") is None
     assert page.locator("#save-state").get_attribute("data-state") != "error" and page.is_hidden("#retry-op")
     screenshot(page, "traps-3-refused-box")
@@ -189,7 +189,7 @@ def test_the_page_speaks_in_words_and_disables_what_cannot_work(live_app, live_s
     page.fill("#jump-to", "999")
     page.press("#jump-to", "Enter")
     page.wait_for_function("() => document.querySelector('#message').textContent.includes('no frame 999')")
-    assert page.locator("#message").inner_text() == "The sequence has no frame 999"
+    assert page.locator("#message").inner_text() == "the sequence has no frame 999"
     page.context.close()
 
     # A reviewer deciding on an annotation someone else accepted already: no "(status: is reviewed)".
@@ -210,6 +210,6 @@ def test_the_page_speaks_in_words_and_disables_what_cannot_work(live_app, live_s
     page.click("#accept")
     page.wait_for_function("() => document.querySelector('#message').textContent.includes('accepted already')")
     text = page.locator("#message").inner_text()
-    assert text == "Only done annotations can be reviewed; this one was accepted already", text
+    assert text == "only done annotations can be reviewed; this one was accepted already", text
     screenshot(page, "traps-4-review-words")
     page.context.close()
