@@ -136,6 +136,9 @@ def _default_config(instance: Path) -> dict:
         # by `flask egonet activations` for larger ones.
         ACTIVATIONS_INLINE_MAX_PARAMS=5_000_000,
         QUEUE_URL=os.environ.get("EGONET_QUEUE_URL") or f"sqlite:///{instance / 'queue.sqlite3'}",
+        # With the SQLite queue the app runs its jobs itself, in a thread (app.queue):
+        # no `flask egonet worker` needed on one machine. False: only a worker runs them.
+        QUEUE_IN_PROCESS=True,
         MAX_CONTENT_LENGTH=64 * 1024 * 1024,
         SESSION_COOKIE_HTTPONLY=True,
         SESSION_COOKIE_SAMESITE="Lax",

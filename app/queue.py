@@ -15,8 +15,20 @@ inside an application context.
 A running worker records a heartbeat in the queue's own storage every
 ``HEARTBEAT_S`` seconds (``worker_last_seen``), so a page with queued work
 can say when no worker is running.
+
+On one machine no second command is needed: with the default SQLite queue
+(and ``QUEUE_IN_PROCESS``, on by default) the web app runs the consumer
+itself, in a thread started by its first request (so ``flask db upgrade``
+and the other commands start none, and neither does the Flask reloader's
+watching parent). Of the processes serving the app (gunicorn's workers),
+the one holding an exclusive lock on ``<queue file>.consumer.lock`` consumes;
+the others try for the lock every ``HEARTBEAT_S``, so one takes over when
+the holder exits. A Redis queue serves several machines: run
+``flask egonet worker`` there.
 """
 
+import fcntl
+import logging
 import threading
 import time
 from collections.abc import Callable
@@ -34,11 +46,14 @@ HEARTBEAT_S = 10.0
 """How often a running worker records that it is alive."""
 WORKER_GONE_S = 60.0
 """A worker not seen for this long is taken as not running (pages with queued work say so)."""
+POLL_S = 0.5
+"""How often the in-process consumer looks for a job while the queue is empty."""
 EXTENSION = "egonet.queue"
 JOBS = "app.tasks"
 """The module whose ``@job`` functions the worker runs."""
 
 _jobs: dict[str, "Job"] = {}
+logger = logging.getLogger(__name__)
 
 
 class Job:
@@ -114,9 +129,68 @@ class AppQueue:
         """Job ``name``, registered on this queue to run in this app's context."""
         return self._registered[1][name]
 
+    _consumer: threading.Thread | None = None
+    _stopping: threading.Event | None = None
+    _starting = threading.Lock()
+
+    @cached_property
+    def consuming(self) -> threading.Event:
+        """Set while this process's in-process consumer holds the machine's lock and runs jobs."""
+        return threading.Event()
+
+    def start_consumer(self) -> None:
+        """Run this app's jobs in a thread of this process, once (the first request calls it)."""
+        if self._consumer is not None:
+            return
+        with self._starting:
+            if self._consumer is None:
+                self._stopping = threading.Event()
+                self._consumer = threading.Thread(target=self._consume, args=(self._stopping,),
+                                                  name="egonet-queue-consumer", daemon=True)
+                self._consumer.start()
+
+    def stop_consumer(self, timeout: float = 30.0) -> None:
+        """Stop the in-process consumer after the job it is running (tests, shutdown)."""
+        if self._consumer is not None:
+            self._stopping.set()
+            self._consumer.join(timeout)
+            self._consumer = None
+
+    def _consume(self, stopping: threading.Event) -> None:
+        lock_path = Path(urlsplit(self.url).path + ".consumer.lock")
+        lock_path.parent.mkdir(parents=True, exist_ok=True)
+        with open(lock_path, "a+b") as lock:
+            while True:  # another process may hold the lock: stand by until it lets go
+                try:
+                    fcntl.flock(lock, fcntl.LOCK_EX | fcntl.LOCK_NB)
+                    break
+                except BlockingIOError:
+                    if stopping.wait(HEARTBEAT_S):
+                        return
+            self.consuming.set()
+            try:
+                beating = threading.Thread(target=_beat, args=(self.huey, stopping),
+                                           name="egonet-queue-heartbeat", daemon=True)
+                beating.start()
+                while not stopping.is_set():
+                    try:
+                        task = self.huey.dequeue()
+                        if task is None:
+                            stopping.wait(POLL_S)
+                        else:
+                            self.huey.execute(task)  # Huey logs and records a job's own failure
+                    except Exception:  # the queue's file unreadable for a moment: try again
+                        logger.exception("in-process queue consumer")
+                        stopping.wait(HEARTBEAT_S)
+            finally:
+                self.consuming.clear()
+                fcntl.flock(lock, fcntl.LOCK_UN)
+
 
 def init_app(app: Flask) -> None:
-    app.extensions[EXTENSION] = AppQueue(app, app.config["QUEUE_URL"])
+    queue = app.extensions[EXTENSION] = AppQueue(app, app.config["QUEUE_URL"])
+    if app.config["QUEUE_IN_PROCESS"] and queue.url.startswith("sqlite:///"):
+        app.before_request(queue.start_consumer)
 
 
 def current_huey() -> Huey:
@@ -136,17 +210,18 @@ def worker_running() -> bool:
     return seen is not None and seen < WORKER_GONE_S
 
 
+def _beat(huey: Huey, stop: threading.Event) -> None:
+    """Record that a consumer of ``huey`` is alive now and every ``HEARTBEAT_S`` until ``stop``."""
+    huey.put(HEARTBEAT_KEY, time.time())
+    while not stop.wait(HEARTBEAT_S):
+        huey.put(HEARTBEAT_KEY, time.time())
+
+
 def run_worker(*, workers: int = 1) -> None:
     """Consume the current app's jobs until interrupted (``flask egonet worker``), beating every ``HEARTBEAT_S``."""
     huey = current_huey()
     stop = threading.Event()
-
-    def heartbeat():
-        huey.put(HEARTBEAT_KEY, time.time())
-        while not stop.wait(HEARTBEAT_S):
-            huey.put(HEARTBEAT_KEY, time.time())
-
-    beating = threading.Thread(target=heartbeat, name="egonet-worker-heartbeat", daemon=True)
+    beating = threading.Thread(target=_beat, args=(huey, stop), name="egonet-worker-heartbeat", daemon=True)
     beating.start()
     # Threads share the process; the training jobs themselves use torch's threads.
     consumer = huey.create_consumer(workers=workers, worker_type="thread", periodic=False)

@@ -55,7 +55,8 @@ def create():
         flash(message[:1].upper() + message[1:] + ".", "export")  # shown in the Label page's export card
         kept = {name: request.form.getlist(name) for name in FORM_FIELDS if name in request.form}
         return redirect(url_for("label.index", **kept, _anchor="export"))
-    flash(f"Export {job.id} ({plan.frames} frames) went to the worker, which builds it (flask --app app egonet worker).", "info")
+    flash(f"Export {job.id} ({plan.frames} frame{'' if plan.frames == 1 else 's'}) is queued: "
+          "it is built in the background, and this page follows it.", "info")
     return redirect(url_for("exports.detail", export_id=job.id))
 
 

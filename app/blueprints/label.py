@@ -85,6 +85,8 @@ def stroke_schema() -> dict:
         "points": List(POINT, max_len=current_app.config["GRABCUT_MAX_STROKE_POINTS"]),
         "label": Str(choices=["fg", "bg"]),
         "radius": Float(),
+        # The object's mask as the page has it: GrabCut starts from it when the user has no session of the object.
+        "start": labelling.Rle(nullable=True, default=None),
     }
 
 
@@ -154,6 +156,9 @@ def page_config(frame: Frame, *, mode: str, annotation: Annotation | None = None
         # The page carries up to carry_max frames as a chain of requests of at most range_max frames each.
         config["carry_max"] = CARRY_MAX
         config["carry_request"] = {"frames": labelling.RANGE_MAX, "object_frames": labelling.RANGE_OBJECT_FRAMES}
+        # Whether the sequence goes on either side: Propagate and Copy are disabled (with the reason) where not.
+        config["carry"] = {"next": labelling.adjacent_frame(frame, step=1) is not None,
+                           "previous": labelling.adjacent_frame(frame, step=-1) is not None}
     else:
         config["own"] = annotation.author_id == current_user.id
         config["urls"].update(
@@ -615,13 +620,15 @@ def grabcut_box():
 @roles(*EDITORS)
 @takes_json(MIB)
 def grabcut_stroke():
-    """``{frame_id, instance, points: [[x, y], ...], label: fg|bg, radius}`` -> the updated mask (PNG)."""
+    """``{frame_id, instance, points: [[x, y], ...], label: fg|bg, radius, start?}`` -> the updated mask (PNG);
+    ``start`` (RLE, the object's mask) starts GrabCut from it when the user has no session of the object."""
     started = _clock()
     data = json_body(stroke_schema())
     fr, key = _target(data)
     labelling.check_stroke(fr, data["points"], data["radius"])
+    start = None if data["start"] is None else labelling.decode_rle(data["start"], (fr.height, fr.width), field="start")
     result = labelling.grabcut_stroke(fr, me(), key, points=data["points"], label=data["label"],
-                                      radius=data["radius"])
+                                      radius=data["radius"], start=start)
     return png_response(result.mask, can_undo=result.can_undo, started=started)
 
 

@@ -53,10 +53,7 @@ def import_command(path, activity, sequence, stride, depth_dir, dhg_dir, masks_d
             on_start=on_start,
             on_progress=on_progress,
         )
-    click.echo(
-        f"{report.activity} / {report.sequence}: {report.added} frames added, "
-        f"{report.skipped} already present, {report.annotations} masks imported"
-    )
+    click.echo(f"{report.activity} / {report.sequence}: {report.summary()}")
 
 
 @bp.cli.command("import-points")

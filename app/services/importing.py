@@ -84,6 +84,22 @@ class ImportReport:
     added: int = 0
     skipped: int = 0
     annotations: int = 0
+    depth: int = 0
+    """Of the frames added, those with depth, with a DHG image (given or computed from depth and intrinsics), with intrinsics."""
+    dhg: int = 0
+    intrinsics: int = 0
+
+    def summary(self) -> str:
+        """``"3 frames added (depth: 3, DHG: 3, intrinsics: found), 0 already present, 0 masks imported"``."""
+        def found(n: int) -> str:
+            return "none" if n == 0 else "found" if n == self.added else f"{n} of {self.added}"
+
+        def count(n: int, what: str) -> str:
+            return f"{n} {what}{'' if n == 1 else 's'}"
+
+        return (f"{count(self.added, 'frame')} added (depth: {self.depth}, DHG: {self.dhg}, "
+                f"intrinsics: {found(self.intrinsics)}), {self.skipped} already present, "
+                f"{count(self.annotations, 'mask')} imported")
 
 
 @dataclass
@@ -350,6 +366,9 @@ def add_frames(
                 report.skipped += 1
             else:
                 report.added += 1
+                report.depth += frame.depth_path is not None
+                report.dhg += frame.dhg_path is not None
+                report.intrinsics += item.K is not None
                 if item.mask is not None:
                     author = author or system_user(mask_author)
                     _add_mask_annotation(frame, item, author, mask_status, written)

@@ -6,7 +6,7 @@ const POLL_MS = 1000;
 
 // The progress line of an export's state (pure: tested in tests/js).
 export function progressText(state) {
-  const frames = `${state.done} of ${state.total} frames`;
+  const frames = `${state.done} of ${count(state.total, "frame")}`;
   if (state.status !== "done") return frames;
   return `${frames}: ${count(state.annotations, "annotation")}, ${count(state.instances, "action-object")}, ${formatBytes(state.size_bytes)}`;
 }

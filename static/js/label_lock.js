@@ -16,6 +16,7 @@ import { errorText, showMessage, updateControls } from "./label_panel.js";
 import { applyMeta, autosaver } from "./label_save.js";
 import { postReopen } from "./label_server.js";
 import { keepHistory } from "./label_history.js";
+import { updateCarryButtons } from "./label_propagate.js";
 import { $, $$, config, editable, finished, meta, reviewing, setEditable, ui } from "./label_state.js";
 import { readOnlyReason, setTool } from "./label_tools.js";
 
@@ -40,6 +41,7 @@ export function updateLock() {
   const app = $("#label-app");
   app.dataset.editable = editable ? "1" : "0";
   controls.forEach((el) => (el.disabled = !editable || el.dataset.alwaysOff === "1"));
+  updateCarryButtons(); // Copy also needs a previous frame
   const banner = $("#locked");
   if (banner) {
     banner.hidden = reviewing || editable;

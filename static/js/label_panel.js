@@ -29,13 +29,19 @@ export function showMessage(text, kind = "info") {
   messageTimer = setTimeout(() => (el.hidden = true), kind === "error" ? 7000 : 4000);
 }
 
-// The server's whole reason, with the fields it names when the message does not.
+// The server's reason in words: the API's "field: reason" messages lose
+// their field's name, and the notes on other fields are added only to a
+// message about fields (a request with several bad ones); a sentence stays
+// as it is (no "(status: is reviewed)" after "this one was accepted already").
 export function errorText(err) {
-  if (err instanceof ApiError) {
-    const fields = Object.entries(err.body?.fields || {}).map(([k, v]) => `${k}: ${v}`);
-    return fields.length && !err.message.includes(fields[0].split(":")[0]) ? `${err.message} (${fields.join("; ")})` : err.message;
-  }
-  return err?.message || String(err);
+  if (!(err instanceof ApiError)) return err?.message || String(err);
+  const message = err.message;
+  const fields = Object.entries(err.body?.fields || {});
+  const named = fields.find(([k]) => /^[a-z_]+$/.test(k) && message.startsWith(`${k}: `));
+  const text = named ? message.slice(named[0].length + 2) : message;
+  const aboutFields = fields.some(([k]) => message.includes(k));
+  const extra = aboutFields ? fields.filter(([k]) => !message.includes(k)) : [];
+  return extra.length ? `${text} (${extra.map(([k, v]) => `${k}: ${v}`).join("; ")})` : text;
 }
 
 export function updateControls() {

@@ -22,7 +22,7 @@
 import { autosaver, leave } from "./label_save.js";
 import { errorText, setBusy, showMessage } from "./label_panel.js";
 import { carry } from "./label_server.js";
-import { $, config, doc, reviewing } from "./label_state.js";
+import { $, config, doc, editable, reviewing } from "./label_state.js";
 
 const WHAT = {
   next: { busy: "Propagating to the next frame", target: "the next frame" },
@@ -88,6 +88,11 @@ async function propagateChain(direction, total, { replace, version }) {
 async function run(kind, { replace = false, version = null } = {}) {
   const url = kind === "copy_previous" ? config.urls.copy_previous : config.urls.propagate;
   if (reviewing || running || !url) return; // a finished frame may be carried on, not onto
+  const button = $(BUTTON[kind]);
+  if (button?.disabled) {
+    showMessage(button.title, "info"); // the key (Shift+arrow) says why, as the tooltip does
+    return;
+  }
   let total = 1;
   if (kind !== "copy_previous") {
     try {
@@ -162,6 +167,32 @@ function label() {
 
 export const propagateNext = () => run("next");
 export const propagatePrevious = () => run("previous");
+
+// Propagate and Copy, disabled with the reason as their tooltip when they
+// cannot work: no next (previous) frame in the sequence, nothing drawn to carry.
+const BUTTON = { next: "#propagate-next", previous: "#propagate-previous", copy_previous: "#copy-previous" };
+const nothingDrawn = () => !doc.instances.some((i) => i.mask.includes(1));
+const WHY_NOT = {
+  "#propagate-next": () =>
+    !config.carry?.next ? "This is the sequence's last frame: there is no next frame to propagate to."
+      : nothingDrawn() ? "Nothing to propagate yet: draw an object first." : null,
+  "#propagate-previous": () =>
+    !config.carry?.previous ? "This is the sequence's first frame: there is no previous frame to propagate to."
+      : nothingDrawn() ? "Nothing to propagate yet: draw an object first." : null,
+  "#copy-previous": () => (!config.carry?.previous ? "This is the sequence's first frame: there is no previous frame to copy from." : null),
+};
+
+// Called on every redraw of the objects and by updateLock (label_lock.js), which sets the edit-only controls.
+export function updateCarryButtons() {
+  for (const [selector, whyNot] of Object.entries(WHY_NOT)) {
+    const button = $(selector);
+    if (!button) continue;
+    button.dataset.title ??= button.title;
+    const reason = whyNot();
+    button.disabled = reason !== null || (button.classList.contains("edit-only") && !editable); // Copy writes here
+    button.title = reason ?? button.dataset.title;
+  }
+}
 export const copyPrevious = () => run("copy_previous");
 
 export function wirePropagate() {
@@ -189,4 +220,6 @@ export function wirePropagate() {
       // a note from an older page: nothing to show
     }
   }
+  updateCarryButtons();
+  document.addEventListener("label:instances-rendered", updateCarryButtons);
 }

@@ -18,6 +18,7 @@ import { encodeCocoRle } from "./mask_codec.js";
 
 let pendingStatus = null; // the status the next save asks for
 let keepalive = false; // the next save may outlive the page
+let markingDone = false; // "Mark done" / "Done & next" under way
 
 function saveBody() {
   const body = {
@@ -166,17 +167,27 @@ async function keepMine() {
 // "Mark done" / "Done & next": on a finished frame it only moves on. An
 // untouched frame is asked about first ("no action-object?"), and an empty
 // object is pointed out, so nothing half-made is saved for want of a click.
+// The buttons are disabled while one runs (a double click marks done once;
+// the server also answers a repeat as done, not as a conflict).
 export async function setStatus(status, { thenGo = null } = {}) {
   if (finished()) {
     if (thenGo) await leave(thenGo);
     return;
   }
-  if (!editable) return;
-  if (status === "done" && !(await readyForDone())) return;
-  pendingStatus = status;
-  autosaver.changed();
-  await autosaver.flush();
-  if (thenGo && finished() && !autosaver.dirty) window.location.href = thenGo;
+  if (!editable || markingDone) return;
+  const buttons = [$("#mark-done"), $("#done-next")];
+  markingDone = true;
+  buttons.forEach((b) => (b.disabled = true));
+  try {
+    if (status === "done" && !(await readyForDone())) return;
+    pendingStatus = status;
+    autosaver.changed();
+    await autosaver.flush();
+    if (thenGo && finished() && !autosaver.dirty) window.location.href = thenGo;
+  } finally {
+    markingDone = false;
+    buttons.forEach((b) => (b.disabled = false));
+  }
 }
 
 async function readyForDone() {

@@ -5,8 +5,11 @@
 // good for thin objects that GrabCut's box misses.
 //
 // An object's box is the last GrabCut box drawn for it, else its mask's
-// bounding box. A box drag that starts on the selected object's box edits
-// it; anywhere else it draws a new object (N first, to draw one inside).
+// bounding box. A box drag that starts on the selected object's box edges or
+// handles edits it; anywhere else, inside the box too, it draws a new
+// object. (Moving the whole box, as drawing programs do, cut the object
+// again from wherever the box landed: a drag meant as a new box inside it
+// emptied the object. The box is GrabCut's input, not the annotation.)
 
 import { boxCursor, boxHit, editBox, toPixel, toScreen } from "./geometry.js";
 import { depthChoice } from "./label_depth.js";
@@ -38,7 +41,7 @@ function editableBox() {
 export function boxDrag(s, p) {
   const found = editableBox();
   const hit = found && boxHit(view, found.box, s.x, s.y);
-  if (!hit) return null;
+  if (!hit || hit === "move") return null;
   const { inst, box } = found;
   return {
     type: "edit-box",
@@ -57,7 +60,8 @@ export function boxDrag(s, p) {
 // The cursor over the selected box's handles.
 export function hoverBox(s) {
   const found = editableBox();
-  canvas.style.cursor = found ? boxCursor(boxHit(view, found.box, s.x, s.y)) : "";
+  const hit = found && boxHit(view, found.box, s.x, s.y);
+  canvas.style.cursor = hit && hit !== "move" ? boxCursor(hit) : "";
 }
 
 function paintBox(ctx) {

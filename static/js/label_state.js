@@ -5,9 +5,11 @@
 // the undo history and the clock.
 //
 // An object (instance) is {key, kind, label, colour, mask, engine, box,
-// hidden}: `engine` is GrabCut's last answer for it, null while the server
-// has no session; `box` the last GrabCut box drawn for it (null: its mask's
-// bounding box stands in); `hidden` hides it on the canvas (not saved).
+// strokes, hidden}: `engine` is GrabCut's last answer for it, null while the
+// server has no session; `box` the last GrabCut box drawn for it (null: its
+// mask's bounding box stands in); `strokes` the GrabCut strokes since that
+// box, shown faintly (not saved, not in the undo history); `hidden` hides it
+// on the canvas (not saved).
 
 import { ActiveClock } from "./autosave.js";
 import { History } from "./history.js";
@@ -94,6 +96,7 @@ export function makeInstance(fields = {}, others = doc.instances) {
     mask: new Uint8Array(N),
     engine: null,
     box: null,
+    strokes: [],
     hidden: false,
     ...fields,
   };

@@ -11,7 +11,7 @@ import { runGrabcut } from "./label_grabcut.js";
 import { addInstance, commit } from "./label_instances.js";
 import { showMessage } from "./label_panel.js";
 import { boxDrag, hoverBox, polygonClick, polygonDoubleClick } from "./label_shapes.js";
-import { $, $$, H, W, clock, editable, instance, reviewing, selected, target, ui } from "./label_state.js";
+import { $, $$, H, W, clock, doc, editable, instance, reviewing, selected, target, ui } from "./label_state.js";
 import { canvas, draw, renderOverlay, setView, view } from "./label_view.js";
 import { paintSegment } from "./raster.js";
 
@@ -19,7 +19,7 @@ import { paintSegment } from "./raster.js";
 export const TOOLS = { box: "b", fg: "f", bg: "g", paint: "p", erase: "e", polygon: "l", pan: "h" };
 
 const HINTS = {
-  box: "Drag a box around the object: GrabCut outlines it. Drag the selected object's box, or its handles, to cut it again.",
+  box: "Drag a box around the object: GrabCut outlines it. Drag the selected object's box edges or handles to cut it again; a drag inside it draws a new object.",
   fg: "Paint over parts that belong to the object (GrabCut).",
   bg: "Paint over background that was taken in (GrabCut).",
   paint: "Paint the mask by hand.",
@@ -145,13 +145,18 @@ function onPointerUp() {
   if (!done) return;
   if (done.type === "box") {
     const box = dragBox(done.start, done.end, W, H);
-    if (box) runGrabcut("box", { box, ...depthChoice() }, target({ fresh: true }).key);
+    if (box) {
+      const selectedBefore = ui.selectedKey;
+      const before = new Set(doc.instances.map((i) => i.key));
+      const { key } = target({ fresh: true });
+      runGrabcut("box", { box, ...depthChoice() }, key, { made: !before.has(key), selectedBefore });
+    }
   } else if (done.type === "edit-box") {
     done.finish();
   } else if (done.type === "stroke") {
     const inst = selected();
-    if (!inst || !inst.engine) {
-      showMessage("Draw a box around the object first (B): GrabCut strokes refine a box, a proposal or a propagated object, not one painted by hand.", "error");
+    if (!inst || (!inst.engine && !inst.mask.includes(1))) {
+      showMessage("Draw a box around the object first (B), or paint it (P): GrabCut strokes correct an object's mask.", "error");
     } else {
       // Points far off the frame change nothing inside it; the server refuses them.
       const r = ui.brushRadius;

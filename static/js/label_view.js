@@ -171,6 +171,28 @@ function paint() {
   }
 }
 
+// A GrabCut stroke through image pixels `points` ({x, y}): green for the
+// object ("fg"), red for background, `alpha` opaque, in screen pixels.
+export function paintStrokePath(points, label, radius, alpha) {
+  ctx.save();
+  ctx.strokeStyle = label === "fg" ? `rgba(60, 220, 90, ${alpha})` : `rgba(255, 70, 70, ${alpha})`;
+  ctx.fillStyle = ctx.strokeStyle;
+  ctx.lineWidth = Math.max(1, 2 * radius * view.scale);
+  ctx.lineCap = ctx.lineJoin = "round";
+  ctx.beginPath();
+  points.forEach((p, i) => {
+    const s = toScreen(view, p.x + 0.5, p.y + 0.5);
+    if (i === 0) ctx.moveTo(s.x, s.y);
+    else ctx.lineTo(s.x, s.y);
+  });
+  if (points.length === 1) {
+    const s = toScreen(view, points[0].x + 0.5, points[0].y + 0.5);
+    ctx.arc(s.x, s.y, radius * view.scale, 0, 2 * Math.PI);
+    ctx.fill();
+  } else ctx.stroke();
+  ctx.restore();
+}
+
 // What is being drawn right now, and the brush outline, in screen pixels.
 function paintPreview() {
   const { drag, pointer, tool, brushRadius } = ui;
@@ -183,23 +205,7 @@ function paintPreview() {
     ctx.strokeRect(Math.min(a.x, b.x), Math.min(a.y, b.y), Math.abs(b.x - a.x), Math.abs(b.y - a.y));
     ctx.setLineDash([]);
   }
-  if (drag?.type === "stroke") {
-    ctx.strokeStyle = drag.label === "fg" ? "rgba(60, 220, 90, 0.6)" : "rgba(255, 70, 70, 0.6)";
-    ctx.fillStyle = ctx.strokeStyle;
-    ctx.lineWidth = Math.max(1, 2 * brushRadius * view.scale);
-    ctx.lineCap = ctx.lineJoin = "round";
-    ctx.beginPath();
-    drag.points.forEach((p, i) => {
-      const s = toScreen(view, p.x + 0.5, p.y + 0.5);
-      if (i === 0) ctx.moveTo(s.x, s.y);
-      else ctx.lineTo(s.x, s.y);
-    });
-    if (drag.points.length === 1) {
-      const s = toScreen(view, drag.points[0].x + 0.5, drag.points[0].y + 0.5);
-      ctx.arc(s.x, s.y, brushRadius * view.scale, 0, 2 * Math.PI);
-      ctx.fill();
-    } else ctx.stroke();
-  }
+  if (drag?.type === "stroke") paintStrokePath(drag.points, drag.label, brushRadius, 0.6);
   if (ui.polygon) paintPolygon(ui.polygon.points, pointer);
   if (pointer && editable && ["fg", "bg", "paint", "erase"].includes(tool) && !ui.spaceHeld) {
     ctx.strokeStyle = { fg: "#3cdc5a", bg: "#ff4646", paint: "#ffffff", erase: "#ffffff" }[tool];

@@ -77,6 +77,8 @@ def make_app(database_url: str, tmp_path, **overrides):
         "CACHE_ROOT": str(tmp_path / "cache"),
         "CHECKPOINT_ROOT": str(tmp_path / "checkpoints"),
         "SERVER_NAME": None,
+        # Jobs wait for a worker, as with Redis, unless a test asks for the in-process consumer.
+        "QUEUE_IN_PROCESS": False,
     }
     config.update(overrides)
     app = create_app(config, instance_path=str(tmp_path / "instance"))

@@ -11,9 +11,9 @@ def test_import_command_reports_and_is_idempotent(ctx, runner, tmp_path):
     folder = image_folder(tmp_path / "rec", n=3)
     result = runner.invoke(args=["egonet", "import", str(folder), "--activity", "cooking", "--sequence", "take1"])
     assert result.exit_code == 0, result.output
-    assert "cooking / take1: 3 frames added, 0 already present" in result.output
+    assert "cooking / take1: 3 frames added (depth: 0, DHG: 0, intrinsics: none), 0 already present" in result.output
     result = runner.invoke(args=["egonet", "import", str(folder), "--activity", "cooking", "--sequence", "take1"])
-    assert "0 frames added, 3 already present" in result.output
+    assert "0 frames added (depth: 0, DHG: 0, intrinsics: none), 3 already present" in result.output
     assert len(db.session.execute(db.select(Frame)).all()) == 3
 
 

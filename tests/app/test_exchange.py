@@ -318,7 +318,7 @@ def test_large_exports_are_built_by_the_worker_with_progress(app, admin_client, 
     state = admin_client.get(f"/api/label/exports/{export_id}").get_json()
     assert (state["status"], state["done"], state["total"], state["download_url"]) == ("queued", 0, 4, None)
     page = admin_client.get(response.location).get_data(as_text=True)
-    assert "Waiting for the worker" in page and "with the frames' images" in page
+    assert "Queued: the queue's worker builds it" in page and "with the frames' images" in page
     assert admin_client.get(f"/label/exports/{export_id}/download").status_code == 409
 
     app.config["EXPORT_MAX_PENDING"] = 1

@@ -178,6 +178,8 @@ def test_bad_paths_and_options(ctx, tmp_path):
 def test_real_rgbd_frames(ctx):
     report = import_path(PRIMESENSE, activity="room")
     assert report.added == 3
+    assert report.summary() == ("3 frames added (depth: 3, DHG: 3, intrinsics: found), 0 already present, "
+                                "0 masks imported")
     f = frames()[0]
     assert (f.width, f.height, f.fx, f.cx) == (640, 480, 525.0, 319.5)
     depth = io.read_depth(media.absolute_path(f.depth_path))
@@ -189,6 +191,7 @@ def test_real_rgbd_frames(ctx):
 def test_real_egonet_samples_pair_rgb_and_dhg(ctx):
     report = import_path(EGONET_SAMPLES, activity="samples")
     assert report.added == 3
+    assert report.summary().startswith("3 frames added (depth: 0, DHG: 3, intrinsics: none)")
     for f in frames():
         assert f.dhg_path is not None and f.depth_path is None
         assert (f.width, f.height) == (514, 386)

@@ -14,6 +14,7 @@ from app.extensions import db
 from app.models import User, utcnow
 from app.models.annotations import EditHistory, FramePresence, GrabCutState
 from app.services import labelling
+from egonet import io
 from tests.app.test_labelling import body, get_png, make_frames, square
 
 BOX = {"box": [40, 25, 125, 95]}
@@ -139,8 +140,10 @@ def test_the_undo_history_is_kept_on_the_server_per_person_and_version(app, make
     assert ann.get(url).status_code == 404
     assert put(ann, again["version"]).status_code == 204
     rev.post(f"/api/label/annotations/{saved['id']}/review", json={"version": again["version"], "decision": "accept"})
+    # Accepted: the reviewer's history goes, the author's stays for when they reopen the frame.
     with app.app_context():
-        assert db.session.execute(db.select(EditHistory)).scalars().all() == []
+        kept = db.session.execute(db.select(User.username, EditHistory.data).join(User, EditHistory.user_id == User.id))
+        assert [tuple(row) for row in kept] == [("ann", blob)]
 
 
 def test_who_else_is_on_a_frame_and_next_unlabelled_skips_frames_others_have_open(app, make_user):
@@ -204,3 +207,62 @@ def test_the_shortcuts_overlay_and_the_labelling_doc_list_the_same_keys(app, mak
              for k, d in re.findall(r"<dt>(.*?)</dt>\s*<dd>(.*?)</dd>", overlay, re.S)]
     assert len(shown) > 20
     assert documented_shortcuts() == shown
+
+
+def test_mark_done_sent_twice_is_answered_as_done(app, make_user):
+    frame_id, *_ = make_frames(app)
+    ann = signed_in(app, make_user, "annotator", "ann")
+    url = f"/api/label/frames/{frame_id}/annotation"
+    saved = ann.put(url, json=body(0, square(10, 30, 10, 40))).get_json()
+    done = body(saved["version"], square(10, 30, 10, 40), status="done")
+    first = ann.put(url, json=done).get_json()
+    assert first["status"] == "done" and first["version"] == saved["version"] + 1
+    # The same click again, on the version it was sent from or the one it made: done, not a conflict.
+    for version in (saved["version"], first["version"]):
+        again = ann.put(url, json={**done, "version": version})
+        assert again.status_code == 200, again.get_json()
+        assert (again.get_json()["status"], again.get_json()["version"]) == ("done", first["version"])
+    # Other content is a real conflict, and still refused.
+    changed = ann.put(url, json=body(saved["version"], square(10, 30, 10, 50), status="done"))
+    assert changed.status_code == 409 and changed.get_json()["current_version"] == first["version"]
+    assert ann.put(url, json=body(first["version"], square(10, 30, 10, 40))).get_json()["reason"] == "finished"
+
+
+def test_strokes_work_on_any_mask_starting_from_it(app, make_user):
+    """A mask painted by hand, a reviewer's fix and the author's mask after acceptance: no box needed."""
+    from tests.app.test_labelling import rle
+
+    frame_id, *_ = make_frames(app)
+    ann = signed_in(app, make_user, "annotator", "ann")
+    rev = signed_in(app, make_user, "reviewer", "rev")
+    painted = square(45, 75, 55, 122)  # most of the red object (rows 40-80, columns 50-110) and some green
+    stroke = {"frame_id": frame_id, "instance": "k0", "points": [[116, 60]], "label": "bg", "radius": 4}
+
+    def strokes(client, start):
+        return client.post("/api/label/grabcut/stroke", json={**stroke, "start": None if start is None else rle(start)})
+
+    assert strokes(ann, None).get_json()["fields"] == {"box": "no box yet for this object"}
+    empty = strokes(ann, np.zeros_like(painted))
+    assert empty.status_code == 400 and empty.get_json()["fields"] == {"start": "empty or the whole frame"}
+    with strokes(ann, painted) as response:
+        assert response.status_code == 200, response.get_json()
+        mask = io.decode_mask(response.data)
+    # Started from the mask as it is: the background stroke took the green out, the red object stayed.
+    red = painted & square(40, 80, 50, 110)
+    assert not mask[60, 116] and (mask & red).sum() > 0.9 * red.sum(), (mask & red).sum()
+    assert not (mask & ~square(40, 80, 50, 124)).any()
+    # The session now exists: a later stroke continues it (start ignored), undo steps back to the mask.
+    assert ann.post("/api/label/grabcut/undo", json={"frame_id": frame_id, "instance": "k0"}).status_code == 200
+
+    url = f"/api/label/frames/{frame_id}/annotation"
+    done = ann.put(url, json=body(0, painted, status="done")).get_json()
+    # The reviewer fixing it has no session of it: their stroke starts from the mask too.
+    with strokes(rev, painted) as response:
+        assert response.status_code == 200 and not io.decode_mask(response.data)[60, 116]
+    rev.post(f"/api/label/annotations/{done['id']}/review", json={"version": done["version"], "decision": "accept"})
+    with app.app_context():
+        assert db.session.execute(db.select(GrabCutState)).scalars().all() == []  # accepted: every session went
+    reopened = ann.post(f"{url}/reopen", json={"version": done["version"] + 1}).get_json()
+    assert reopened["status"] == "in_progress"
+    with strokes(ann, painted) as response:
+        assert response.status_code == 200 and not io.decode_mask(response.data)[60, 116]

@@ -82,9 +82,13 @@ def migrated_sqlite(tmp_path_factory) -> Path:
 
 
 @pytest.fixture
-def live_app(tmp_path, migrated_sqlite):
+def live_app(request, tmp_path, migrated_sqlite):
+    """The app on a copy of the migrated database; settings of a test's own come by
+    ``@pytest.mark.parametrize("live_app", [{"NAME": value}], indirect=True)``."""
     shutil.copyfile(migrated_sqlite, tmp_path / "live.sqlite3")
-    return make_app(f"sqlite:///{tmp_path / 'live.sqlite3'}", tmp_path)
+    app = make_app(f"sqlite:///{tmp_path / 'live.sqlite3'}", tmp_path, **getattr(request, "param", {}))
+    yield app
+    app.extensions["egonet.queue"].stop_consumer()  # the in-process one, when a test turned it on
 
 
 @pytest.fixture

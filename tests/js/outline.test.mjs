@@ -86,7 +86,7 @@ test("an export's progress line", () => {
   );
   assert.equal(
     progressText({ status: "done", done: 1, total: 1, annotations: 1, instances: 1, size_bytes: 1500 }),
-    "1 of 1 frames: 1 annotation, 1 action-object, 1.5 kB",
+    "1 of 1 frame: 1 annotation, 1 action-object, 1.5 kB",
   );
   assert.equal(formatBytes(999), "999 Bytes");
 });

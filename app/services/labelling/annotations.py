@@ -136,11 +136,15 @@ def save_annotation(frame: Frame, user: User, data: dict) -> Annotation:
             ``version`` is stale.
     """
     existing = user_annotation(frame, user)
+    status = Status(data["status"]) if data["status"] else None
+    if _marks_done_again(existing, data, status):
+        specs = instance_specs(frame, data["instances"])
+        if _same_content(existing, specs, data["no_action_object"]):
+            return existing  # "Mark done" twice (a double click): already done, as asked
     if data["version"] != (existing.version if existing is not None else 0):
         raise stale(existing.version if existing is not None else 0)  # before any mask is decoded or stored
     if existing is not None:
         check_open(existing)
-    status = Status(data["status"]) if data["status"] else None
     return _write(
         frame,
         user,
@@ -150,6 +154,21 @@ def save_annotation(frame: Frame, user: User, data: dict) -> Annotation:
         status=status,
         time_delta_s=data["time_spent_delta_s"],
     )
+
+
+def _marks_done_again(existing: Annotation | None, data: dict, status: Status | None) -> bool:
+    """A request to mark done an annotation that its last save marked done,
+    sent on that save's version or the one before it (the same click sent twice)."""
+    return (existing is not None and status is Status.DONE and existing.status is Status.DONE
+            and data["version"] in (existing.version, existing.version - 1))
+
+
+def _same_content(annotation: Annotation, specs: list["InstanceSpec"], no_action_object: bool) -> bool:
+    """Whether a save brings exactly the annotation's objects (masks compared by their content-addressed files)."""
+    stored = [(i.key, i.kind, i.label, i.mask_path) for i in annotation.instances]
+    return annotation.no_action_object == no_action_object and stored == [
+        (s.key, s.kind, s.label, s.mask_path) for s in specs
+    ]
 
 
 def instance_specs(frame: Frame, instances: list[dict]) -> list["InstanceSpec"]:

@@ -280,11 +280,11 @@ def check_box(frame: Frame, box: list[float]) -> tuple[int, int, int, int]:
     w, h = frame.width, frame.height
     if not (0 <= x0 < x1 <= w and 0 <= y0 < y1 <= h):
         raise Problem(
-            f"box: [{x0}, {y0}, {x1}, {y1}] is empty or outside the {w}x{h} frame",
+            f"box: the box [{x0}, {y0}, {x1}, {y1}] is empty or outside the {w}x{h} frame",
             fields={"box": f"must satisfy 0 <= x0 < x1 <= {w} and 0 <= y0 < y1 <= {h}"},
         )
     if (x0, y0, x1, y1) == (0, 0, w, h):
-        raise Problem("box: covers the whole frame; leave some background around the object",
+        raise Problem("box: the box covers the whole frame; leave some background around the object",
                       fields={"box": "covers the whole frame"})
     return x0, y0, x1, y1
 
@@ -394,15 +394,36 @@ def grabcut_seed(frame: Frame, user: User, key: str, mask: np.ndarray, *, band: 
                     use_depth=has_depth if use_depth is None else use_depth)
 
 
-def grabcut_stroke(frame: Frame, user: User, key: str, *, points: list, label: str, radius: float) -> GrabCutResult:
+START_BAND = 8
+"""Pixels a stroke's session started from a mask may move its edge (``grabcut_stroke``'s ``start``).
+With the edge fixed (0) the engine's models see too little background: a
+background stroke then emptied a hand-painted mask of a plain object."""
+
+
+def grabcut_stroke(frame: Frame, user: User, key: str, *, points: list, label: str, radius: float,
+                   start: np.ndarray | None = None) -> GrabCutResult:
     """Add a corrective fg/bg stroke to the object ``key``; see ``check_stroke``.
-    The object's strokes in all may sweep at most GRABCUT_MAX_STROKE_PIXELS."""
+    The object's strokes in all may sweep at most GRABCUT_MAX_STROKE_PIXELS.
+
+    Args:
+        start: The object's mask as the page has it (bool ``(H, W)``), for an
+            object this user has no GrabCut session of: one painted by hand,
+            fixed by a reviewer, or kept after its sessions went (marked done,
+            accepted). The session then starts from that mask as GrabCut's
+            trimap (``grabcut_seed`` with ``START_BAND``: the mask eroded by
+            the band stays in, beyond it dilated by the band stays out, the
+            edge between is GrabCut's to place), and the stroke corrects it.
+            Ignored while a session exists.
+    """
+    if start is not None and (not start.any() or start.all()):
+        raise Problem("start: the object's mask is empty or covers the whole frame; draw a box around the object first",
+                      fields={"start": "empty or the whole frame"})
 
     def apply(session: GrabCutSession) -> np.ndarray:
         _check_sweep(session, points, radius)
         return session.stroke(points, label, radius)
 
-    return _operate(frame, user, key, apply, create=False)
+    return _operate(frame, user, key, apply, create=False, start=start, use_depth=frame.depth_path is not None)
 
 
 def grabcut_undo(frame: Frame, user: User, key: str) -> GrabCutResult:
@@ -429,25 +450,28 @@ def grabcut_mask(frame: Frame, user: User, key: str) -> GrabCutResult:
 
 
 def _operate(frame: Frame, user: User, key: str, apply: Callable[[GrabCutSession], np.ndarray], *, create: bool,
-             use_depth: bool = False) -> GrabCutResult:
+             use_depth: bool = False, start: np.ndarray | None = None) -> GrabCutResult:
     _check_frame_size(frame)
     # The lock file serialises the workers of one machine; the revision check
     # below still catches a writer that it cannot see (another machine).
     with _session_lock(frame, user, key):
-        return _operate_locked(frame, user, key, apply, create=create, use_depth=use_depth)
+        return _operate_locked(frame, user, key, apply, create=create, use_depth=use_depth, start=start)
 
 
 def _operate_locked(frame: Frame, user: User, key: str, apply: Callable[[GrabCutSession], np.ndarray], *,
-                    create: bool, use_depth: bool) -> GrabCutResult:
+                    create: bool, use_depth: bool, start: np.ndarray | None) -> GrabCutResult:
     """``create``: the operation is a box (or a mask), which may start a
-    session (with depth when ``use_depth``); otherwise it continues the saved one."""
+    session (with depth when ``use_depth``); otherwise it continues the saved
+    one, or one started from the mask ``start`` when there is none."""
     for _ in range(3):
         row = _state_row(frame, user, key, lock=True)
         try:
             if row is None:
-                if not create:
+                if not create and start is None:
                     raise Problem("box: draw a box around the object first", fields={"box": "no box yet for this object"})
                 session = _new_session(frame, use_depth=use_depth)
+                if not create:
+                    session.seed_mask(start, band=START_BAND)
             else:
                 session = _sessions.take(row.revision) or _load_session(frame, row.state)
                 if create and session.uses_depth != use_depth:

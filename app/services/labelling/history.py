@@ -16,7 +16,7 @@ loads a newer saved version.
 
 A history is one person's: the annotation's author, or a reviewer fixing a
 done annotation (``review.fix_annotation``). Reviewing an annotation deletes
-the reviewer's history of it; accepting it deletes every history of it.
+the reviewer's history of it; the author's stays, accepted or not.
 """
 
 from app.errors import Problem

@@ -226,7 +226,7 @@ def _seed_sessions(target: Frame, user: User, specs: list[InstanceSpec]) -> None
     """A GrabCut session for each carried object, started from its mask as it
     was saved (``grabcut_seed``), so strokes correct it at once, no box needed.
     An object GrabCut cannot start from (empty, or covering the frame) keeps
-    no session: a stroke on it asks for a box, as on one painted by hand."""
+    no session: a stroke on it asks for a box (GrabCut cannot start from such a mask)."""
     for spec in specs:
         if not spec.mask.any():
             continue

@@ -2,7 +2,8 @@
 reviewer's fix of its masks, which frames and annotations wait for whom, and
 the masks' thumbnails they show.
 
-A reviewer accepts a done annotation (reviewed; its GrabCut sessions go) or
+A reviewer accepts a done annotation (reviewed; its GrabCut sessions go, its
+author's undo history stays) or
 rejects it with a comment (rejected, back to its author). Before deciding, a
 reviewer may fix its masks on the review page (``fix_annotation``): the fix
 is saved into the author's annotation (it stays theirs, one per frame and
@@ -82,8 +83,8 @@ def review_annotation(annotation: Annotation, reviewer: User, *, version: int, d
     if user_annotation(annotation.frame, reviewer) is None:
         forget_sessions(annotation.frame, reviewer, keep=set())  # those of a fix
     if annotation.status is Status.REVIEWED:
+        # The author's undo history stays: reopened, the frame undoes as before.
         forget_sessions(annotation.frame, annotation.author, keep=set())
-        forget_histories(annotation)
     try:
         db.session.commit()
     except StaleDataError:
@@ -115,10 +116,19 @@ def fix_annotation(annotation: Annotation, reviewer: User, data: dict) -> Annota
                   no_action_object=data["no_action_object"], status=None, time_delta_s=0.0, fixed_by=reviewer)
 
 
+NOT_DONE = {
+    Status.TODO: "is not started",
+    Status.IN_PROGRESS: "is still in progress with its author",
+    Status.REVIEWED: "was accepted already",
+    Status.REJECTED: "was rejected already and is back with its author",
+}
+"""Why an annotation waits for no decision, in words."""
+
+
 def _check_done(annotation: Annotation) -> None:
     if annotation.status is not Status.DONE:
         raise Problem(
-            f"only done annotations can be reviewed; this one is {annotation.status.value.replace('_', ' ')}",
+            f"only done annotations can be reviewed; this one {NOT_DONE[annotation.status]}",
             status=409,
             fields={"status": f"is {annotation.status.value}"},
         )
