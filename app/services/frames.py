@@ -162,12 +162,15 @@ def cached(name: str, make) -> Path:
 # The frame viewer
 
 
+# Where the depth came from: the page's Depth and Intrinsics rows say it in words.
+DEPTH_KEYS = ("depth_source", "depth_model", "intrinsics_assumed", "assumed_intrinsics")
+
+
 def shown_meta(frame: Frame) -> dict:
-    """The frame's metadata as staff see it: without the demo renderer's truth (``RENDERER_TRUTH_KEYS``)."""
-    meta = frame.meta or {}
-    if frame.sequence.source != DEMO_SOURCE:
-        return dict(meta)
-    return {k: v for k, v in meta.items() if k not in RENDERER_TRUTH_KEYS}
+    """The frame's metadata as staff see it: without the demo renderer's truth (``RENDERER_TRUTH_KEYS``)
+    and the depth's origin (``DEPTH_KEYS``, shown in words)."""
+    hidden = DEPTH_KEYS + (RENDERER_TRUTH_KEYS if frame.sequence.source == DEMO_SOURCE else ())
+    return {k: v for k, v in (frame.meta or {}).items() if k not in hidden}
 
 
 def viewer_annotations(frame: Frame) -> list[tuple[Annotation, bool]]:

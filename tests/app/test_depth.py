@@ -146,7 +146,10 @@ def test_the_mark_shows_on_the_frame_and_label_pages_and_in_exports(app, admin_c
         export_folder(tmp_path / "out", ExportOptions.of(fmt="coco", statuses=[Status.DONE]))
     page = admin_client.get(f"/frames/{predicted.id}").get_data(as_text=True)
     assert 'class="depth-predicted"' in page and "from predicted depth" in page and "intrinsics assumed (60° wide)" in page
-    assert "depth-predicted" not in admin_client.get(f"/frames/{measured.id}").get_data(as_text=True)
+    assert '<td id="depth-source">predicted from the RGB</td>' in page and "its DHG assumed a 60° wide camera (fx " in page
+    assert "assumed_intrinsics" not in page and "hfov_deg" not in page  # in words, not the stored record
+    other = admin_client.get(f"/frames/{measured.id}").get_data(as_text=True)
+    assert "depth-predicted" not in other and '<td id="depth-source">measured</td>' in other
     label = admin_client.get(f"/label/frames/{predicted.id}").get_data(as_text=True)
     assert "Depth predicted" in label
     coco = json.loads((tmp_path / "out" / "annotations.json").read_text())
