@@ -169,7 +169,7 @@ DEPTH_KEYS = ("depth_source", "depth_model", "intrinsics_assumed", "assumed_intr
 def shown_meta(frame: Frame) -> dict:
     """The frame's metadata as staff see it: without the demo renderer's truth (``RENDERER_TRUTH_KEYS``)
     and the depth's origin (``DEPTH_KEYS``, shown in words)."""
-    hidden = DEPTH_KEYS + (RENDERER_TRUTH_KEYS if frame.sequence.source == DEMO_SOURCE else ())
+    hidden = set(DEPTH_KEYS) | (RENDERER_TRUTH_KEYS if frame.sequence.source == DEMO_SOURCE else set())
     return {k: v for k, v in (frame.meta or {}).items() if k not in hidden}
 
 
