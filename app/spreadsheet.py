@@ -1,4 +1,5 @@
-"""The one CSV writer: every CSV the app writes goes through ``csv_text``.
+"""The one CSV writer and reader: every CSV the app writes goes through
+``csv_text``, every one it reads (attention points) through ``csv_rows``.
 
 A cell that a spreadsheet would run as a formula (text starting with ``=``,
 ``+``, ``-``, ``@``, a tab or a carriage return) gets a leading ``'``, as
@@ -30,3 +31,12 @@ def csv_text(rows: Iterable[Sequence[object]], header: Sequence[str] | None = No
         writer.writerow([safe_cell(h) for h in header])
     writer.writerows([safe_cell(v) for v in row] for row in rows)
     return out.getvalue()
+
+
+def csv_rows(text: str) -> list[tuple[int, list[str]]]:
+    """CSV text's rows, each with its line number; raises ValueError naming the line it cannot read."""
+    reader = csv.reader(text.splitlines())
+    try:
+        return [(reader.line_num, cells) for cells in reader]
+    except csv.Error as exc:  # a field past csv's size limit
+        raise ValueError(f"line {reader.line_num}: not readable as CSV ({exc})") from None

@@ -30,7 +30,6 @@ line, and nothing is kept.
 
 from __future__ import annotations
 
-import csv
 import math
 import tempfile
 from collections import defaultdict
@@ -46,6 +45,7 @@ from app.extensions import db
 from app.models import Activity, Annotation, AttentionPoints, Frame, Instance, Sequence, Status
 from app.services import ground_truth, media
 from app.services.importing import system_user
+from app.spreadsheet import csv_rows
 from egonet import io
 from egonet.clicks import DEFAULT_SIGMA, REFERENCE_WIDTH, points_mask, scaled_sigma
 
@@ -175,11 +175,10 @@ def read_points(path: Path, frames: list[Frame], *, activity: str) -> dict[int, 
     by_stem: dict[str, list[Frame]] = defaultdict(list)
     for frame in frames:
         by_stem[frame.source_name].append(frame)
-    reader = csv.reader(text.splitlines())
     try:
-        rows = [(reader.line_num, cells) for cells in reader]
-    except csv.Error as exc:  # a field past csv's size limit
-        raise PointsProblem(f"{name} line {reader.line_num}: not readable as CSV ({exc})", field="path") from None
+        rows = csv_rows(text)
+    except ValueError as exc:
+        raise PointsProblem(f"{name} {exc}", field="path") from None
     header = rows[0][1] if rows else None
     if header is None or [h.strip().lower() for h in header] != list(COLUMNS):
         raise PointsProblem(f"{name} line 1: the header must be {','.join(COLUMNS)}, got {','.join(header or [])!r}",
