@@ -34,15 +34,15 @@ from egonet.errors import EgonetError
 
 @dataclass(frozen=True)
 class DepthRequest:
-    """What a person asks of a depth run; ``create_depth_run`` checks every field."""
+    """What a person asks of a depth run; ``create_depth_run`` checks every field (defaults: ``DepthConfig``'s)."""
 
-    epochs: int = 10
-    width: int = 160
-    height: int = 120
-    lr: float = 1e-3
-    batch_size: int = 4
-    seed: int = 0
-    device: str = "auto"
+    epochs: int = DepthConfig.epochs
+    width: int = DepthConfig.width
+    height: int = DepthConfig.height
+    lr: float = DepthConfig.lr
+    batch_size: int = DepthConfig.batch_size
+    seed: int = DepthConfig.seed
+    device: str = DepthConfig.device
     activity_ids: tuple[int, ...] | None = None
     name: str | None = None
 
