@@ -118,8 +118,13 @@ def _default_config(instance: Path) -> dict:
         SECRET_KEY=None,
         SQLALCHEMY_DATABASE_URI=f"sqlite:///{instance / 'egonet.sqlite3'}",
         SQLALCHEMY_ENGINE_OPTIONS={"pool_pre_ping": True},
-        MEDIA_ROOT=str(instance / "media"),
+        # Where durable files live (app.services.storage): a folder, or
+        # s3://bucket/prefix with the AWS_* variables for endpoint and keys.
+        # Media under media/, checkpoints under checkpoints/, exports under exports/.
+        STORAGE_URL=str(instance),
+        # This host's own files: decoded frames, thumbnails, a bucket's cached copies.
         CACHE_ROOT=str(instance / "cache"),
+        STORAGE_CACHE_BYTES=4 * 1024**3,
         # Exports (app.services.exchange.jobs): one up to this many mask pixels
         # and without images is built in the request, bigger ones by the worker
         # into EXPORT_ROOT; at most EXPORT_MAX_PENDING waiting per person, the
@@ -198,6 +203,9 @@ def _configure(app: Flask, test_config: dict | None) -> None:
         app.config.from_prefixed_env()
     else:
         app.config.from_mapping(test_config)
+    if "MEDIA_ROOT" in app.config:
+        raise RuntimeError("MEDIA_ROOT is replaced by STORAGE_URL, the folder (or s3://bucket/prefix) that holds media/: "
+                           "set STORAGE_URL to MEDIA_ROOT's parent folder (docs/deployment.md)")
     app.config["SQLALCHEMY_DATABASE_URI"] = normalise_database_url(app.config["SQLALCHEMY_DATABASE_URI"])
     os.makedirs(app.instance_path, exist_ok=True)
     if not app.config.get("SECRET_KEY"):

@@ -12,11 +12,12 @@ server's fault, not the user's.
 
 from pathlib import Path
 
-from flask import Flask, current_app, jsonify, render_template, request
+from flask import Flask, current_app, jsonify, make_response, render_template, request
 from flask_wtf.csrf import CSRFError
 from werkzeug.exceptions import HTTPException, InternalServerError
 
 from app.extensions import db
+from app.services.storage import StorageUnavailable
 from egonet.errors import EgonetError
 from egonet.io import MediaError
 
@@ -73,7 +74,7 @@ def error_response(status: int, name: str, message: str, fields: dict[str, str] 
 
 def _is_stored(path: str) -> bool:
     """Whether ``path`` is one of the instance's own files (media, caches, checkpoints)."""
-    roots = (current_app.instance_path, current_app.config["MEDIA_ROOT"], current_app.config["CACHE_ROOT"])
+    roots = (current_app.instance_path, current_app.config["STORAGE_URL"], current_app.config["CACHE_ROOT"])
     return any(Path(path).resolve().is_relative_to(Path(root).resolve()) for root in roots)
 
 
@@ -99,6 +100,15 @@ def register(app: Flask) -> None:
             db.session.rollback()
         name = (exc.name or "error").lower().replace(" ", "_")
         return error_response(exc.code or 500, name, exc.description or exc.name)
+
+    @app.errorhandler(StorageUnavailable)
+    def handle_storage_down(exc: StorageUnavailable):
+        # The bucket's name and address stay in the log; the next request tries again.
+        db.session.rollback()
+        app.logger.error("storage unreachable on %s %s: %s", request.method, request.path, exc)
+        response = make_response(error_response(503, "storage_unavailable", "File storage is unreachable just now. Try again in a minute."))
+        response.headers["Retry-After"] = "30"
+        return response
 
     @app.errorhandler(Exception)
     def handle_unexpected(exc: Exception):

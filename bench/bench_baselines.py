@@ -59,7 +59,7 @@ def main() -> None:
     print(f"load average before: {' '.join(f'{x:.2f}' for x in os.getloadavg())}")
     with tempfile.TemporaryDirectory() as tmp:
         app = create_app({"TESTING": True, "SECRET_KEY": "bench", "SQLALCHEMY_DATABASE_URI": f"sqlite:///{tmp}/bench.sqlite3",
-                          "MEDIA_ROOT": f"{tmp}/media", "CACHE_ROOT": f"{tmp}/cache"})  # fmt: skip
+                          "STORAGE_URL": tmp, "CACHE_ROOT": f"{tmp}/cache"})  # fmt: skip
         with app.app_context():
             upgrade()
             create_demo(frames_per_activity=args.frames_per_activity, unlabelled_fraction=args.unlabelled_fraction)

@@ -107,7 +107,7 @@ def main() -> None:
 
     folder = Path(tempfile.mkdtemp(prefix="bench-export-"))
     app = create_app({"SQLALCHEMY_DATABASE_URI": f"sqlite:///{folder / 'db.sqlite3'}", "SECRET_KEY": "bench",
-                      "MEDIA_ROOT": str(folder / "media"), "CACHE_ROOT": str(folder / "cache"), "TESTING": True},
+                      "STORAGE_URL": str(folder), "CACHE_ROOT": str(folder / "cache"), "TESTING": True},
                      instance_path=str(folder / "instance"))
     with app.app_context():
         upgrade()

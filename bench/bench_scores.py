@@ -149,7 +149,7 @@ def main() -> None:
     print(f"load average before: {' '.join(f'{x:.2f}' for x in os.getloadavg())}")
     with tempfile.TemporaryDirectory() as tmp:
         app = create_app({"TESTING": True, "SECRET_KEY": "bench", "SQLALCHEMY_DATABASE_URI": f"sqlite:///{tmp}/bench.sqlite3",
-                          "MEDIA_ROOT": f"{tmp}/media", "CACHE_ROOT": f"{tmp}/cache", "WTF_CSRF_ENABLED": True})  # fmt: skip
+                          "STORAGE_URL": tmp, "CACHE_ROOT": f"{tmp}/cache", "WTF_CSRF_ENABLED": True})  # fmt: skip
         with app.app_context():
             upgrade()
             start = time.perf_counter()

@@ -52,7 +52,7 @@ def median_ms(fn, repeats: int) -> float:
 
 def main() -> None:
     with tempfile.TemporaryDirectory() as tmp:
-        app = create_app({"TESTING": True, "SQLALCHEMY_DATABASE_URI": "sqlite://", "MEDIA_ROOT": f"{tmp}/media", "CACHE_ROOT": f"{tmp}/cache"})
+        app = create_app({"TESTING": True, "SQLALCHEMY_DATABASE_URI": "sqlite://", "STORAGE_URL": tmp, "CACHE_ROOT": f"{tmp}/cache"})
         with app.app_context():
             data = io.encode_png(frame_image())
             frame = Frame(width=W, height=H, content_hash=media.sha256(data), rgb_path=media.store(data, ".png"))

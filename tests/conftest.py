@@ -41,7 +41,8 @@ def pytest_cmdline_main(config):
 def pytest_collection_modifyitems(config, items):
     # Costly science whose outcome no database changes (fitting, training,
     # scoring arrays) runs once, on the default SQLite; the rest runs on both.
-    twice = [item for item in items if item.get_closest_marker("one_database") and _on_postgresql(item)]
+    # Likewise a bucket's tests (marked both_storages) run on SQLite only.
+    twice = [item for item in items if _on_postgresql(item) and (item.get_closest_marker("one_database") or _on_s3(item))]
     if twice:
         config.hook.pytest_deselected(items=twice)
         items[:] = [item for item in items if item not in twice]
@@ -56,6 +57,11 @@ def pytest_collection_modifyitems(config, items):
 def _on_postgresql(item) -> bool:
     callspec = getattr(item, "callspec", None)
     return callspec is not None and callspec.params.get("database_url") == "postgresql"
+
+
+def _on_s3(item) -> bool:
+    callspec = getattr(item, "callspec", None)
+    return callspec is not None and callspec.params.get("storage_url") == "s3"
 
 
 @pytest.fixture(scope="session", autouse=True)
@@ -99,3 +105,22 @@ def full_rgb_caffemodel(tmp_path_factory):
     path = write_caffemodel(tmp_path_factory.mktemp("caffe") / "EgoNet_rgb.caffemodel",
                             release_layers(FULL["rgb"], {"fc9": fc9}))
     return path, marker
+
+
+@pytest.fixture(scope="session")
+def seaweedfs(tmp_path_factory):
+    """A real S3-compatible store (SeaweedFS, tests/seaweed.py) for the session, with the bucket
+    ``egonet-test``; the AWS variables the app reads point at it."""
+    from tests.seaweed import SeaweedFS
+
+    server = SeaweedFS(tmp_path_factory.mktemp("seaweedfs")).start()
+    server.create_bucket("egonet-test")
+    saved = {name: os.environ.get(name) for name in server.environ()}
+    os.environ.update(server.environ())
+    yield server
+    server.stop()
+    for name, value in saved.items():
+        if value is None:
+            os.environ.pop(name, None)
+        else:
+            os.environ[name] = value

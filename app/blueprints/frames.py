@@ -1,6 +1,6 @@
 """Pages for browsing the dataset: activities, frame grids, the frame viewer, media."""
 
-from flask import Blueprint, abort, current_app, flash, redirect, render_template, send_file, send_from_directory, url_for
+from flask import Blueprint, abort, current_app, flash, redirect, render_template, send_file, url_for
 
 from app.errors import Problem
 from app.extensions import db
@@ -172,4 +172,10 @@ def points(frame_id: int):
 def media_file(name: str):
     # Content-addressed: a name never changes meaning, so it can be cached forever
     # (by the signed-in browser only: app.security marks it private).
-    return send_from_directory(media.media_root(), name, max_age=365 * 86400)
+    try:
+        path = media.local_path(name) if media.NAME.fullmatch(name) else None
+    except FileNotFoundError:
+        path = None
+    if path is None or not path.is_file():
+        abort(404)
+    return send_file(path, max_age=365 * 86400)

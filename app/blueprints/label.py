@@ -570,7 +570,7 @@ def review_annotation(annotation_id: int):
 
 def _mask_file(relative: str):
     # Revalidated on every use (ETag), since an instance's mask changes under the same URL.
-    return send_file(media.absolute_path(relative), mimetype="image/png", max_age=0, etag=True, conditional=True)
+    return send_file(media.local_path(relative), mimetype="image/png", max_age=0, etag=True, conditional=True)
 
 
 # --------------------------------------------------------------------------

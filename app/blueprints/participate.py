@@ -244,7 +244,7 @@ def open_example(open_token: str):
     example = studies.example_frame(studies.open_link_study(open_token))
     if example is None:
         raise Problem("this study has no frames", status=404)
-    path = media.absolute_path(example.frame.rgb_path)
+    path = media.local_path(example.frame.rgb_path)
     return send_file(path, mimetype="image/jpeg" if path.suffix.lower() in (".jpg", ".jpeg") else "image/png")
 
 
@@ -473,6 +473,6 @@ def environment():
 def image(trial_id: int):
     """The RGB frame of the participant's trial on screen or the next one (never depth, DHG or ground truth)."""
     participant, trial = _owned_trial(trial_id)
-    path = media.absolute_path(studies.trial_frame(participant, trial).rgb_path)
+    path = media.local_path(studies.trial_frame(participant, trial).rgb_path)
     mimetype = "image/jpeg" if path.suffix.lower() in (".jpg", ".jpeg") else "image/png"
     return send_file(path, mimetype=mimetype)

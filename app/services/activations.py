@@ -107,8 +107,8 @@ def compute(checkpoint: Checkpoint, frame: Frame) -> Activations:
                 out.absent[pathway] = "this frame has no DHG image: the DHG pathway cannot run"
         if "rgb" not in streams:
             raise Problem(f"frame {frame.id} has no DHG image and {name} reads only DHG: nothing to show", field="frame")
-    rgb = io.read_image(media.absolute_path(frame.rgb_path))
-    dhg = io.read_dhg(media.absolute_path(frame.dhg_path)) if frame.dhg_path and predictor.model.uses_dhg else None
+    rgb = io.read_image(media.local_path(frame.rgb_path))
+    dhg = io.read_dhg(media.local_path(frame.dhg_path)) if frame.dhg_path and predictor.model.uses_dhg else None
     out.maps = predictor.activations(rgb, dhg)
     return out
 
@@ -120,8 +120,8 @@ def figure_png(found: Activations, frame: Frame, checkpoint: Checkpoint) -> byte
     matplotlib.use("Agg")
     from matplotlib.figure import Figure
 
-    rgb = io.read_image(media.absolute_path(frame.rgb_path))
-    dhg = io.read_dhg(media.absolute_path(frame.dhg_path)) if frame.dhg_path else None
+    rgb = io.read_image(media.local_path(frame.rgb_path))
+    dhg = io.read_dhg(media.local_path(frame.dhg_path)) if frame.dhg_path else None
     columns = ["joint"] if "joint" in found.channels else ["rgb", "dhg"]
     aspect = frame.height / frame.width
     figure = Figure(figsize=(4.6 * len(columns) + 0.6, 2 * 4.0 * aspect + 1.6), dpi=110)

@@ -128,7 +128,7 @@ def renderer_truth(frame: Frame) -> np.ndarray:
     if frame.sequence.source != DEMO_SOURCE or not {"activity", "index", "seed"} <= meta.keys():
         raise Problem(f"frame {frame.id} is not a demo frame: only those have a renderer's truth", field="frame")
     rendered = synth.render_frame(meta["activity"], meta["index"], seed=meta["seed"], width=frame.width, height=frame.height)
-    if not np.array_equal(rendered.rgb, io.read_image(media.absolute_path(frame.rgb_path))):
+    if not np.array_equal(rendered.rgb, io.read_image(media.local_path(frame.rgb_path))):
         raise Problem(
             f"frame {frame.id}: the renderer no longer makes this image (egonet.synth changed since the demo was created)",
             field="frame",

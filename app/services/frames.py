@@ -110,12 +110,12 @@ def frame_depth(frame: Frame) -> np.ndarray | None:
     """
     if frame.depth_path is None:
         return None
-    return io.read_depth(media.absolute_path(frame.depth_path))
+    return io.read_depth(media.local_path(frame.depth_path))
 
 
 def depth_preview(frame: Frame) -> Path:
     """A colour-mapped PNG of the frame's depth (near = warm), cached on disk."""
-    return cached(f"depth-{Path(frame.depth_path).stem}.png", lambda: _colour_depth(io.read_depth(media.absolute_path(frame.depth_path))))
+    return cached(f"depth-{Path(frame.depth_path).stem}.png", lambda: _colour_depth(io.read_depth(media.local_path(frame.depth_path))))
 
 
 def thumbnail_size(frame: Frame) -> tuple[int, int]:
@@ -131,7 +131,7 @@ def thumbnail(frame: Frame) -> Path:
     size = thumbnail_size(frame)
 
     def make() -> bytes:
-        rgb = io.read_image(media.absolute_path(frame.rgb_path))
+        rgb = io.read_image(media.local_path(frame.rgb_path))
         small = cv2.resize(rgb, size, interpolation=cv2.INTER_AREA)
         ok, buf = cv2.imencode(".jpg", cv2.cvtColor(small, cv2.COLOR_RGB2BGR), [cv2.IMWRITE_JPEG_QUALITY, 85])
         return buf.tobytes()

@@ -52,4 +52,4 @@ def mask_of(annotation: Annotation) -> np.ndarray:
     frame = annotation.frame
     if annotation.mask_path is None:
         return np.zeros((frame.height, frame.width), bool)
-    return io.read_mask(media.absolute_path(annotation.mask_path))
+    return io.read_mask(media.local_path(annotation.mask_path))

@@ -1,25 +1,26 @@
-"""Content-addressed media storage under the instance folder.
+"""Content-addressed media in the site's storage (``app.services.storage``).
 
-A file is stored under ``<root>/<h[:2]>/<h><suffix>`` where ``h`` is the
-SHA-256 of its bytes, written to a temporary file in the same folder and
-renamed into place, so a reader never sees half a file and writing the same
-bytes twice is a no-op. The database stores the relative path.
+A file is stored under the key ``media/<h[:2]>/<h><suffix>`` where ``h`` is
+the SHA-256 of its bytes, written atomically (a reader never sees half a
+file) and never changed again, so writing the same bytes twice is a no-op
+and a host's cached copy never goes stale. The database stores the path
+after ``media/``.
 """
 
 import contextlib
 import hashlib
+import re
 import time
 from collections.abc import Iterator
 from dataclasses import dataclass, field
 from pathlib import Path
 
-from flask import current_app
-
+from app.services.storage import StorageUnavailable
+from app.services.storage import store as storage
 from egonet.io import write_atomic  # the one atomic writer: media, caches and checkpoints
 
-
-def media_root() -> Path:
-    return Path(current_app.config["MEDIA_ROOT"])
+AREA = "media/"
+NAME = re.compile(r"[0-9a-f]{2}/[0-9a-f]{64}\.[a-z0-9]{1,8}")  # what relative_path makes
 
 
 def sha256(data: bytes) -> str:
@@ -30,31 +31,31 @@ def relative_path(digest: str, suffix: str) -> str:
     return f"{digest[:2]}/{digest}{suffix}"
 
 
-def absolute_path(relative: str) -> Path:
-    return media_root() / relative
+def local_path(relative: str) -> Path:
+    """The file on this host's disk (in a bucket's case, this host's cached copy)."""
+    return storage().local_path(AREA + relative)
 
 
-def store(data: bytes, suffix: str, *, written: list[Path] | None = None) -> str:
+def store(data: bytes, suffix: str, *, written: list[str] | None = None) -> str:
     """Store bytes atomically; return their relative path.
 
     Args:
         data: the encoded file.
         suffix: the file ending, with its dot (".png").
-        written: if given, the absolute path is appended when this call
+        written: if given, the relative path is appended when this call
             created the file, so a failed import can remove what it added.
     """
     rel = relative_path(sha256(data), suffix)
-    path = media_root() / rel
-    if path.exists():
+    if storage().exists(AREA + rel):
         return rel
-    write_atomic(path, data, durable=True)
+    storage().put(AREA + rel, data)
     if written is not None:
-        written.append(path)
+        written.append(rel)
     return rel
 
 
 @contextlib.contextmanager
-def transaction() -> Iterator[list[Path]]:
+def transaction() -> Iterator[list[str]]:
     """One database transaction with the media it writes.
 
     Yields the list that ``store(..., written=...)`` appends new files to.
@@ -63,19 +64,20 @@ def transaction() -> Iterator[list[Path]]:
     """
     from app.extensions import db
 
-    written: list[Path] = []
+    written: list[str] = []
     try:
         yield written
         db.session.commit()
     except BaseException:
         db.session.rollback()
-        for path in written:
-            path.unlink(missing_ok=True)
+        for rel in written:
+            with contextlib.suppress(OSError, StorageUnavailable):  # media-check --remove-orphans finds the rest
+                storage().delete(AREA + rel)
         raise
 
 
 def read(relative: str) -> bytes:
-    return absolute_path(relative).read_bytes()
+    return storage().get(AREA + relative)
 
 
 @dataclass
@@ -100,7 +102,7 @@ def referenced_paths() -> set[str]:
 
 
 def check(*, remove_orphans: bool = False, grace_s: float = 3600.0) -> MediaReport:
-    """Compare the media folder with the database.
+    """Compare the media in storage with the database.
 
     Media are written before the transaction that refers to them commits, so
     a crash in between leaves an unreferenced file (an orphan); it is never
@@ -109,23 +111,18 @@ def check(*, remove_orphans: bool = False, grace_s: float = 3600.0) -> MediaRepo
     that is missing is reported: that would be real damage.
     """
     referenced = referenced_paths()
-    root = media_root()
     report = MediaReport(referenced=len(referenced))
     present: set[str] = set()
     now = time.time()
-    if root.exists():
-        for path in root.rglob("*"):
-            if not path.is_file():
-                continue
-            rel = path.relative_to(root).as_posix()
-            report.files += 1
-            present.add(rel)
-            if rel in referenced:
-                continue
-            stale = now - path.stat().st_mtime > grace_s
-            report.orphans.append(rel)
-            if remove_orphans and stale:
-                path.unlink(missing_ok=True)
-                report.removed.append(rel)
+    for entry in storage().list(AREA):
+        rel = entry.key.removeprefix(AREA)
+        report.files += 1
+        present.add(rel)
+        if rel in referenced:
+            continue
+        report.orphans.append(rel)
+        if remove_orphans and now - entry.modified > grace_s:
+            storage().delete(entry.key)
+            report.removed.append(rel)
     report.missing = sorted(referenced - present)
     return report

@@ -78,7 +78,7 @@ def frame_cloud(frame: Frame, *, prediction_id: int | None = None, max_points: i
     annotation = ground_truth.ground_truths([frame.id]).get(frame.id)
     K = np.array([[frame.fx, 0.0, frame.cx], [0.0, frame.fy, frame.cy], [0.0, 0.0, 1.0]])
     cloud = egonet_frame_cloud(
-        frames_service.frame_depth(frame), K, io.read_image(media.absolute_path(frame.rgb_path)),
+        frames_service.frame_depth(frame), K, io.read_image(media.local_path(frame.rgb_path)),
         truth=ground_truth.mask_of(annotation) if annotation is not None else None,
         probability=probability, threshold=threshold or DEFAULT_THRESHOLD, max_points=max_points,
     )

@@ -29,7 +29,7 @@ CHROMIUM_ARGS = ["--headless", "--no-sandbox", "--disable-gpu", "--no-first-run"
 PASSWORD = "screenshot-of-the-labelling-page"
 
 with tempfile.TemporaryDirectory() as tmp:
-    app = create_app({"SQLALCHEMY_DATABASE_URI": f"sqlite:///{tmp}/egonet.sqlite3", "MEDIA_ROOT": f"{tmp}/media",
+    app = create_app({"SQLALCHEMY_DATABASE_URI": f"sqlite:///{tmp}/egonet.sqlite3", "STORAGE_URL": str(tmp),
                       "CACHE_ROOT": f"{tmp}/cache", "CHECKPOINT_ROOT": f"{tmp}/checkpoints"}, instance_path=tmp)
     with app.app_context():
         upgrade()

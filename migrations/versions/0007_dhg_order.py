@@ -22,9 +22,7 @@ Offline (``--sql``) there is no media folder to rewrite: the revision says so
 and changes nothing.
 """
 
-import hashlib
 import logging
-from pathlib import Path
 
 import cv2
 import numpy as np
@@ -54,11 +52,9 @@ def _rewrite(*, to: str) -> None:
     if context.is_offline_mode():
         log.warning("0007: offline mode cannot rewrite DHG media; run `flask db upgrade` against the database")
         return
-    from flask import current_app
-
+    from app.services import media  # the one module that touches the site's files, folder or bucket
     from egonet import io
 
-    root = Path(current_app.config["MEDIA_ROOT"])
     frame = sa.table("frame", sa.column("id", sa.Integer()), sa.column("rgb_path", sa.String()),
                      sa.column("dhg_path", sa.String()))
     conn = op.get_bind()
@@ -68,7 +64,7 @@ def _rewrite(*, to: str) -> None:
         rgb_of.setdefault(dhg_path, rgb_path)
     rewritten = 0
     for i, (dhg_path, rgb_path) in enumerate(rgb_of.items(), start=1):
-        new_path = _reordered(root, dhg_path, rgb_path, to=to, io=io)
+        new_path = _reordered(media, dhg_path, rgb_path, to=to, io=io)
         if new_path is not None:
             conn.execute(frame.update().where(frame.c.dhg_path == dhg_path).values(dhg_path=new_path))
             rewritten += 1
@@ -77,27 +73,22 @@ def _rewrite(*, to: str) -> None:
     log.info("0007: %d of %d DHG images rewritten into the %s order", rewritten, len(rgb_of), to)
 
 
-def _reordered(root: Path, dhg_path: str, rgb_path: str, *, to: str, io) -> str | None:
+def _reordered(media, dhg_path: str, rgb_path: str, *, to: str, io) -> str | None:
     """The media path of the image in order ``to`` (written when new), or None when it is in that order already."""
     try:
-        dhg = io.read_dhg(root / dhg_path)
-    except ValueError as exc:  # a missing or broken file: media-check reports it, nothing to rewrite
+        dhg = io.read_dhg(media.local_path(dhg_path))
+    except (ValueError, FileNotFoundError) as exc:  # a missing or broken file: media-check reports it, nothing to rewrite
         log.warning("0007: DHG %s left as it is: %s", dhg_path, exc)
         return None
-    if _order(dhg, _frame_gray(root / rgb_path, io)) == to:
+    if _order(dhg, _frame_gray(media, rgb_path, io)) == to:
         return None
-    data = io.encode_png(np.ascontiguousarray(dhg[..., ::-1]))
-    digest = hashlib.sha256(data).hexdigest()
-    relative = f"{digest[:2]}/{digest}.png"
-    if not (root / relative).exists():
-        io.write_atomic(root / relative, data, durable=True)
-    return relative
+    return media.store(io.encode_png(np.ascontiguousarray(dhg[..., ::-1])), ".png")
 
 
-def _frame_gray(path: Path, io) -> np.ndarray | None:
+def _frame_gray(media, rgb_path: str, io) -> np.ndarray | None:
     try:
-        return cv2.cvtColor(io.read_image(path), cv2.COLOR_RGB2GRAY)
-    except ValueError:
+        return cv2.cvtColor(io.read_image(media.local_path(rgb_path)), cv2.COLOR_RGB2GRAY)
+    except (ValueError, FileNotFoundError):
         return None
 
 

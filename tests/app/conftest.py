@@ -73,7 +73,7 @@ def make_app(database_url: str, tmp_path, **overrides):
         "TESTING": True,
         "SECRET_KEY": "test-secret",
         "SQLALCHEMY_DATABASE_URI": database_url,
-        "MEDIA_ROOT": str(tmp_path / "media"),
+        "STORAGE_URL": str(tmp_path),
         "CACHE_ROOT": str(tmp_path / "cache"),
         "CHECKPOINT_ROOT": str(tmp_path / "checkpoints"),
         "SERVER_NAME": None,
@@ -142,11 +142,27 @@ def database_url(request, tmp_path_factory):
         engine.dispose()
 
 
+def pytest_generate_tests(metafunc):
+    """A test marked ``both_storages`` runs with its files in a folder and in a bucket."""
+    if metafunc.definition.get_closest_marker("both_storages") and "storage_url" in metafunc.fixturenames:
+        metafunc.parametrize("storage_url", ["local", "s3"], indirect=True)
+
+
 @pytest.fixture
-def app(database_url, tmp_path):
+def storage_url(request, tmp_path):
+    """Where the test app's files live: ``tmp_path`` (media/, checkpoints/, exports/ under it), or
+    a fresh prefix in the SeaweedFS bucket for tests marked ``both_storages``."""
+    if getattr(request, "param", "local") == "local":
+        return str(tmp_path)
+    request.getfixturevalue("seaweedfs")
+    return f"s3://egonet-test/{uuid.uuid4().hex[:12]}"
+
+
+@pytest.fixture
+def app(database_url, storage_url, tmp_path):
     """The app on empty tables. Requests get their own app context, so ``g``
     and the database session never leak from one request into the next."""
-    app = make_app(database_url, tmp_path)
+    app = make_app(database_url, tmp_path, STORAGE_URL=storage_url)
     yield app
     with app.app_context():
         db.session.remove()

@@ -51,7 +51,7 @@ def test_the_maps_are_the_predictors_on_the_frames_inputs(frames):
     checkpoint = saved_checkpoint()
     found = activations.compute(checkpoint, with_dhg)
     predictor = NetworkPredictor.from_checkpoint(load_checkpoint(training.checkpoint_root() / checkpoint.path))
-    rgb, dhg = io.read_image(media.absolute_path(with_dhg.rgb_path)), io.read_dhg(media.absolute_path(with_dhg.dhg_path))
+    rgb, dhg = io.read_image(media.local_path(with_dhg.rgb_path)), io.read_dhg(media.local_path(with_dhg.dhg_path))
     expected = predictor.activations(rgb, dhg)
     assert set(found.maps) == {"rgb", "dhg"} and found.channels == {"rgb": 256, "dhg": 256} and not found.absent
     for name in ("rgb", "dhg"):

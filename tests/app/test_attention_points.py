@@ -20,7 +20,7 @@ def frames():
 
 
 def media_files(app) -> list[Path]:
-    root = Path(app.config["MEDIA_ROOT"])
+    root = Path(app.config["STORAGE_URL"]) / "media"
     return sorted(p for p in root.rglob("*") if p.is_file()) if root.exists() else []
 
 

@@ -148,7 +148,7 @@ def test_a_long_fit_goes_to_the_worker_and_its_rows_appear_when_it_is_done(app, 
         EGONET_QUEUE_URL=app.config["QUEUE_URL"],
         FLASK_SQLALCHEMY_DATABASE_URI=database_url,
         FLASK_SECRET_KEY="worker-test-secret-key-0123456789abcdef",
-        FLASK_MEDIA_ROOT=app.config["MEDIA_ROOT"],
+        FLASK_STORAGE_URL=app.config["STORAGE_URL"],
         FLASK_CACHE_ROOT=app.config["CACHE_ROOT"],
         OMP_NUM_THREADS="1",
     )

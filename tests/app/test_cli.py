@@ -81,8 +81,8 @@ def test_demo_command_creates_reviewed_ground_truth_and_leaves_the_last_frames_t
     unlabelled = db.session.execute(db.select(Frame).where(~Frame.annotations.any())).scalars().all()
     assert [f.index for f in unlabelled] == [1] * 7
     for a in anns:
-        mask = io.read_mask(media.absolute_path(a.mask_path))
-        depth = io.read_depth(media.absolute_path(a.frame.depth_path))
+        mask = io.read_mask(media.local_path(a.mask_path))
+        depth = io.read_depth(media.local_path(a.frame.depth_path))
         assert mask.any() and (depth[mask] > 0).all()
         assert a.frame.dhg_path is not None and a.frame.fx is not None
     for f in unlabelled:
@@ -136,4 +136,4 @@ def test_demo_frames_match_the_renderer(ctx, runner):
     runner.invoke(args=["egonet", "demo", "--frames-per-activity", "1", "--width", "64", "--height", "48", "--no-train"])
     frame = db.session.execute(db.select(Frame).filter_by(source_name="cooking-0-0000")).scalar_one()
     expected = synth.render_frame("cooking", 0, seed=0, width=64, height=48)
-    np.testing.assert_array_equal(io.read_image(media.absolute_path(frame.rgb_path)), expected.rgb)
+    np.testing.assert_array_equal(io.read_image(media.local_path(frame.rgb_path)), expected.rgb)

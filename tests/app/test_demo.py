@@ -73,7 +73,7 @@ def test_the_demo_ships_hand_masks_that_are_no_part_of_the_action_object(ctx):
         if rendered.hands.any():
             hands_seen += 1
             (hand,) = hands
-            np.testing.assert_array_equal(io.read_mask(media.absolute_path(hand.mask_path)), rendered.hands)
+            np.testing.assert_array_equal(io.read_mask(media.local_path(hand.mask_path)), rendered.hands)
             assert not (rendered.hands & rendered.mask).any()
         else:
             assert hands == []

@@ -101,9 +101,9 @@ def test_predict_depth_fills_frames_without_depth_marked_predicted_and_keeps_mea
         assert frame.meta["depth_model"] == f"{DEPTH_MODEL} run {newest_run().id} checkpoint {report.checkpoint_id}"
         assert frame.meta["assumed_intrinsics"]["fx"] == pytest.approx(assumed_intrinsics(64, 48)[0, 0], abs=0.005)
         assert frame.fx is None  # the frame's own camera stays unknown
-        depth = io.read_depth(media.absolute_path(frame.depth_path))
+        depth = io.read_depth(media.local_path(frame.depth_path))
         assert depth.shape == (48, 64) and (depth >= 0.1).all() and (depth <= 10).all()
-        decoded = decode_dhg(io.read_dhg(media.absolute_path(frame.dhg_path)))
+        decoded = decode_dhg(io.read_dhg(media.local_path(frame.dhg_path)))
         assert np.allclose(decoded.depth, depth, atol=10 / 255 + 1e-3)  # the DHG is made from that depth
         # An activity with measured depth: nothing replaced.
         cooking = predict_depth("cooking", device="cpu")

@@ -27,7 +27,7 @@ def raising_app(app):
         raise Problem("no such frame", status=404)
 
     def broken_media():
-        raise MediaError(Path(app.config["MEDIA_ROOT"]) / "ab" / "abc.png", "not a readable image (corrupt or unknown format)")
+        raise MediaError(Path(app.config["STORAGE_URL"]) / "media" / "ab" / "abc.png", "not a readable image (corrupt or unknown format)")
 
     app.add_url_rule("/_test/egonet-error", view_func=public(egonet_error))
     app.add_url_rule("/_test/broken-media", view_func=public(broken_media))
@@ -58,7 +58,7 @@ def test_a_broken_stored_file_is_the_servers_fault_and_its_path_stays_private(ra
     response = raising_app.test_client().get("/_test/broken-media", headers=JSON)
     assert response.status_code == 500
     assert response.get_json()["error"] == "internal_server_error"
-    assert raising_app.config["MEDIA_ROOT"] not in response.get_data(as_text=True)
+    assert raising_app.config["STORAGE_URL"] not in response.get_data(as_text=True)
 
 
 def test_problem_in_a_view_keeps_its_status(raising_app):

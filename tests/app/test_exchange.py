@@ -380,7 +380,7 @@ def test_a_queued_export_is_built_by_a_real_worker(app, database_url, admin_clie
         EGONET_QUEUE_URL=app.config["QUEUE_URL"],
         FLASK_SQLALCHEMY_DATABASE_URI=database_url,
         FLASK_SECRET_KEY="worker-test-secret-key-0123456789abcdef",
-        FLASK_MEDIA_ROOT=str(tmp_path / "media"),
+        FLASK_STORAGE_URL=str(tmp_path),
         FLASK_CACHE_ROOT=str(tmp_path / "cache"),
         FLASK_EXPORT_ROOT=app.config["EXPORT_ROOT"],
         OMP_NUM_THREADS="1",

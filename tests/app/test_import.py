@@ -21,7 +21,7 @@ def frames():
 
 
 def media_files(app) -> list[Path]:
-    root = Path(app.config["MEDIA_ROOT"])
+    root = Path(app.config["STORAGE_URL"]) / "media"
     return sorted(p for p in root.rglob("*") if p.is_file()) if root.exists() else []
 
 
@@ -69,13 +69,13 @@ def test_depth_is_paired_by_stem_and_dhg_computed_with_intrinsics(ctx, tmp_path)
     import_path(folder, activity="desk work")
     for i, f in enumerate(frames()):
         assert (f.fx, f.fy, f.cx, f.cy) == (50.0, 50.0, 32.0, 24.0)
-        depth = io.read_depth(media.absolute_path(f.depth_path))
+        depth = io.read_depth(media.local_path(f.depth_path))
         assert depth[0, 0] == 0.0
         assert depth[5, 5] == pytest.approx(1.0 + 0.25 * i, abs=1e-3)
-        dhg = io.read_dhg(media.absolute_path(f.dhg_path))
+        dhg = io.read_dhg(media.local_path(f.dhg_path))
         assert dhg.shape == (48, 64, 3)
         # Stored in the authors' order: the computed DHG decodes to the depth it came from.
-        rgb = io.read_image(media.absolute_path(f.rgb_path))
+        rgb = io.read_image(media.local_path(f.rgb_path))
         np.testing.assert_array_equal(dhg[..., GRAY], cv2.cvtColor(rgb, cv2.COLOR_RGB2GRAY))
         decoded = decode_dhg(dhg)
         assert np.isnan(decoded.depth[0, 0])
@@ -91,8 +91,8 @@ def test_npy_depth_and_given_dhg(ctx, tmp_path):
     (folder / "dhg" / "00000.png").write_bytes(io.encode_png(dhg))
     import_path(folder, activity="grocery")
     (f,) = frames()
-    assert io.read_depth(media.absolute_path(f.depth_path))[3, 3] == pytest.approx(2.5)
-    np.testing.assert_array_equal(io.read_dhg(media.absolute_path(f.dhg_path)), dhg)
+    assert io.read_depth(media.local_path(f.depth_path))[3, 3] == pytest.approx(2.5)
+    np.testing.assert_array_equal(io.read_dhg(media.local_path(f.dhg_path)), dhg)
 
 
 def test_masks_become_annotations(ctx, tmp_path):
@@ -102,7 +102,7 @@ def test_masks_become_annotations(ctx, tmp_path):
     anns = db.session.execute(db.select(Annotation)).scalars().all()
     assert {a.author.username for a in anns} == {"wearer"}
     assert {a.status for a in anns} == {Status.REVIEWED}
-    mask = io.read_mask(media.absolute_path(anns[0].mask_path))
+    mask = io.read_mask(media.local_path(anns[0].mask_path))
     assert mask.sum() == 10 * 25 or mask.sum() == 10 * 24
     assert len(anns[0].instances) == 1
 
@@ -182,7 +182,7 @@ def test_real_rgbd_frames(ctx):
                                 "0 masks imported")
     f = frames()[0]
     assert (f.width, f.height, f.fx, f.cx) == (640, 480, 525.0, 319.5)
-    depth = io.read_depth(media.absolute_path(f.depth_path))
+    depth = io.read_depth(media.local_path(f.depth_path))
     assert 0.3 < np.median(depth[depth > 0]) < 5.0
     assert f.dhg_path is not None
 
@@ -196,9 +196,9 @@ def test_real_egonet_samples_pair_rgb_and_dhg(ctx):
         assert f.dhg_path is not None and f.depth_path is None
         assert (f.width, f.height) == (514, 386)
         # The authors' files import as they are, and their gray channel decodes as gray, not as depth.
-        stored = io.read_dhg(media.absolute_path(f.dhg_path))
+        stored = io.read_dhg(media.local_path(f.dhg_path))
         np.testing.assert_array_equal(stored, io.read_dhg(next((EGONET_SAMPLES / "dhg").glob(f"{f.source_name}.*"))))
-        gray = cv2.cvtColor(io.read_image(media.absolute_path(f.rgb_path)), cv2.COLOR_RGB2GRAY).ravel()
+        gray = cv2.cvtColor(io.read_image(media.local_path(f.rgb_path)), cv2.COLOR_RGB2GRAY).ravel()
         decoded = decode_dhg(stored)
         assert np.corrcoef(decoded.gray.ravel(), gray)[0, 1] > 0.95
         assert abs(np.corrcoef(np.nan_to_num(decoded.depth).ravel(), gray)[0, 1]) < 0.5

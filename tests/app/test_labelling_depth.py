@@ -65,7 +65,7 @@ def saved_state(app, frame_id: int, key: str) -> dict:
 
 def stored_depth_path(app, frame_id: int) -> Path:
     with app.app_context():
-        return media.absolute_path(db.session.get(Frame, frame_id).depth_path)
+        return media.local_path(db.session.get(Frame, frame_id).depth_path)
 
 
 def test_a_box_uses_the_frames_depth_unless_told_not_to(app, annotator):
@@ -183,7 +183,7 @@ def test_real_chair_backrest_comes_in_with_the_imported_depth(app, annotator, mo
     with app.app_context():
         import_path(PRIMESENSE, activity="room")
         frame = db.session.execute(db.select(Frame).filter_by(index=1)).scalar_one()
-        frame_id, image = frame.id, io.read_image(media.absolute_path(frame.rgb_path))
+        frame_id, image = frame.id, io.read_image(media.local_path(frame.rgb_path))
     box = [335, 105, 610, 390]
     # Background strokes on the wall (as the engine's test): under the seat,
     # through the right armrest's loop, left of the left leg.

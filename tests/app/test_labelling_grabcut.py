@@ -202,7 +202,7 @@ def test_workers_share_decoded_frames_on_disk_within_a_budget(app, annotator, mo
     (copy,) = [p for p in folder.glob("*.npy") if "-" not in p.stem]  # beside it: the guides, "<frame>-v1-..."
     with app.app_context():
         frame = db.session.get(Frame, frame_ids[0])
-        assert np.array_equal(np.load(copy), io.read_image(grabcut_service.media.absolute_path(frame.rgb_path)))
+        assert np.array_equal(np.load(copy), io.read_image(grabcut_service.media.local_path(frame.rgb_path)))
 
     # A worker that has not seen the frame loads the shared copy: no decoding.
     def no_decoding(*args, **kwargs):

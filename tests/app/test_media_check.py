@@ -13,13 +13,13 @@ def test_media_check_finds_orphans_and_missing_files(ctx, runner, tmp_path):
 
     orphan = media.store(b"written before a crash", ".png")
     old = time.time() - 7200
-    os.utime(media.absolute_path(orphan), (old, old))
+    os.utime(media.local_path(orphan), (old, old))
     fresh = media.store(b"in flight right now", ".png")
     report = media.check(remove_orphans=True, grace_s=3600)
     assert set(report.orphans) == {orphan, fresh} and report.removed == [orphan]
-    assert not media.absolute_path(orphan).exists() and media.absolute_path(fresh).exists()
+    assert not media.local_path(orphan).exists() and media.local_path(fresh).exists()
 
     victim = sorted(media.referenced_paths())[0]
-    media.absolute_path(victim).unlink()
+    media.local_path(victim).unlink()
     result = runner.invoke(args=["egonet", "media-check"])
     assert result.exit_code == 1 and f"missing: {victim}" in result.output

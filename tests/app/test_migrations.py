@@ -83,11 +83,11 @@ def test_0007_gives_stored_dhg_images_the_authors_order(ctx):
         after = stored()
         assert after["authors"] == paths["authors"]  # already the authors' order
         assert after["ours"] != paths["ours"] and after["flat"] != paths["flat"]
-        decoded = decode_dhg(io.read_dhg(media.absolute_path(after["ours"])))
+        decoded = decode_dhg(io.read_dhg(media.local_path(after["ours"])))
         np.testing.assert_array_equal(decoded.gray, gray)
         np.testing.assert_allclose(decoded.depth, depth, atol=0.016)
         np.testing.assert_allclose(decoded.height, height, atol=0.006)
-        assert media.absolute_path(paths["ours"]).exists()  # left for media-check: another row may share it
+        assert media.local_path(paths["ours"]).exists()  # left for media-check: another row may share it
 
         downgrade(revision="0006")
         back = stored()

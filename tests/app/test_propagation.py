@@ -278,7 +278,7 @@ def test_real_rgbd_frames_propagate_the_chair_with_their_stored_depth(app, annot
         import_path(PRIMESENSE, activity="room")
         frames = list(db.session.execute(db.select(Frame).order_by(Frame.index)).scalars())
         assert all(f.depth_path for f in frames)
-        chairs = [chair_from_depth(io.read_depth(media.absolute_path(f.depth_path))) for f in frames[:2]]
+        chairs = [chair_from_depth(io.read_depth(media.local_path(f.depth_path))) for f in frames[:2]]
         f0, f1 = frames[0].id, frames[1].id
     annotate(annotator, f0, chairs[0])
     response = annotator.post(f"/api/label/frames/{f0}/propagate", json={})

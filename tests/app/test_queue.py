@@ -20,7 +20,7 @@ def start_worker(database_url: str, tmp_path, queue_url: str) -> subprocess.Pope
         EGONET_QUEUE_URL=queue_url,
         FLASK_SQLALCHEMY_DATABASE_URI=database_url,
         FLASK_SECRET_KEY="worker-test-secret-key-0123456789abcdef",  # no key file in the repository's instance/
-        FLASK_MEDIA_ROOT=str(tmp_path / "media"),
+        FLASK_STORAGE_URL=str(tmp_path),
     )
     return subprocess.Popen(
         [sys.executable, "-m", "flask", "--app", "app", "egonet", "worker"],

@@ -33,7 +33,7 @@ def test_an_old_study_keeps_slic_and_a_new_one_records_the_new_default(ctx):
                                "max_region_share": egonet_clicks.SUPERPIXEL_DEFAULTS.max_region_share, "max_side": 640}
 
     frame = db.session.get(Frame, old.frames[0].frame_id)
-    rgb = io.read_image(media.absolute_path(frame.rgb_path))
+    rgb = io.read_image(media.local_path(frame.rgb_path))
     slic = egonet_clicks.superpixels(rgb, method="slic", n_segments=400, compactness=10.0, max_side=640)
     hierarchy = egonet_clicks.superpixels(rgb)
     assert not np.array_equal(slic, hierarchy)  # the two methods differ on this frame

@@ -92,7 +92,7 @@ def truth_mask(frame: Frame) -> np.ndarray:
 
 
 def rgb_of(frame: Frame) -> np.ndarray:
-    return egonet_io.read_image(media.absolute_path(frame.rgb_path))
+    return egonet_io.read_image(media.local_path(frame.rgb_path))
 
 
 def row(report: scoring.Report, name: str) -> scoring.Row:
@@ -426,7 +426,7 @@ def make_run(name: str, *, held_out: list[str], folds: str = "loao", seed: int =
 def stored_prediction(run: TrainingRun, frame: Frame) -> np.ndarray:
     """The map as stored (what the run predicted, to 16 bits), read straight from its PNG."""
     path = db.session.execute(db.select(Prediction.path).filter_by(run_id=run.id, frame_id=frame.id)).scalar_one()
-    return cv2.imread(str(media.absolute_path(path)), cv2.IMREAD_UNCHANGED).astype(np.float32) / 65535.0
+    return cv2.imread(str(media.local_path(path)), cv2.IMREAD_UNCHANGED).astype(np.float32) / 65535.0
 
 
 def test_model_rows_score_held_out_predictions_only(ctx):

@@ -71,7 +71,7 @@ def stored_run(maps: dict[int, np.ndarray], *, threshold: float | None = 0.5, st
 
 
 def saved_mask(instance: Instance) -> np.ndarray:
-    return io.read_mask(media.absolute_path(instance.mask_path))
+    return io.read_mask(media.local_path(instance.mask_path))
 
 
 def iou(a: np.ndarray, b: np.ndarray) -> float:

@@ -566,8 +566,8 @@ def test_inspect_a_trained_run_then_delete_it_leaving_nothing_behind(app, demo, 
         paths = sorted(db.session.execute(db.select(Prediction.path).where(Prediction.run_id == run_id)).scalars())
         # Media are content-addressed: another run's row may name the same file, which must stay.
         hand_made_run(name="kept", frame=db.session.get(Frame, order[0]), path=paths[0])
-        files = [media.absolute_path(p) for p in paths[1:]]
-        kept_files = [media.absolute_path(paths[0])]
+        files = [media.local_path(p) for p in paths[1:]]
+        kept_files = [media.local_path(paths[0])]
         folder = training.checkpoint_root() / f"run-{run_id}"
         assert folder.is_dir() and all(f.exists() for f in files)
     confirm = admin_client.get(f"/training/runs/{run_id}/delete").data.decode()

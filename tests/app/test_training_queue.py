@@ -32,7 +32,7 @@ def test_a_run_started_from_the_page_completes_through_the_worker(app, database_
         EGONET_QUEUE_URL=app.config["QUEUE_URL"],
         FLASK_SQLALCHEMY_DATABASE_URI=database_url,
         FLASK_SECRET_KEY="worker-test-secret-key-0123456789abcdef",  # no key file in the repository's instance/
-        FLASK_MEDIA_ROOT=str(tmp_path / "media"),
+        FLASK_STORAGE_URL=str(tmp_path),
         FLASK_CACHE_ROOT=str(tmp_path / "cache"),
         FLASK_CHECKPOINT_ROOT=str(tmp_path / "checkpoints"),
         OMP_NUM_THREADS="1",

@@ -16,7 +16,7 @@ def test_upload_a_release_watch_it_convert(live_app, live_server, page, monkeypa
 
     queued = []
     monkeypatch.setattr("app.tasks.import_weights", lambda *args: queued.append(args))  # the test plays the worker
-    live_app.config["CHECKPOINT_ROOT"] = str(media.Path(live_app.config["MEDIA_ROOT"]).parent / "checkpoints")
+    live_app.config["CHECKPOINT_ROOT"] = str(media.Path(live_app.config["STORAGE_URL"]) / "checkpoints")
     sign_in(page, live_app, live_server)
     page.goto(live_server + "/training/")
     page.get_by_text("Import the authors' released weights").click()

@@ -48,7 +48,7 @@ def drop_schema(base_url: str, schema: str) -> None:
 def app_config(database_url: str, instance: Path) -> dict:
     return {
         "SQLALCHEMY_DATABASE_URI": database_url,
-        "MEDIA_ROOT": str(instance / "media"),
+        "STORAGE_URL": str(instance),
         "CACHE_ROOT": str(instance / "cache"),
         "CHECKPOINT_ROOT": str(instance / "checkpoints"),
         "SECRET_KEY": SECRET,

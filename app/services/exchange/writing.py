@@ -116,7 +116,7 @@ def _write_annotation(write: Write, options: ExportOptions, annotation: Annotati
         record["mask_file"] = annotator_file(author, name)
     if options.writes_coco:
         for instance in annotation.instances:
-            mask = io.read_mask(media.absolute_path(instance.mask_path))
+            mask = io.read_mask(media.local_path(instance.mask_path))
             objects.append(_coco_object(len(objects) + 1, image_id, annotation, instance, mask))
     return record
 

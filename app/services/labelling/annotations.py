@@ -292,7 +292,7 @@ def _spec_of(instance: Instance) -> InstanceSpec:
         kind=instance.kind,
         label=instance.label,
         mask_path=instance.mask_path,
-        mask=egonet_io.read_mask(media.absolute_path(instance.mask_path)),
+        mask=egonet_io.read_mask(media.local_path(instance.mask_path)),
     )
 
 

@@ -137,7 +137,7 @@ def _grabcut_frame(frame: Frame, *, use_depth: bool) -> GrabCutFrame:
     key = _frame_key(frame, use_depth=use_depth)
     kept = _frames.get(key)
     if kept is None:
-        image = _decoded(frame.rgb_path, lambda: egonet_io.read_image(media.absolute_path(frame.rgb_path)))
+        image = _decoded(frame.rgb_path, lambda: egonet_io.read_image(media.local_path(frame.rgb_path)))
         depth = None
         if key[1]:
             depth = _decoded(frame.depth_path, lambda: _missing_as_nan(frames_service.frame_depth(frame)))

@@ -200,12 +200,12 @@ def carry(source: Frame, target: Frame, user: User, *, replace: bool, version: i
                       fields={source_field: "a frame of another size"})
     _check_size(target)
 
-    prev_rgb = egonet_io.read_image(media.absolute_path(source.rgb_path))
-    next_rgb = egonet_io.read_image(media.absolute_path(target.rgb_path))
+    prev_rgb = egonet_io.read_image(media.local_path(source.rgb_path))
+    next_rgb = egonet_io.read_image(media.local_path(target.rgb_path))
     prev_depth, next_depth = _depth(source), _depth(target)
     specs, unsure = [], ""
     for n, instance in enumerate(existing.instances, start=1):
-        prev_mask = egonet_io.read_mask(media.absolute_path(instance.mask_path))
+        prev_mask = egonet_io.read_mask(media.local_path(instance.mask_path))
         try:
             carried = carry_mask(prev_rgb, prev_mask, next_rgb, prev_depth=prev_depth, next_depth=next_depth)
         except EgonetError as exc:  # the stored media disagree with each other (sizes)
@@ -268,7 +268,7 @@ def _depth(frame: Frame) -> np.ndarray | None:
     """The frame's stored depth in metres (H, W), None when it has none."""
     if not frame.depth_path:
         return None
-    return egonet_io.read_depth(media.absolute_path(frame.depth_path))
+    return egonet_io.read_depth(media.local_path(frame.depth_path))
 
 
 # --------------------------------------------------------------------------

@@ -106,7 +106,7 @@ class Proposer:
         """The map of the frame, float32 ``(H, W)`` in [0, 1], and "stored" or "computed"."""
         if self.checkpoint is not None:
             return frame_probability(self.checkpoint, frame, device=device)
-        rgb = egonet_io.read_image(media.absolute_path(frame.rgb_path))
+        rgb = egonet_io.read_image(media.local_path(frame.rgb_path))
         depth = frames_service.frame_depth(frame) if self.source == "depth" else None
         K = np.array(frame.intrinsics) if frame.intrinsics is not None else None
         try:

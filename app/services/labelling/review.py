@@ -267,7 +267,7 @@ def mask_thumbnail(annotation: Annotation) -> Path:
     def make() -> bytes:
         picture = np.zeros((height, width, 4), np.uint8)
         for i, path in enumerate(paths):
-            small = _shrunk(io.read_mask(media.absolute_path(path)), (width, height))
+            small = _shrunk(io.read_mask(media.local_path(path)), (width, height))
             colour = instance_colour(i)
             picture[small] = (*colour, THUMB_FILL_ALPHA)
             contours, _ = cv2.findContours(small.astype(np.uint8), cv2.RETR_EXTERNAL, cv2.CHAIN_APPROX_NONE)

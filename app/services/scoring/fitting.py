@@ -55,9 +55,9 @@ def trained_keys() -> list[str]:
 
 def training_frame(frame: Frame, annotation: Annotation) -> TrainingFrame:
     """One labelled frame as a baseline trains on it: colour, DHG (or None), ground truth and labelled instances."""
-    rgb = io.read_image(media.absolute_path(frame.rgb_path))
-    dhg = io.read_dhg(media.absolute_path(frame.dhg_path)) if frame.dhg_path else None
-    instances = tuple((inst.label or "", io.read_mask(media.absolute_path(inst.mask_path))) for inst in annotation.instances)
+    rgb = io.read_image(media.local_path(frame.rgb_path))
+    dhg = io.read_dhg(media.local_path(frame.dhg_path)) if frame.dhg_path else None
+    instances = tuple((inst.label or "", io.read_mask(media.local_path(inst.mask_path))) for inst in annotation.instances)
     return TrainingFrame(rgb, dhg, ground_truth.mask_of(annotation), instances)
 
 

@@ -314,8 +314,8 @@ def baseline_maps(key: str, truth: Truth, notes: list[str], on_progress: Callabl
             notes.append(f"{BASELINES[key].name}: {where}.")
             continue
         for frame in frames:
-            rgb = io.read_image(media.absolute_path(frame.rgb_path))
-            dhg = io.read_dhg(media.absolute_path(frame.dhg_path)) if trained and frame.dhg_path else None
+            rgb = io.read_image(media.local_path(frame.rgb_path))
+            dhg = io.read_dhg(media.local_path(frame.dhg_path)) if trained and frame.dhg_path else None
             yield frame, predictor.predict(rgb, dhg)
 
 

@@ -62,7 +62,7 @@ def frame_regions(frame: Frame, settings: dict[str, Any]) -> egonet_clicks.Regio
             return egonet_clicks.Regions(labels, capped)
     except (OSError, ValueError, KeyError, zipfile.BadZipFile):
         pass  # missing or unreadable: compute it again
-    rgb = io.read_image(media.absolute_path(frame.rgb_path))
+    rgb = io.read_image(media.local_path(frame.rgb_path))
     found = egonet_clicks.regions(rgb, **settings)
     # uint16 holds any realistic region count and halves the file.
     stored = found.labels.astype(np.uint16) if found.labels.max() < 2**16 else found.labels
@@ -239,5 +239,5 @@ def overlay_png(
     See ``egonet.overlay.overlay``: the heat map's opacity follows the mask,
     so the frame shows through where the mask is low.
     """
-    rgb = io.read_image(media.absolute_path(frame.rgb_path))
+    rgb = io.read_image(media.local_path(frame.rgb_path))
     return io.encode_png(egonet_overlay(rgb, mask, points=list(points), outline=outline, max_width=max_width))

@@ -111,7 +111,7 @@ def depth_samples(run: TrainingRun) -> list:
     frames = measured_depth_frames(run.config.get("activity_ids"))
     if len(frames) < 2:
         raise TrainingProblem(f"depth training needs at least two frames with measured depth, found {len(frames)}")
-    return [DepthSample(rgb=media.absolute_path(f.rgb_path), depth=media.absolute_path(f.depth_path), key=f.id,
+    return [DepthSample(rgb=media.local_path(f.rgb_path), depth=media.local_path(f.depth_path), key=f.id,
                         group=f.sequence.activity.name) for f in frames]
 
 

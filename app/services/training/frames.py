@@ -48,7 +48,7 @@ def score_run_frames(run: TrainingRun) -> int:
         for prediction in predictions:
             frame = db.session.get(Frame, prediction.frame_id)
             annotation = truths.get(frame.id)
-            mask = media.absolute_path(annotation.mask_path) if annotation is not None and annotation.mask_path else None
+            mask = media.local_path(annotation.mask_path) if annotation is not None and annotation.mask_path else None
             probability = read_probability(prediction.path, shape=(frame.height, frame.width))
             prediction.f_score, prediction.precision, prediction.recall = scores_at(frame_counts(probability, mask), threshold)
             done += 1

@@ -293,14 +293,14 @@ def _samples(activity_ids: list[int] | None, *, classes: bool = False) -> list:
         annotation = truths[frame.id]
         samples.append(
             Sample(
-                rgb=media.absolute_path(frame.rgb_path),
-                dhg=media.absolute_path(frame.dhg_path) if frame.dhg_path else None,
+                rgb=media.local_path(frame.rgb_path),
+                dhg=media.local_path(frame.dhg_path) if frame.dhg_path else None,
                 # As ground_truth.mask_of: no mask file means no action-object. Paths, not
                 # arrays, so a large dataset is read as training goes, not held in memory.
-                mask=media.absolute_path(annotation.mask_path) if annotation.mask_path else None,
+                mask=media.local_path(annotation.mask_path) if annotation.mask_path else None,
                 group=frame.sequence.activity.name,
                 key=frame.id,
-                instances=tuple((_class_of(i.label), media.absolute_path(i.mask_path))
+                instances=tuple((_class_of(i.label), media.local_path(i.mask_path))
                                 for i in annotation.instances if not is_hand(i.label)) if classes else (),
             )
         )

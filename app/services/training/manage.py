@@ -262,7 +262,7 @@ def _remove_files(run_id: int, paths: set[str]) -> None:
     """After the commit: the run's media, their cached overlays, and its checkpoint folder."""
     cache = Path(current_app.config["CACHE_ROOT"]) / "predictions"
     for rel in paths:
-        media.absolute_path(rel).unlink(missing_ok=True)
+        media.local_path(rel).unlink(missing_ok=True)
         stem = Path(rel).stem
         for cached in cache.glob(f"*-{stem}*"):
             cached.unlink(missing_ok=True)

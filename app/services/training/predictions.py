@@ -163,7 +163,7 @@ def prediction_picture(prediction: Prediction, kind: str) -> Path:
     source = Path(prediction.path).stem if kind == "prediction" else Path(frame.rgb_path).stem
     path = Path(current_app.config["CACHE_ROOT"]) / "predictions" / f"{kind}-{source}-{truth_name}-{Path(frame.rgb_path).stem}.png"
     if not path.exists():
-        rgb = io.read_image(media.absolute_path(frame.rgb_path))
+        rgb = io.read_image(media.local_path(frame.rgb_path))
         truth = ground_truth.mask_of(annotation) if annotation is not None else np.zeros(rgb.shape[:2], bool)
         layer = read_probability(prediction.path, shape=rgb.shape[:2]) if kind == "prediction" else truth.astype(np.float32)
         picture = egonet_overlay(rgb, layer, outline=truth, max_width=PICTURE_WIDTH)
@@ -254,8 +254,8 @@ def predict(
     existing = _existing_predictions(checkpoint, frames)
     out = []
     for frame in frames:
-        rgb = io.read_image(media.absolute_path(frame.rgb_path))
-        dhg = io.read_dhg(media.absolute_path(frame.dhg_path)) if frame.dhg_path and uses_dhg else None
+        rgb = io.read_image(media.local_path(frame.rgb_path))
+        dhg = io.read_dhg(media.local_path(frame.dhg_path)) if frame.dhg_path and uses_dhg else None
         probability = predictor.predict(rgb, dhg)
         path = media.store(io.encode_probability_png(probability), ".png")
         prediction = existing.get(frame.id) or Prediction(run_id=checkpoint.run_id, checkpoint_id=checkpoint.id, frame_id=frame.id)
@@ -263,7 +263,7 @@ def predict(
         prediction.f_score = prediction.precision = prediction.recall = None
         if frame.id in truths:
             mask = truths[frame.id].mask_path
-            counts = frame_counts(probability, media.absolute_path(mask) if mask else None)
+            counts = frame_counts(probability, media.local_path(mask) if mask else None)
             prediction.f_score, prediction.precision, prediction.recall = scores_at(counts, threshold_of(checkpoint))
         db.session.add(prediction)
         out.append(prediction)

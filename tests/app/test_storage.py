@@ -1,0 +1,59 @@
+"""The storage module on both backends: a folder and a real SeaweedFS bucket."""
+
+import pytest
+
+from app.services import media
+from app.services.storage import StorageUnavailable, open_store, store
+from tests.seaweed import SeaweedFS
+
+pytestmark = pytest.mark.both_storages
+
+
+def test_keys_round_trip_list_and_delete(ctx):
+    files = store()
+    files.put("checkpoints/run-1/fold-1.pt", b"weights")
+    files.put("checkpoints/run-1/config.json", lambda fh: fh.write(b"{}"))
+    files.put("exports/one.zip", b"zip")
+    assert files.get("checkpoints/run-1/fold-1.pt") == b"weights"
+    assert files.local_path("checkpoints/run-1/config.json").read_bytes() == b"{}"
+    assert sorted((e.key, e.size) for e in files.list("checkpoints/run-1")) == [
+        ("checkpoints/run-1/config.json", 2), ("checkpoints/run-1/fold-1.pt", 7)]
+    files.put("checkpoints/run-1/fold-1.pt", b"better weights")  # a changed key is read afresh
+    assert files.local_path("checkpoints/run-1/fold-1.pt").read_bytes() == b"better weights"
+    files.delete_prefix("checkpoints/run-1")
+    assert list(files.list("checkpoints")) == [] and files.exists("exports/one.zip")
+    assert not files.exists("checkpoints/run-1/fold-1.pt")
+    with pytest.raises(FileNotFoundError):
+        files.get("exports/none.zip")
+    with pytest.raises(ValueError, match="not a storage key"):
+        files.get("../secret")
+
+
+def test_media_are_content_addressed_and_served(ctx, client):
+    rel = media.store(b"\x89PNG not really", ".png")
+    assert media.store(b"\x89PNG not really", ".png") == rel and media.read(rel) == b"\x89PNG not really"
+    assert media.local_path(rel).read_bytes() == b"\x89PNG not really"
+    assert [e.key for e in store().list("media")] == [f"media/{rel}"]
+    assert client.get(f"/media/{rel}").status_code in (302, 401, 200)  # served to whoever may see media
+
+
+def test_a_bucket_that_is_down_says_so_and_comes_back(tmp_path):
+    server = SeaweedFS(tmp_path / "weed").start()
+    try:
+        server.create_bucket("egonet-down")
+        import os
+        saved = dict(os.environ)
+        os.environ.update(server.environ())
+        try:
+            files = open_store("s3://egonet-down/p", cache=tmp_path / "cache", cache_bytes=1 << 20)
+            files.put("exports/x.zip", b"x")
+            server.stop()
+            with pytest.raises(StorageUnavailable):
+                files.get("exports/x.zip")
+            server.start()
+            assert files.get("exports/x.zip") == b"x"
+        finally:
+            os.environ.clear()
+            os.environ.update(saved)
+    finally:
+        server.stop()
