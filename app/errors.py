@@ -17,7 +17,6 @@ from flask_wtf.csrf import CSRFError
 from werkzeug.exceptions import HTTPException, InternalServerError
 
 from app.extensions import db
-from app.services.storage import StorageUnavailable
 from egonet.errors import EgonetError
 from egonet.io import MediaError
 
@@ -53,6 +52,10 @@ class Problem(Exception):
     def from_egonet(cls, exc: EgonetError) -> "Problem":
         """egonet's error as the app's: a 400 naming its field (an argument or a file)."""
         return cls(exc.message, field=exc.field, fields={exc.field: exc.reason} if exc.field else {})
+
+
+class StorageUnavailable(RuntimeError):
+    """The object store did not answer (connection refused, time-out, 5xx): 503 (app.services.storage)."""
 
 
 ERROR_NAMES = {400: "bad_request", 404: "not_found", 409: "conflict", 413: "too_large", 415: "unsupported_media_type"}

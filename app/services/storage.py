@@ -38,13 +38,10 @@ from typing import BinaryIO, Protocol
 
 from flask import current_app
 
+from app.errors import StorageUnavailable
 from egonet.io import write_atomic
 
 Data = bytes | Callable[[BinaryIO], None]
-
-
-class StorageUnavailable(RuntimeError):
-    """The object store did not answer (connection refused, time-out, 5xx)."""
 
 
 @dataclass(frozen=True)
