@@ -115,6 +115,7 @@ def test_cancelling_a_conversion_stops_it(ctx, tiny_file, monkeypatch):
 # --------------------------------------------------------------------------- the page's upload
 
 
+@pytest.mark.both_storages
 def test_the_page_uploads_in_chunks_and_refuses_what_is_no_release(app, admin_client, tiny_file, monkeypatch):
     monkeypatch.setattr(released, "CHUNK_BYTES", 4096)
     data = tiny_file.read_bytes()
@@ -148,6 +149,7 @@ def test_the_page_uploads_in_chunks_and_refuses_what_is_no_release(app, admin_cl
         assert not training.files.listing(released.UPLOADS)
 
 
+@pytest.mark.both_storages
 def test_a_lying_file_is_refused_in_one_line_naming_it_as_uploaded_and_removed(app, admin_client, tmp_path):
     """Review: a blob shape of 2**63 gave a 500 and left the upload on disk; messages showed the instance's path."""
     for dims in ([2**63, 0], [2**63]):
@@ -162,6 +164,7 @@ def test_a_lying_file_is_refused_in_one_line_naming_it_as_uploaded_and_removed(a
             assert not training.files.listing(released.UPLOADS)
 
 
+@pytest.mark.both_storages
 def test_upload_limits_and_cancelling(app, admin_client, client, make_user):
     app.config["WEIGHTS_MAX_BYTES"] = 1000
     too_big = admin_client.post("/training/weights/uploads", json={"filename": "a.caffemodel", "size": 1001}, headers=JSON)

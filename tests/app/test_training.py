@@ -443,6 +443,7 @@ def test_admins_rename_and_tag_with_a_version_check(app, ctx, admin_client, make
     # Only admins edit: the access matrix checks every other role gets 403.
 
 
+@pytest.mark.both_storages
 def test_staff_download_checkpoints_and_configuration(app, ctx, client, make_user, tmp_path):
     run = hand_made_run(folds=("desk work",))
     (checkpoint,) = run.checkpoints

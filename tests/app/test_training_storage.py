@@ -1,6 +1,11 @@
 """Checkpoints in storage, on a folder and on a bucket: a run trained on one host is used, resumed and
 downloaded on another (the same database and STORAGE_URL, an instance and cache of its own)."""
 
+import json
+import os
+import socket
+import subprocess
+import sys
 from pathlib import Path
 
 import pytest
@@ -11,11 +16,12 @@ from app.models.training import Checkpoint, RunStatus, TrainingRun
 from app.services import training
 from app.services.demo import create_demo
 from app.services.training import released
-from tests.app.conftest import PASSWORD
+from tests.app.conftest import PASSWORD, make_app
 from tests.caffe_files import TINY, TINY_RELEASES, release_layers, write_caffemodel
 
 pytestmark = [pytest.mark.both_storages, pytest.mark.usefixtures("one_thread")]
 
+ROOT = Path(__file__).resolve().parents[2]
 RUN = {"model": "egonet-lite", "epochs": 1, "width": 32, "height": 24, "batch_size": 2, "device": "cpu"}
 JSON = {"Accept": "application/json"}
 
@@ -37,6 +43,11 @@ def other_host(app_with, storage_url, tmp_path):
 
 def names(run_id: int) -> set[str]:
     return {path.rsplit("/", 1)[1] for path, _, _ in training.files.listing(f"run-{run_id}")}
+
+
+def test_checkpoint_root_is_refused_at_startup(database_url, tmp_path):
+    with pytest.raises(RuntimeError, match="CHECKPOINT_ROOT is replaced by STORAGE_URL"):
+        make_app(database_url, tmp_path, CHECKPOINT_ROOT=str(tmp_path / "checkpoints"))
 
 
 def test_a_run_trains_into_storage_and_another_host_predicts_and_downloads_it(app, demo, other_host, storage_url, tmp_path,
@@ -121,3 +132,25 @@ def test_a_released_model_uploaded_through_two_hosts_is_converted_by_a_third(app
         (checkpoint,) = run.checkpoints
         assert training.files.load(checkpoint.path)["config"]["height"] == 48
         assert training.files.listing(released.UPLOADS) == []  # the chunks are gone once converted
+
+
+@pytest.mark.slow
+def test_torchrun_trains_on_two_processes_on_a_host_of_its_own_and_rank_zero_writes_to_storage(
+        app, demo, database_url, storage_url, tmp_path):
+    with socket.socket() as free:
+        free.bind(("127.0.0.1", 0))
+        port = free.getsockname()[1]
+    env = dict(os.environ, FLASK_SQLALCHEMY_DATABASE_URI=database_url, FLASK_SECRET_KEY="torchrun-test-secret-key-0123456789",
+               FLASK_STORAGE_URL=storage_url, FLASK_CACHE_ROOT=str(tmp_path / "gpu-host" / "cache"), OMP_NUM_THREADS="1")
+    args = ["--folds", "loao", "--epochs", "2", "--size", "32x24", "--batch-size", "4", "--device", "cpu",
+            "--activities", "cooking", "--activities", "dining", "--name", "two processes"]
+    done = subprocess.run([sys.executable, "-m", "torch.distributed.run", "--nproc-per-node", "2", "--master-port", str(port),
+                           "-m", "flask", "--app", "app", "egonet", "train", *args],
+                          cwd=ROOT, env=env, capture_output=True, text=True, timeout=300, check=False)
+    assert done.returncode == 0, done.stderr[-3000:]
+    with app.app_context():
+        run = db.session.execute(db.select(TrainingRun).filter_by(name="two processes")).scalar_one()
+        assert run.status is RunStatus.DONE and names(run.id) == {"config.json", "cooking.pt", "dining.pt"}
+        assert json.loads(training.files.read(f"run-{run.id}/config.json"))["environment"]["world_size"] == 2
+        assert all(training.files.load(c.path)["epoch"] == 2 for c in run.checkpoints)
+    assert not list((tmp_path / "gpu-host" / "cache" / "training").iterdir())  # both processes' scratch folders went
