@@ -3,9 +3,11 @@ downloaded on another (the same database and STORAGE_URL, an instance and cache 
 
 import json
 import os
+import signal
 import socket
 import subprocess
 import sys
+import time
 from pathlib import Path
 
 import pytest
@@ -154,3 +156,71 @@ def test_torchrun_trains_on_two_processes_on_a_host_of_its_own_and_rank_zero_wri
         assert json.loads(training.files.read(f"run-{run.id}/config.json"))["environment"]["world_size"] == 2
         assert all(training.files.load(c.path)["epoch"] == 2 for c in run.checkpoints)
     assert not list((tmp_path / "gpu-host" / "cache" / "training").iterdir())  # both processes' scratch folders went
+
+
+def test_an_upload_left_unfinished_for_a_day_is_removed(app, admin_client, monkeypatch):
+    def start():
+        return admin_client.post("/training/weights/uploads", json={"filename": "a.caffemodel", "size": 10}, headers=JSON).json["upload"]
+
+    first = start()
+    chunk = {"data": b"01234", "content_type": "application/octet-stream", "headers": JSON}
+    assert admin_client.put(f"/training/weights/uploads/{first}?offset=0", **chunk).json["received"] == 5
+    monkeypatch.setattr(released, "STALE_UPLOAD_S", -60)  # a day has passed
+    second = start()
+    assert admin_client.put(f"/training/weights/uploads/{first}?offset=5", **chunk).status_code == 404
+    with app.app_context():
+        assert {path.split("/")[1] for path, _, _ in training.files.listing(released.UPLOADS)} == {second}
+
+
+def worker(app, database_url: str, storage_url: str, cache: Path) -> subprocess.Popen:
+    """``flask egonet worker`` on a host of its own: the same database, queue and storage, its own cache."""
+    env = dict(os.environ, EGONET_QUEUE_URL=app.config["QUEUE_URL"], FLASK_SQLALCHEMY_DATABASE_URI=database_url,
+               FLASK_SECRET_KEY="worker-test-secret-key-0123456789abcdef", FLASK_STORAGE_URL=storage_url,
+               FLASK_CACHE_ROOT=str(cache), OMP_NUM_THREADS="1")
+    return subprocess.Popen([sys.executable, "-m", "flask", "--app", "app", "egonet", "worker"], cwd=ROOT, env=env,
+                            stdout=subprocess.PIPE, stderr=subprocess.STDOUT, text=True, start_new_session=True)
+
+
+@pytest.mark.slow
+def test_a_worker_killed_mid_training_resumes_on_another_host_from_the_last_checkpoint_in_storage(
+        app, demo, database_url, storage_url, tmp_path):
+    epochs = 6
+    with app.app_context():
+        run_id = training.start_run(training.RunRequest(**(RUN | {"epochs": epochs}), activity_ids=demo)).id
+    first = worker(app, database_url, storage_url, tmp_path / "host-a")
+    try:
+        deadline = time.monotonic() + 120
+        with app.app_context():
+            while not training.files.exists(f"run-{run_id}/cooking.pt") and time.monotonic() < deadline:
+                time.sleep(0.05)
+    finally:
+        os.killpg(first.pid, signal.SIGKILL)  # the host goes away mid-training
+        first.communicate(timeout=20)
+    with app.app_context():
+        state = training.files.load(f"run-{run_id}/cooking.pt")
+        assert 1 <= state["epoch"] < epochs
+        # Mark the stored checkpoint: only a run that goes on from it keeps the mark in its history.
+        state["history"][0]["train_loss"] = 123.0
+        training.files.save(f"run-{run_id}/cooking.pt", state)
+        run = db.session.get(TrainingRun, run_id)
+        assert run.status is RunStatus.RUNNING  # as a killed worker leaves it: cancel, then resume
+        training.resume_run(training.cancel_run(run))
+
+    second = worker(app, database_url, storage_url, tmp_path / "host-b")
+    try:
+        deadline = time.monotonic() + 180
+        with app.app_context():
+            while time.monotonic() < deadline:
+                db.session.expire_all()
+                if db.session.get(TrainingRun, run_id).status in (RunStatus.DONE, RunStatus.FAILED):
+                    break
+                time.sleep(0.2)
+    finally:
+        os.killpg(second.pid, signal.SIGTERM)
+        out = second.communicate(timeout=20)[0]
+    with app.app_context():
+        run = db.session.get(TrainingRun, run_id)
+        assert run.status is RunStatus.DONE, out[-3000:]
+        cooking = next(c for c in run.checkpoints if c.fold == "cooking")
+        history = training.files.load(cooking.path)["history"]
+        assert [h["epoch"] for h in history] == list(range(1, epochs + 1)) and history[0]["train_loss"] == 123.0

@@ -27,7 +27,6 @@ import json
 import os
 import re
 import secrets
-import shutil
 import tempfile
 import time
 from collections.abc import Callable, Iterator
@@ -53,9 +52,9 @@ STALE_UPLOAD_S = 24 * 3600
 PROGRESS_INTERVAL_S = 1.0
 _TOKEN = re.compile(r"[0-9a-f]{32}")
 UPLOADS = "uploads"
-"""Uploads in storage: ``checkpoints/uploads/<token>/`` holds ``meta.json`` (``finished.json`` once
-finished) and the chunks, ``part-<offset>``."""
-META, FINISHED = "meta.json", "finished.json"
+"""Uploads in storage: ``checkpoints/uploads/<token>/`` holds the chunks, ``part-<offset>``, and
+while the upload is under way its ``meta.json``."""
+META = "meta.json"
 
 
 def max_bytes() -> int:
@@ -277,8 +276,7 @@ def finish_upload(token: str, *, name: str | None, size: tuple[int, int] | None,
     if received != meta["size"]:
         raise TrainingProblem(f"{received:,} of {meta['size']:,} bytes received: send the rest first", status=409,
                               received=received)
-    files.put(f"{UPLOADS}/{token}/{FINISHED}", json.dumps(meta).encode())
-    files.delete(f"{UPLOADS}/{token}/{META}")  # no longer under way: neither listed as pending nor written to
+    files.delete(f"{UPLOADS}/{token}/{META}")  # no longer under way: neither counted as pending nor written to
     run = None
     try:
         with _assembled(token) as path:
@@ -350,8 +348,7 @@ def _assembled(token: str) -> Iterator[Path]:
     try:
         with os.fdopen(fd, "wb") as fh:
             for part in sorted(p for p, _, _ in files.listing(f"{UPLOADS}/{token}") if p.rsplit("/", 1)[1].startswith("part-")):
-                with files.local_path(part).open("rb") as src:
-                    shutil.copyfileobj(src, fh, 1 << 20)
+                fh.write(files.read(part))  # one chunk (at most CHUNK_BYTES) at a time
         yield path
     finally:
         path.unlink(missing_ok=True)
