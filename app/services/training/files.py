@@ -14,6 +14,7 @@ goes on, on this host or another, first takes its files back from storage
 (:func:`fetch_run`), so it continues from the last epoch storage has.
 """
 
+import hashlib
 import shutil
 from pathlib import Path
 
@@ -88,20 +89,28 @@ def scratch(run_id: int, rank: int = 0) -> Path:
 
 
 class Uploader:
-    """Puts each file of a run's scratch folder into storage once it is new or has changed."""
+    """Puts each file of a run's scratch folder into storage once it is new or has changed.
+
+    A file's content digest says whether it changed: two saves within one
+    tick of a coarse file-system clock can leave the same size and time.
+    """
 
     def __init__(self, run_id: int, folder: Path):
         self.prefix, self.folder = run_folder(run_id), folder
-        self.sent: dict[str, tuple[int, int]] = {}
+        self.sent: dict[str, str] = {}
 
     def __call__(self) -> None:
         for path in sorted(self.folder.glob("*")):
             if path.name.startswith(".tmp-") or not path.is_file():
                 continue  # a write in flight
-            stat = path.stat()
-            if self.sent.get(path.name) != (stat.st_mtime_ns, stat.st_size):
+            if self.sent.get(path.name) != (digest := _digest(path)):
                 storage().put_file(f"{AREA}{self.prefix}/{path.name}", path)
-                self.sent[path.name] = (stat.st_mtime_ns, stat.st_size)
+                self.sent[path.name] = digest
+
+
+def _digest(path: Path) -> str:
+    with path.open("rb") as fh:
+        return hashlib.file_digest(fh, "blake2b").hexdigest()
 
 
 def fetch_run(run_id: int, folder: Path) -> Uploader:
@@ -113,8 +122,6 @@ def fetch_run(run_id: int, folder: Path) -> Uploader:
         name = path.removeprefix(run_folder(run_id) + "/")
         if "/" in name:
             continue
-        target = folder / name
-        shutil.copyfile(local_path(path), target)
-        stat = target.stat()
-        uploader.sent[name] = (stat.st_mtime_ns, stat.st_size)
+        shutil.copyfile(local_path(path), folder / name)
+        uploader.sent[name] = _digest(folder / name)
     return uploader
