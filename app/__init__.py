@@ -206,6 +206,9 @@ def _configure(app: Flask, test_config: dict | None) -> None:
     if "MEDIA_ROOT" in app.config:
         raise RuntimeError("MEDIA_ROOT is replaced by STORAGE_URL, the folder (or s3://bucket/prefix) that holds media/: "
                            "set STORAGE_URL to MEDIA_ROOT's parent folder (docs/deployment.md)")
+    if "CHECKPOINT_ROOT" in app.config:
+        raise RuntimeError("CHECKPOINT_ROOT is replaced by STORAGE_URL, the folder (or s3://bucket/prefix) that holds "
+                           "checkpoints/: set STORAGE_URL to CHECKPOINT_ROOT's parent folder (docs/deployment.md)")
     app.config["SQLALCHEMY_DATABASE_URI"] = normalise_database_url(app.config["SQLALCHEMY_DATABASE_URI"])
     os.makedirs(app.instance_path, exist_ok=True)
     if not app.config.get("SECRET_KEY"):
