@@ -23,6 +23,7 @@ from egonet.grabcut.colour import _first_models
 from egonet.grabcut.cut import (_NEAR_GRID, _STROKE_REACH, _box_cut, _box_labels, _depth_box_cut, _depth_first_models,
                                _keep_connected, _recut, _seed_cut, _Terms)
 from egonet.grabcut.depth import _DepthGuide
+from egonet.grabcut.fine import _THIN, _fine_cut
 from egonet.grabcut.frame import GrabCutFrame
 from egonet.grabcut.geometry import _clip_to_box, _downsample, _Geometry, _grow_box
 from egonet.grabcut.refine import _BAND, _GF_RADIUS, _Guide, _upsample_mask
@@ -321,8 +322,10 @@ class GrabCutSession:
         new_roi = box != prev.box
         # In a new ROI the cut starts from the current mask (the models carry over either way).
         prior = _downsample(self._mask, guide.geom) if new_roi else prev.low
+        # A stroke thinner than the grid resolves is cut at full resolution (``fine``), not flooded on the grid.
+        thin = self._depth is None and r * min(guide.geom.sx, guide.geom.sy) < _THIN
         if self._depth is None:
-            low, models = _recut(_Terms.colour(guide), guide, prev.models, strokes, prior, flood=True)
+            low, models = _recut(_Terms.colour(guide), guide, prev.models, strokes, prior, flood=not thin)
         else:
             low, models = _recut(_Terms.depth(self._depth_guide_for(guide)), guide, prev.models, strokes, prior,
                                  reach=None)
@@ -332,6 +335,9 @@ class GrabCutSession:
             mask = self._mask | self._full_mask(guide, snap)
         else:
             mask = self._refresh_changed(guide, snap, prev.low, new.fg)
+            self._apply_strokes(mask, strokes)
+        if thin:
+            mask[_fine_cut(self._image, mask, *footprint, new.fg)] = new.fg
             self._apply_strokes(mask, strokes)
         # Local at full resolution too: only what is joined to the stroke through the change moves.
         grid = min(guide.geom.sx, guide.geom.sy)
@@ -486,7 +492,13 @@ class GrabCutSession:
             view[max(0, y0 - oy) : max(0, y1 - oy), max(0, x0 - ox) : max(0, x1 - ox)] |= (
                 part[max(0, y0 - oy) : max(0, y1 - oy), max(0, x0 - ox) : max(0, x1 - ox)])
         else:
-            view &= part
+            # Only near grid pixels that left the object: what the full-resolution cut added elsewhere stays.
+            k = 2 * _BAND + 1
+            moved = cv2.dilate((prior & ~snap.low).view(np.uint8), np.ones((k, k), np.uint8)).view(bool)
+            rx0, ry0 = geom.roi[:2]
+            near_r = ((np.arange(oy, oy + part.shape[0]) - ry0 + 0.5) * geom.sy).astype(np.intp)
+            near_c = ((np.arange(ox, ox + part.shape[1]) - rx0 + 0.5) * geom.sx).astype(np.intp)
+            view &= part | ~moved[np.ix_(np.minimum(near_r, geom.low_h - 1), np.minimum(near_c, geom.low_w - 1))]
         return mask
 
     def _apply_strokes(self, mask: np.ndarray, strokes: tuple[_Stroke, ...]) -> None:
