@@ -1,4 +1,4 @@
-"""Thin objects in GrabCut: a stroke's effect is local, and NoC@90 on real frames with thin objects.
+"""Thin objects in GrabCut: a stroke's effect is local, a click follows a thin part, and NoC@90 on real frames with thin objects.
 
 The NoC@90 protocol and the frames are ``tests/thin_objects.py``'s (the
 same as ``bench/bench_grabcut.py --noc``).
@@ -115,6 +115,28 @@ def test_a_click_floods_the_coherent_region_it_lands_in():
     assert not (region & sure).any() and region[40:50, 40:48].all() and not (region & ~near).any()
 
 
+def test_a_click_on_a_chopstick_follows_it_at_full_resolution():
+    """A click on an 8-10 px chopstick (2 px on the cut's grid) takes the stick along its length, nothing beside it.
+
+    On main's engine before (10b4b88) the same click took 110 px of the
+    stick, about its own footprint (101 px); now about 2,200.
+    """
+    cases = [c for c in thin_objects.utensil_cases() if c.name.startswith("chopsticks")]
+    if not cases:
+        pytest.skip("no first-person frames in ../shared")
+    case = cases[0]
+    session = GrabCutSession(case.rgb)
+    before = session.box(*thin_objects.loose_box(case.truth))
+    k = thin_objects.click(before, case.truth)
+    assert k.label == "fg" and k.radius < 6
+    after = session.stroke(k.points, k.label, k.radius)
+    footprint = stroke_footprint(after.shape, k.points, k.radius)
+    added = after & ~before
+    assert np.count_nonzero(added & case.truth) > 10 * np.count_nonzero(footprint)
+    assert np.count_nonzero(added & ~case.truth) < 0.01 * np.count_nonzero(added)
+    assert not _far_changes(before, after, footprint).any()
+
+
 @pytest.mark.slow
 def test_noc90_on_real_frames_with_thin_objects():
     """NoC@90 (the box first, then clicks at the largest error's interior-most point), as the bench runs it.
@@ -140,12 +162,12 @@ def test_noc90_on_real_frames_with_thin_objects():
         assert not any(far), (case.name, far)
     davis = [v for k, v in scores.items() if k in ("camel", "cows", "dog", "goat", "soapbox")]
     assert len(davis) == 5
-    # 2026-12-04: 11.2 on the DAVIS frames and 9.56 on all nine (main's engine before issue 36: 11.6
-    # and 10.0); the goat takes all 20, the chopsticks miss (see docs/benchmarks.md). The goal of
-    # issue 36, 5, is not met.
+    # 2026-12-04: 11.2 on the DAVIS frames and 8.67 on all nine (main's engine before issue 36: 11.6
+    # and 10.0); the goat takes all 20, the chopsticks 12 (before this change they missed: IoU 0.33 at
+    # 20). The goal of issue 36, 5, is not met (see docs/benchmarks.md).
     assert np.mean(davis) <= 11.8, scores
     assert sum(v < thin_objects.MAX_CLICKS for v in davis) >= 4, scores
     if len(scores) > 5:
-        assert np.mean(list(scores.values())) <= 10.0, scores
+        assert np.mean(list(scores.values())) <= 9.2, scores
         assert scores["fork-00_007850_1"] <= 2 and scores["spoon-02_024150_3"] <= 3, scores
-        assert scores["knife-01_007750_6"] <= 8, scores
+        assert scores["knife-01_007750_6"] <= 8 and scores["chopsticks-02_024150_3"] <= 16, scores
