@@ -28,7 +28,7 @@ from egonet.grabcut.graph import _CutGraph, _links
 
 _THIN = 2.0  # a colour stroke narrower than this many grid pixels (radius) may be on a part the grid cannot resolve
 _WIDER = 2.0  # ... it is, where the part of its colour is at most this many times its radius wide (+2 px)
-_MIN_PIXELS = 20  # a stroke of fewer pixels (a dot on an edge) has no colour to follow: only its pixels change
+_MIN_PIXELS = 20  # a stroke of fewer pixels (a dot on an edge) has no colour to follow: left to the grid's cut
 _REACH = 240  # full-resolution pixels around the stroke that its cut may change
 _MODEL_REACH = 50  # ... and whose colours, within this many of it, train the two mixtures
 _LIKE = 11.3  # squared Mahalanobis distance to the stroke's colours of a pixel like them (chi-squared, 3 dof, 99 %)
@@ -58,15 +58,15 @@ def _fine_cut(image: np.ndarray, mask: np.ndarray, own: np.ndarray, origin: tupl
 
     Returns:
         bool ``(H, W)``: the pixels labelled against the stroke to give its
-        label (none for a stroke of fewer than ``_MIN_PIXELS`` pixels); None
-        when the part it lies on is wider than ``_WIDER`` times its radius
-        (the grid's cut resolves it).
+        label; None when the part it lies on is wider than ``_WIDER`` times
+        its radius (the grid's cut resolves it) or the stroke has fewer than
+        ``_MIN_PIXELS`` pixels.
     """
     h, w = mask.shape
     y0, x0 = origin
-    flip = np.zeros((h, w), bool)
     if np.count_nonzero(own) < _MIN_PIXELS:
-        return flip
+        return None
+    flip = np.zeros((h, w), bool)
     limit = _WIDER * radius + 2
     stroke = image[y0 : y0 + own.shape[0], x0 : x0 + own.shape[1]][own].astype(np.float64)
     inverse = np.linalg.inv(np.cov(stroke.T) + 4.0 * np.eye(3))
