@@ -1,4 +1,4 @@
-"""Thin objects in GrabCut: a stroke's effect is local, a click follows a thin part, and NoC@90 on real frames with thin objects.
+"""Thin objects in GrabCut: a stroke's effect is local, a click follows a thin part, and NoC@90 on real frames.
 
 The NoC@90 protocol and the frames are ``tests/thin_objects.py``'s (the
 same as ``bench/bench_grabcut.py --noc``).
