@@ -505,13 +505,7 @@ class GrabCutSession:
             view[max(0, y0 - oy) : max(0, y1 - oy), max(0, x0 - ox) : max(0, x1 - ox)] |= (
                 part[max(0, y0 - oy) : max(0, y1 - oy), max(0, x0 - ox) : max(0, x1 - ox)])
         else:
-            # Only near grid pixels that left the object: what the full-resolution cut added elsewhere stays.
-            k = 2 * _BAND + 1
-            moved = cv2.dilate((prior & ~snap.low).view(np.uint8), np.ones((k, k), np.uint8)).view(bool)
-            rx0, ry0 = geom.roi[:2]
-            near_r = ((np.arange(oy, oy + part.shape[0]) - ry0 + 0.5) * geom.sy).astype(np.intp)
-            near_c = ((np.arange(ox, ox + part.shape[1]) - rx0 + 0.5) * geom.sx).astype(np.intp)
-            view &= part | ~moved[np.ix_(np.minimum(near_r, geom.low_h - 1), np.minimum(near_c, geom.low_w - 1))]
+            view &= part
         return mask
 
     def _apply_strokes(self, mask: np.ndarray, strokes: tuple[_Stroke, ...]) -> None:
