@@ -29,7 +29,7 @@ from egonet.grabcut.graph import _CutGraph, _links
 _THIN = 2.0  # a colour stroke narrower than this many grid pixels (radius) may be on a part the grid cannot resolve
 _WIDER = 2.0  # ... it is, where the part of its colour is at most this many times its radius wide (+2 px)
 _MIN_PIXELS = 20  # a stroke of fewer pixels (a dot on an edge) has no colour to follow: left to the grid's cut
-_REACH = 240  # full-resolution pixels around the stroke that its cut may change
+_REACH = 360  # full-resolution pixels around the stroke that its cut may change
 _MODEL_REACH = 50  # ... and whose colours, within this many of it, train the two mixtures
 _LIKE = 11.3  # squared Mahalanobis distance to the stroke's colours of a pixel like them (chi-squared, 3 dof, 99 %)
 _BIAS = 4.0  # nats the stroke's side is favoured by, for the part's edge (pixels of mixed colour)

@@ -120,7 +120,8 @@ def test_a_click_on_a_chopstick_follows_it_at_full_resolution():
     """A click on an 8-10 px chopstick (2 px on the cut's grid) takes the stick along its length, nothing beside it.
 
     On main's engine before (10b4b88) the same click took 110 px of the
-    stick, about its own footprint (101 px); now about 2,200.
+    stick, about its own footprint (101 px); with the cut reaching 240 px
+    about 2,200, with 360 px (2026-12-04) about 4,000.
     """
     cases = [c for c in thin_objects.utensil_cases() if c.name.startswith("chopsticks")]
     if not cases:
@@ -133,7 +134,7 @@ def test_a_click_on_a_chopstick_follows_it_at_full_resolution():
     after = session.stroke(k.points, k.label, k.radius)
     footprint = stroke_footprint(after.shape, k.points, k.radius)
     added = after & ~before
-    assert np.count_nonzero(added & case.truth) > 10 * np.count_nonzero(footprint)
+    assert np.count_nonzero(added & case.truth) > 30 * np.count_nonzero(footprint)
     assert np.count_nonzero(added & ~case.truth) < 0.01 * np.count_nonzero(added)
     assert not _far_changes(before, after, footprint).any()
 
@@ -153,7 +154,7 @@ def test_a_thin_stroke_follows_a_thin_part_and_leaves_a_wide_one_to_the_grid():
     mask[148:153, 285:316] = True
     flip = _fine_cut(image, mask, crop, (148, 285), True, 2.5)
     assert flip is not None
-    assert (flip | mask)[150, 60:540].all()  # the bar, 240 px each way of the stroke
+    assert (flip | mask)[150, 60:540].all()  # the bar, its whole length (240 px each way of the stroke)
     assert np.count_nonzero(flip & ~bar) < 0.05 * np.count_nonzero(flip)
     assert not flip[20:120, 40:200].any()
     patch = np.zeros((300, 600), bool)
@@ -186,13 +187,13 @@ def test_noc90_on_real_frames_with_thin_objects():
         assert not any(far), (case.name, far)
     davis = [v for k, v in scores.items() if k in ("camel", "cows", "dog", "goat", "soapbox")]
     assert len(davis) == 5
-    # 2026-12-04: 11.2 on the DAVIS frames and 8.22 on all nine (main's engine before issue 36: 11.6
-    # and 10.0; before the full-resolution cut of thin strokes 9.56); the goat takes all 20, the
-    # chopsticks 8 (they missed before: IoU 0.33 at 20). The goal of issue 36, 5, is not met (see
-    # docs/benchmarks.md).
-    assert np.mean(davis) <= 11.8, scores
+    # 2026-12-04: 11.2 on the DAVIS frames and 8.11 on all nine (main's engine before issue 36: 11.6
+    # and 10.0; before the full-resolution cut of thin strokes 9.56, with it reaching 240 px 8.22);
+    # the goat takes all 20, the chopsticks 7 (they missed before: IoU 0.33 at 20). The goal of
+    # issue 36, 5, is not met (see docs/benchmarks.md).
+    assert np.mean(davis) <= 11.4, scores
     assert sum(v < thin_objects.MAX_CLICKS for v in davis) >= 4, scores
     if len(scores) > 5:
-        assert np.mean(list(scores.values())) <= 8.8, scores
+        assert np.mean(list(scores.values())) <= 8.2, scores
         assert scores["fork-00_007850_1"] <= 2 and scores["spoon-02_024150_3"] <= 3, scores
-        assert scores["knife-01_007750_6"] <= 8 and scores["chopsticks-02_024150_3"] <= 12, scores
+        assert scores["knife-01_007750_6"] <= 7 and scores["chopsticks-02_024150_3"] <= 7, scores
