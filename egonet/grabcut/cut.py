@@ -47,6 +47,8 @@ from collections.abc import Callable
 
 import cv2
 import numpy as np
+from skimage.feature import hessian_matrix, hessian_matrix_eigvals
+from skimage.graph import MCP_Geometric
 from skimage.segmentation import watershed
 
 from egonet.grabcut.colour import _costs, _first_models, _fit_model, _learn
@@ -68,6 +70,9 @@ _FLOOD_SCALE = 2.0  # a stroke floods at most this many times its depth in its r
 _FLOOD_MIN = 4  # ... or this many grid pixels, whichever is more
 _FLOOD_SMOOTH = 0.7  # Gaussian sigma of the colours before the flood's gradient, grid pixels
 _SURE_MARGIN = 4.0  # a pixel whose colour favours the other label by this much (-log p) stops the flood
+_CROSSING_BAND = 0.1  # the box prior's bands along the box's edges, a fraction of its width or height (``_crossing``)
+_COHERENT = 0.4  # ... a path counts if its colours spread at most this many times as much as the box's
+_CROSSING_ITERATIONS = 2  # re-estimation + cut with the path as sure object
 _FINE_BAND = 6  # a box's cut on the full grid moves the coarse label's edge by at most this many grid pixels
 
 # The terms of one cut: ``learn(is_fg, models) -> models`` re-estimates both
@@ -245,7 +250,67 @@ def _box_cut(frame: np.ndarray, guide: _Guide, gc: np.ndarray, work_size: int) -
         low, models = _coarse_to_fine(terms, geom, gc, _Terms.of_image(image), small_gc, initial, _BOX_ITERATIONS)
     if low[rows, cols].mean() < _SPARSE:
         low, models = _rescue(frame, guide, start, low, models, work_size, graph)
+    if low[rows, cols].mean() < _SPARSE:
+        path = _crossing(guide.image[rows, cols], low[rows, cols])
+        if path is not None:
+            gc = start.copy()
+            view = gc[rows, cols]
+            view[path] = cv2.GC_FGD
+            gc[rows, cols] = view
+            low, models = _cut(terms, gc, models, _CROSSING_ITERATIONS)
     return low, models
+
+
+def _crossing(image: np.ndarray, low: np.ndarray) -> np.ndarray | None:
+    """The box prior for a box its cut keeps little of: a path along the object to each edge band the label misses.
+
+    A box drawn around an object touches it on all four sides (Lempitsky et
+    al. 2009: every row and column of a tight box crosses the object), but
+    the cut of a long thin object lying across its box (a knife) often keeps
+    something else, of the colours the box holds most of. So, where the
+    label misses the band along an edge of the box (``_CROSSING_BAND`` of its
+    width or height), the cheapest path from the label to that band along
+    ridges of the image (thin bright or dark lines: the Hessian's largest
+    eigenvalue, as Sato's filter) is taken
+    as the object's, and the box is cut again with it as sure object. Only a
+    path of one material counts (its colours spread at most ``_COHERENT``
+    times as much as the box's): one that crosses table, plate and food is
+    no object's.
+
+    Args:
+        image: uint8 ``(h, w, 3)``, the box on the grid.
+        low: bool ``(h, w)``, the box's label.
+
+    Returns:
+        bool ``(h, w)``: the path, or None when the label reaches every band
+        or the path is not of one material.
+    """
+    h, w = low.shape
+    bh, bw = max(1, round(_CROSSING_BAND * h)), max(1, round(_CROSSING_BAND * w))
+    bands = [np.zeros((h, w), bool) for _ in range(4)]
+    bands[0][:, :bw] = bands[1][:, w - bw :] = bands[2][:bh] = bands[3][h - bh :] = True
+    missing = [k for k, band in enumerate(bands) if not (low & band).any()]
+    if not missing:
+        return None
+    # Ridge strength: the Hessian's eigenvalue of largest magnitude, scale-normalised, best over 1-3 grid pixels.
+    grey = image.astype(np.float32).mean(axis=2)
+    ridge = np.zeros_like(grey)
+    for sigma in (1, 2, 3):
+        eigen = hessian_matrix_eigvals(hessian_matrix(grey, sigma, order="rc", use_gaussian_derivatives=False))
+        ridge = np.maximum(ridge, sigma * sigma * np.abs(eigen).max(axis=0))
+    cost = 1.0 / (ridge / (ridge.max() + 1e-9) + 0.05)
+    path = np.zeros((h, w), bool)
+    for k in missing:
+        # From the label, or without one from the opposite band.
+        starts = np.argwhere(low if low.any() else bands[k ^ 1])
+        ends = np.argwhere(bands[k])
+        mcp = MCP_Geometric(cost)
+        cumulative, _ = mcp.find_costs([tuple(p) for p in starts], [tuple(p) for p in ends], find_all_ends=False)
+        for p in mcp.traceback(tuple(ends[np.argmin(cumulative[bands[k]])])):
+            path[p] = True
+    lab = cv2.cvtColor(image, cv2.COLOR_RGB2LAB).reshape(-1, 3).astype(np.float32)
+    spread = np.linalg.norm(lab[path.ravel()].std(axis=0)) / max(1e-6, float(np.linalg.norm(lab.std(axis=0))))
+    return path if spread <= _COHERENT else None
 
 
 def _resize(frame: np.ndarray, geom: _Geometry) -> np.ndarray:
