@@ -24,6 +24,10 @@ energy:
   the stroke (``_STROKE_REACH``); its models are re-estimated from the
   whole ROI.
 
+A box whose cut keeps little of it and misses one of its edges is cut
+again with a path along the image's ridges to that edge as object
+(``_crossing``, the box prior), when the path is of one material.
+
 A colour stroke also flips the error region it lands in up to the image's
 edges (``_flooded``: a watershed from the stroke against what surely has
 the other label), not only what the re-cut's colour models move.
