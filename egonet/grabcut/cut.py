@@ -275,11 +275,10 @@ def _crossing(image: np.ndarray, low: np.ndarray) -> np.ndarray | None:
     label misses the band along an edge of the box (``_CROSSING_BAND`` of its
     width or height), the cheapest path from the label to that band along
     ridges of the image (thin bright or dark lines: the Hessian's largest
-    eigenvalue, as Sato's filter) is taken
-    as the object's, and the box is cut again with it as sure object. Only a
-    path of one material counts (its colours spread at most ``_COHERENT``
-    times as much as the box's): one that crosses table, plate and food is
-    no object's.
+    eigenvalue, as Sato's filter) is taken as the object's, and the box is
+    cut again with it as sure object. Only a path of one material counts
+    (its colours spread at most ``_COHERENT`` times as much as the box's):
+    one that crosses table, plate and food is no object's.
 
     Args:
         image: uint8 ``(h, w, 3)``, the box on the grid.
