@@ -1,0 +1,371 @@
+"""Benchmark: the site's files in a local folder against an S3 bucket, in one run.
+
+The bucket is SeaweedFS on loopback (``tests/seaweed.py``, started here);
+the folder is a temporary one on this machine's disk. Each backend gets its
+own SQLite database and the same input files, and the two are measured in
+turns (local, then S3, for every repetition and request), so load from
+elsewhere on a shared machine falls on both alike.
+
+* **import**: ``app.services.importing.import_path`` (one transaction, as
+  ``flask egonet import``) on folders of frames: the real first-person frames
+  of ``shared/data/egonet-samples`` (RGB and DHG, 514x386 JPEG), the real
+  RGB-D frames of ``shared/data/rgbd-primesense`` (640x480 JPEG and 16-bit
+  depth PNG, intrinsics), each copied ``--copies`` times with a few pixels
+  changed (so every file is new to the store), and demo-sized synthetic
+  frames (``egonet.synth``, 320x240 RGB and depth PNG, intrinsics). Frames
+  per second, the median of ``--repeats`` imports.
+* **page**: ``GET /media/<rgb>`` (the frame page's image) and
+  ``GET /frames/<id>/thumb.jpg`` through the test client, signed in, on the
+  imported frames: the first request of each (the host has never seen the
+  file: a bucket's copy is downloaded, the thumbnail made) and then
+  ``--gets`` more (cached); p50 and p95.
+* **GrabCut box**: a new host (a fresh app: empty instance folder and
+  ``CACHE_ROOT``, same database and bucket, nothing in memory) boxes a frame
+  it has never seen (first touch: the frame's RGB and depth are fetched from
+  storage and decoded), then the same frame again under another object key
+  (cached). Each new host first serves a box on another frame, so its first
+  request (making its S3 client, opening connections) is not timed, as a
+  host that has been serving would not pay it.
+* **checkpoint**: ``torch.save`` of egonet-lite's ``state_dict`` (1.6 M
+  parameters), then ``storage().put_file`` (save) and, on a new host,
+  ``local_path`` plus ``torch.load`` (first load: downloaded into the cache)
+  and the same again (cached: for a bucket the copy is checked against the
+  object's ETag).
+
+Goals (issue 37): cached GrabCut and page figures within 10 % of local;
+first touch within 150 ms of local; import at least half of local throughput.
+
+    .venv/bin/python bench/bench_storage.py [--repeats 5] [--copies 4] [--synthetic 24] [--hosts 8] [--gets 10]
+"""
+
+from __future__ import annotations
+
+import argparse
+import os
+import sys
+
+for _name in ("OMP_NUM_THREADS", "OPENBLAS_NUM_THREADS", "MKL_NUM_THREADS"):
+    os.environ.setdefault(_name, "1")
+
+import json  # noqa: E402
+import statistics  # noqa: E402
+import tempfile  # noqa: E402
+import time  # noqa: E402
+import uuid  # noqa: E402
+from pathlib import Path  # noqa: E402
+
+import cv2  # noqa: E402
+import numpy as np  # noqa: E402
+
+ROOT = Path(__file__).resolve().parents[1]
+if str(ROOT) not in sys.path:
+    sys.path.insert(0, str(ROOT))
+
+import torch  # noqa: E402
+from flask_migrate import upgrade  # noqa: E402
+
+from app import create_app  # noqa: E402
+from app.extensions import db  # noqa: E402
+from app.models import Activity, Frame, Sequence  # noqa: E402
+from app.services.importing import import_path  # noqa: E402
+from app.services.labelling import grabcut as grabcut_service  # noqa: E402
+from app.services.storage import store  # noqa: E402
+from app.services.users import create_user  # noqa: E402
+from egonet import io  # noqa: E402
+from egonet.network.builders import build_model  # noqa: E402
+from egonet.synth import render_frame  # noqa: E402
+from tests.app.conftest import CSRFClient  # noqa: E402
+from tests.seaweed import SeaweedFS  # noqa: E402
+
+DATA = ROOT.parent / "shared" / "data"
+if not DATA.is_dir():
+    DATA = Path("/work/shared/data")
+SAMPLES, PRIMESENSE = DATA / "egonet-samples", DATA / "rgbd-primesense"
+PASSWORD = "bench-storage-password"
+BUCKET = "bench"
+
+
+# --------------------------------------------------------------------------
+# Input folders (the same files for both backends)
+
+
+def mark(image: np.ndarray, stamp: int) -> np.ndarray:
+    """The image with an 8x8 block in its corner coloured by ``stamp``: a new file, the same picture."""
+    out = image.copy()
+    out[:8, :8] = (stamp % 251, (stamp // 251) % 251, 200)
+    return out
+
+
+def write_jpeg(path: Path, rgb: np.ndarray) -> None:
+    path.parent.mkdir(parents=True, exist_ok=True)
+    cv2.imwrite(str(path), cv2.cvtColor(rgb, cv2.COLOR_RGB2BGR), [cv2.IMWRITE_JPEG_QUALITY, 92])
+
+
+def write_bytes(path: Path, data: bytes) -> None:
+    path.parent.mkdir(parents=True, exist_ok=True)
+    path.write_bytes(data)
+
+
+def intrinsics_json(K: np.ndarray, width: int, height: int) -> str:
+    return json.dumps({"width": width, "height": height, "intrinsic_matrix": [float(v) for v in K.T.ravel()]})
+
+
+def real_folders(out: Path, rep: int, copies: int) -> dict[str, Path]:
+    """The real frames, each copied ``copies`` times with a stamp of its own."""
+    folders = {}
+    if SAMPLES.is_dir():
+        folder = out / f"egonet-samples-{rep}"
+        for path in sorted((SAMPLES / "rgb").glob("*.jpg")):
+            rgb, dhg = io.read_image(path), io.read_image(SAMPLES / "dhg" / path.name)
+            for k in range(copies):
+                stamp = 1000 * rep + 10 * k + 1
+                write_jpeg(folder / "rgb" / f"{path.stem}-{k}.jpg", mark(rgb, stamp))
+                write_jpeg(folder / "dhg" / f"{path.stem}-{k}.jpg", mark(dhg, stamp))
+        folders["egonet-samples"] = folder
+    if PRIMESENSE.is_dir():
+        folder = out / f"rgbd-primesense-{rep}"
+        for path in sorted((PRIMESENSE / "color").glob("*.jpg")):
+            rgb, depth = io.read_image(path), io.read_depth(PRIMESENSE / "depth" / f"{path.stem}.png")
+            for k in range(copies):
+                stamp = 1000 * rep + 10 * k + 2
+                write_jpeg(folder / "color" / f"{path.stem}{k}.jpg", mark(rgb, stamp))
+                depth_k = depth.copy()
+                depth_k[:8, :8] = 0.5 + stamp / 1e4
+                write_bytes(folder / "depth" / f"{path.stem}{k}.png", io.encode_depth_png(depth_k))
+        (folder / "camera.json").write_text((PRIMESENSE / "camera_primesense.json").read_text())
+        folders["rgbd-primesense"] = folder
+    return folders
+
+
+def synthetic_folder(out: Path, rep: int, count: int) -> Path:
+    """Demo-sized frames (320x240 RGB and depth PNG, intrinsics), different for every ``rep``."""
+    folder = out / f"synthetic-{rep}"
+    for i in range(count):
+        f = render_frame("dining", 1000 * rep + i)
+        write_bytes(folder / "rgb" / f"{i:05d}.png", io.encode_png(f.rgb))
+        write_bytes(folder / "depth" / f"{i:05d}.png", io.encode_depth_png(f.depth_m))
+    (folder / "camera.json").write_text(intrinsics_json(f.K, f.rgb.shape[1], f.rgb.shape[0]))
+    return folder
+
+
+# --------------------------------------------------------------------------
+# The two backends, each with hosts made on demand
+
+
+class Backend:
+    """A database and a store; ``host()`` is a new app server on them (own instance folder and cache)."""
+
+    def __init__(self, name: str, storage_url: str, folder: Path):
+        self.name, self.storage_url, self.folder = name, storage_url, folder
+        self.database_url = f"sqlite:///{folder / 'egonet.sqlite3'}"
+        self.hosts = 0
+        self.main = self.host()
+        with self.main.app_context():
+            upgrade()
+            create_user("bench", "admin", PASSWORD)
+        self.client = self.signed_in(self.main)
+
+    def host(self):
+        self.hosts += 1
+        instance = self.folder / f"host-{self.hosts}"
+        app = create_app({"SQLALCHEMY_DATABASE_URI": self.database_url, "STORAGE_URL": self.storage_url,
+                          "CACHE_ROOT": str(instance / "cache"), "SECRET_KEY": "bench-storage-" + "k" * 32,
+                          "QUEUE_IN_PROCESS": False}, instance_path=str(instance))
+        app.test_client_class = CSRFClient
+        return app
+
+    def signed_in(self, app) -> CSRFClient:
+        client = app.test_client()
+        if client.login("bench", PASSWORD).status_code != 302:
+            raise RuntimeError(f"{self.name}: log-in failed")
+        return client
+
+    def frames(self, rep: int) -> list[tuple[int, str, int, int]]:
+        """(id, rgb media path, width, height) of the frames of repetition ``rep``'s imports."""
+        with self.main.app_context():
+            query = (db.select(Frame.id, Frame.rgb_path, Frame.width, Frame.height).join(Sequence).join(Activity)
+                     .where(Activity.name.endswith(f"-{rep}")).order_by(Activity.name, Frame.index))
+            return [tuple(row) for row in db.session.execute(query)]
+
+
+def ms_since(start: float) -> float:
+    return 1e3 * (time.perf_counter() - start)
+
+
+def pct(values: list[float], q: float) -> float:
+    return float(np.percentile(values, q)) if values else float("nan")
+
+
+def get(client: CSRFClient, url: str) -> float:
+    start = time.perf_counter()
+    response = client.get(url)
+    size = len(response.get_data())
+    ms = ms_since(start)
+    response.close()
+    if response.status_code != 200 or not size:
+        raise RuntimeError(f"GET {url}: {response.status_code}")
+    return ms
+
+
+def box(client: CSRFClient, frame: tuple[int, str, int, int], key: str) -> float:
+    frame_id, _, w, h = frame
+    start = time.perf_counter()
+    response = client.post("/api/label/grabcut/box", json={"frame_id": frame_id, "instance": key,
+                                                           "box": [w // 4, h // 4, 3 * w // 4, 3 * h // 4]})
+    ms = ms_since(start)
+    if response.status_code != 200:
+        raise RuntimeError(f"box on frame {frame_id}: {response.status_code} {response.get_data()[:200]!r}")
+    return ms
+
+
+def forget_memory() -> None:
+    """Nothing of GrabCut's in this process's memory, as in a new server process."""
+    grabcut_service._sessions = grabcut_service._Recent()
+    grabcut_service._frames = grabcut_service._Recent()
+
+
+# --------------------------------------------------------------------------
+# The measures: each returns {backend name: [values]}
+
+
+def measure_import(backends: list[Backend], inputs: list[dict[str, Path]]) -> dict[str, dict[str, list[float]]]:
+    """Frames per second by source, one value per repetition."""
+    rates: dict[str, dict[str, list[float]]] = {}
+    for rep, folders in enumerate(inputs):
+        for source, folder in folders.items():
+            for b in backends:
+                with b.main.app_context():
+                    start = time.perf_counter()
+                    report = import_path(folder, activity=f"{source}-{rep}")
+                    seconds = time.perf_counter() - start
+                rates.setdefault(f"{source} ({report.added})", {}).setdefault(b.name, []).append(report.added / seconds)
+    return rates
+
+
+def measure_pages(backends: list[Backend], gets: int) -> dict[str, dict[str, list[float]]]:
+    times: dict[str, dict[str, list[float]]] = {}
+    per_backend = [b.frames(0) for b in backends]
+    for i in range(len(per_backend[0])):
+        for b, frames in zip(backends, per_backend, strict=True):
+            frame_id, rgb_path, *_ = frames[i]
+            for kind, url in (("media", f"/media/{rgb_path}"), ("thumbnail", f"/frames/{frame_id}/thumb.jpg")):
+                times.setdefault(f"{kind} first", {}).setdefault(b.name, []).append(get(b.client, url))
+    for _ in range(gets):
+        for i in range(len(per_backend[0])):
+            for b, frames in zip(backends, per_backend, strict=True):
+                frame_id, rgb_path, *_ = frames[i]
+                for kind, url in (("media", f"/media/{rgb_path}"), ("thumbnail", f"/frames/{frame_id}/thumb.jpg")):
+                    times.setdefault(kind, {}).setdefault(b.name, []).append(get(b.client, url))
+    return times
+
+
+def measure_grabcut(backends: list[Backend], hosts: int, rep: int) -> dict[str, dict[str, list[float]]]:
+    """On frames the page measures never touched (repetition ``rep``'s), a new host per frame."""
+    times: dict[str, dict[str, list[float]]] = {}
+    per_backend = [b.frames(rep) for b in backends]
+    picks = np.linspace(0, len(per_backend[0]) - 1, hosts + 1).round().astype(int)
+    for n, i in enumerate(picks[1:]):
+        for b, frames in zip(backends, per_backend, strict=True):
+            app = b.host()
+            client = b.signed_in(app)
+            forget_memory()
+            box(client, frames[picks[0]], f"warm{n}")  # the host's first request: not timed
+            forget_memory()
+            times.setdefault("first touch", {}).setdefault(b.name, []).append(box(client, frames[i], "first"))
+            times.setdefault("cached", {}).setdefault(b.name, []).append(box(client, frames[i], "again"))
+            with app.app_context():
+                db.engine.dispose()
+    return times
+
+
+def measure_checkpoints(backends: list[Backend], repeats: int, folder: Path) -> dict[str, dict[str, list[float]]]:
+    path = folder / "egonet-lite.pt"
+    torch.save(build_model("egonet-lite").state_dict(), path)
+    print(f"checkpoint: egonet-lite state_dict, {path.stat().st_size / 1e6:.1f} MB")
+    times: dict[str, dict[str, list[float]]] = {}
+    for rep in range(repeats):
+        for b in backends:
+            key = f"checkpoints/bench/{rep}/egonet-lite.pt"
+            with b.main.app_context():
+                start = time.perf_counter()
+                store().put_file(key, path)
+                times.setdefault("save", {}).setdefault(b.name, []).append(ms_since(start))
+            app = b.host()
+            with app.app_context():
+                store().exists("checkpoints/none")  # the host's client made, as after its first request
+                for label in ("load first", "load cached"):
+                    start = time.perf_counter()
+                    torch.load(store().local_path(key), map_location="cpu", weights_only=True)
+                    times.setdefault(label, {}).setdefault(b.name, []).append(ms_since(start))
+                db.engine.dispose()
+    return times
+
+
+# --------------------------------------------------------------------------
+
+
+def load() -> str:
+    return "load average " + ", ".join(f"{v:.2f}" for v in os.getloadavg()) + f" on {os.cpu_count()} CPUs"
+
+
+def main(argv: list[str] | None = None) -> int:
+    parser = argparse.ArgumentParser(description=__doc__.split("\n")[0])
+    parser.add_argument("--repeats", type=int, default=5, help="imports of each source, and checkpoint round trips")
+    parser.add_argument("--copies", type=int, default=4, help="copies of each real frame per import")
+    parser.add_argument("--synthetic", type=int, default=24, help="synthetic frames per import")
+    parser.add_argument("--hosts", type=int, default=8, help="new hosts for the GrabCut first touch")
+    parser.add_argument("--gets", type=int, default=10, help="cached requests per frame and image")
+    args = parser.parse_args(argv)
+    cv2.setNumThreads(1)
+    torch.set_num_threads(1)
+    print(f"start: {load()}")
+    results: dict[str, dict[str, dict[str, list[float]]]] = {}
+    with tempfile.TemporaryDirectory(prefix="egonet-bench-storage-") as tmp:
+        tmp = Path(tmp)
+        weed = SeaweedFS(tmp / "seaweedfs").start()
+        try:
+            weed.create_bucket(BUCKET)
+            os.environ.update(weed.environ())
+            inputs = []
+            for rep in range(args.repeats):
+                folders = real_folders(tmp / "input", rep, args.copies)
+                folders["synthetic"] = synthetic_folder(tmp / "input", rep, args.synthetic)
+                inputs.append(folders)
+            backends = [Backend("local", str(tmp / "local-storage"), tmp / "local"),
+                        Backend("s3", f"s3://{BUCKET}/{uuid.uuid4().hex[:8]}", tmp / "s3")]
+            print(f"stores: {backends[0].storage_url} and {backends[1].storage_url} (SeaweedFS at {weed.endpoint})")
+            results["import (frames/s)"] = measure_import(backends, inputs)
+            results["page (ms)"] = measure_pages(backends, args.gets)
+            results["GrabCut box (ms)"] = measure_grabcut(backends, args.hosts, args.repeats - 1)
+            results["checkpoint (ms)"] = measure_checkpoints(backends, args.repeats, tmp)
+            for b in backends:
+                with b.main.app_context():
+                    db.engine.dispose()
+        finally:
+            weed.stop()
+    print(f"end: {load()}\n")
+    report(results)
+    return 0
+
+
+def report(results: dict[str, dict[str, dict[str, list[float]]]]) -> None:
+    print(f"{'measure':32s} {'local p50':>10s} {'p95':>8s} {'s3 p50':>10s} {'p95':>8s} {'s3/local':>9s} {'n':>4s}  goal")
+    for group, measures in results.items():
+        for name, by in measures.items():
+            local, s3 = by["local"], by["s3"]
+            ratio = statistics.median(s3) / statistics.median(local)
+            goal = ""
+            if group.startswith("import"):
+                goal = f"s3 >= 0.5 x local: {'met' if ratio >= 0.5 else 'NOT met'}"
+            elif group.startswith("page") and not name.endswith("first") or name == "cached":
+                ok = ratio <= 1.10 and pct(s3, 95) / pct(local, 95) <= 1.10
+                goal = f"p50, p95 within 10 %: {'met' if ok else 'NOT met'} (p95 {pct(s3, 95) / pct(local, 95):.2f})"
+            elif name == "first touch":
+                extra = statistics.median(s3) - statistics.median(local)
+                goal = f"within 150 ms: +{extra:.0f} ms, {'met' if extra <= 150 else 'NOT met'}"
+            print(f"{group + ': ' + name:32s} {statistics.median(local):10.1f} {pct(local, 95):8.1f} "
+                  f"{statistics.median(s3):10.1f} {pct(s3, 95):8.1f} {ratio:9.2f} {len(s3):4d}  {goal}")
+
+
+if __name__ == "__main__":
+    raise SystemExit(main())
