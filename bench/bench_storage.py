@@ -188,6 +188,11 @@ class Backend:
             return [tuple(row) for row in db.session.execute(query)]
 
 
+def turns(backends: list, n: int) -> list:
+    """The backends in the order of turn ``n``: local first, then S3 first, and so on."""
+    return backends if n % 2 == 0 else backends[::-1]
+
+
 def ms_since(start: float) -> float:
     return 1e3 * (time.perf_counter() - start)
 
@@ -232,8 +237,8 @@ def measure_import(backends: list[Backend], inputs: list[dict[str, Path]]) -> di
     """Frames per second by source, one value per repetition."""
     rates: dict[str, dict[str, list[float]]] = {}
     for rep, folders in enumerate(inputs):
-        for source, folder in folders.items():
-            for b in backends:
+        for k, (source, folder) in enumerate(folders.items()):
+            for b in turns(backends, rep + k):
                 with b.main.app_context():
                     start = time.perf_counter()
                     report = import_path(folder, activity=f"{source}-{rep}")
@@ -244,35 +249,31 @@ def measure_import(backends: list[Backend], inputs: list[dict[str, Path]]) -> di
 
 def measure_pages(backends: list[Backend], gets: int) -> dict[str, dict[str, list[float]]]:
     times: dict[str, dict[str, list[float]]] = {}
-    per_backend = [b.frames(0) for b in backends]
-    for i in range(len(per_backend[0])):
-        for b, frames in zip(backends, per_backend, strict=True):
-            frame_id, rgb_path, *_ = frames[i]
-            for kind, url in (("media", f"/media/{rgb_path}"), ("thumbnail", f"/frames/{frame_id}/thumb.jpg")):
-                times.setdefault(f"{kind} first", {}).setdefault(b.name, []).append(get(b.client, url))
-    for _ in range(gets):
-        for i in range(len(per_backend[0])):
-            for b, frames in zip(backends, per_backend, strict=True):
-                frame_id, rgb_path, *_ = frames[i]
+    frames = {b.name: b.frames(0) for b in backends}
+    for n in range(gets + 1):
+        for i in range(len(frames["local"])):
+            for b in turns(backends, n + i):
+                frame_id, rgb_path, *_ = frames[b.name][i]
                 for kind, url in (("media", f"/media/{rgb_path}"), ("thumbnail", f"/frames/{frame_id}/thumb.jpg")):
-                    times.setdefault(kind, {}).setdefault(b.name, []).append(get(b.client, url))
+                    name = f"{kind} first" if n == 0 else kind
+                    times.setdefault(name, {}).setdefault(b.name, []).append(get(b.client, url))
     return times
 
 
 def measure_grabcut(backends: list[Backend], hosts: int, rep: int) -> dict[str, dict[str, list[float]]]:
     """On frames the page measures never touched (repetition ``rep``'s), a new host per frame."""
     times: dict[str, dict[str, list[float]]] = {}
-    per_backend = [b.frames(rep) for b in backends]
-    picks = np.linspace(0, len(per_backend[0]) - 1, hosts + 1).round().astype(int)
+    frames = {b.name: b.frames(rep) for b in backends}
+    picks = np.linspace(0, len(frames["local"]) - 1, hosts + 1).round().astype(int)
     for n, i in enumerate(picks[1:]):
-        for b, frames in zip(backends, per_backend, strict=True):
+        for b in turns(backends, n):
             app = b.host()
             client = b.signed_in(app)
             forget_memory()
-            box(client, frames[picks[0]], f"warm{n}")  # the host's first request: not timed
+            box(client, frames[b.name][picks[0]], f"warm{n}")  # the host's first request: not timed
             forget_memory()
-            times.setdefault("first touch", {}).setdefault(b.name, []).append(box(client, frames[i], "first"))
-            times.setdefault("cached", {}).setdefault(b.name, []).append(box(client, frames[i], "again"))
+            times.setdefault("first touch", {}).setdefault(b.name, []).append(box(client, frames[b.name][i], "first"))
+            times.setdefault("cached", {}).setdefault(b.name, []).append(box(client, frames[b.name][i], "again"))
             with app.app_context():
                 db.engine.dispose()
     return times
@@ -284,7 +285,7 @@ def measure_checkpoints(backends: list[Backend], repeats: int, folder: Path) -> 
     print(f"checkpoint: egonet-lite state_dict, {path.stat().st_size / 1e6:.1f} MB")
     times: dict[str, dict[str, list[float]]] = {}
     for rep in range(repeats):
-        for b in backends:
+        for b in turns(backends, rep):
             key = f"checkpoints/bench/{rep}/egonet-lite.pt"
             with b.main.app_context():
                 start = time.perf_counter()
