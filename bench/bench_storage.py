@@ -25,7 +25,10 @@ elsewhere on a shared machine falls on both alike.
   storage and decoded), then the same frame again under another object key
   (cached). Each new host first serves a box on another frame, so its first
   request (making its S3 client, opening connections) is not timed, as a
-  host that has been serving would not pay it.
+  host that has been serving would not pay it. Then the same on new hosts
+  whose cache already holds ``--cache-files`` files (20,000: what a 4 GiB
+  ``STORAGE_CACHE_BYTES`` holds at ~200 kB a frame), as after a while of
+  serving: keeping the cache within its bytes must not cost each download.
 * **checkpoint**: ``torch.save`` of egonet-lite's ``state_dict`` (1.6 M
   parameters), then ``storage().put_file`` (save) and, on a new host,
   ``local_path`` plus ``torch.load`` (first load: downloaded into the cache)
@@ -36,6 +39,10 @@ Goals (issue 37): cached GrabCut and page figures within 10 % of local;
 first touch within 150 ms of local; import at least half of local throughput.
 
     .venv/bin/python bench/bench_storage.py [--repeats 5] [--copies 4] [--synthetic 24] [--hosts 8] [--gets 10]
+        [--cache-files 20000]
+
+Each line also says how many HTTP requests the S3 host sent to the bucket
+(per frame for imports), counted on boto3's ``before-send`` event.
 """
 
 from __future__ import annotations
@@ -281,24 +288,42 @@ def measure_pages(backends: list[Backend], gets: int) -> Results:
     return results
 
 
-def measure_grabcut(backends: list[Backend], hosts: int, rep: int) -> Results:
-    """On frames the page measures never touched (repetition ``rep``'s), a new host per frame."""
+def measure_grabcut(backends: list[Backend], hosts: int, rep: int, fillers: dict[str, Path] | None = None) -> Results:
+    """On frames the page measures never touched (repetition ``rep``'s), a new host per frame; with
+    ``fillers``, each new host's ``CACHE_ROOT/storage`` holds that folder's files (a host that has served a while)."""
     results: Results = {}
+    suffix = f", {sum(1 for _ in next(iter(fillers.values())).rglob('*.png'))} files cached" if fillers else ""
     frames = {b.name: b.frames(rep) for b in backends}
     picks = np.linspace(0, len(frames["local"]) - 1, hosts + 1).round().astype(int)
     for n, i in enumerate(picks[1:]):
         for b in turns(backends, n):
             app = b.host()
+            cache = Path(app.config["CACHE_ROOT"]) / "storage"
+            if fillers:
+                cache.parent.mkdir(parents=True)
+                fillers[b.name].rename(cache)
             client, sent = b.signed_in(app), bucket_requests(app)
             forget_memory()
             box(client, frames[b.name][picks[0]], f"warm{n}")  # the host's first request: not timed
             forget_memory()
             for name, key in (("first touch", "first"), ("cached", "again")):
                 before = sent()
-                add(results, name, b, box(client, frames[b.name][i], key), sent() - before)
+                add(results, name + suffix, b, box(client, frames[b.name][i], key), sent() - before)
+            if fillers:
+                cache.rename(fillers[b.name])  # on to the next host, with what this one fetched
             with app.app_context():
                 db.engine.dispose()
     return results
+
+
+def filler(folder: Path, count: int) -> Path:
+    """``count`` small files laid out as a bucket's media copies are (what a host's cache holds after a while)."""
+    for i in range(count):
+        name = f"{i:064x}"
+        path = folder / "media" / name[-2:] / f"{name}.png"
+        path.parent.mkdir(parents=True, exist_ok=True)
+        path.write_bytes(b"\0" * 1024)
+    return folder
 
 
 def measure_checkpoints(backends: list[Backend], repeats: int, folder: Path) -> Results:
@@ -338,6 +363,8 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument("--copies", type=int, default=4, help="copies of each real frame per import")
     parser.add_argument("--synthetic", type=int, default=24, help="synthetic frames per import")
     parser.add_argument("--hosts", type=int, default=8, help="new hosts for the GrabCut first touch")
+    parser.add_argument("--cache-files", type=int, default=20_000,
+                        help="files in a new host's cache for the second first-touch measure (0: skip it)")
     parser.add_argument("--gets", type=int, default=10, help="cached requests per frame and image")
     args = parser.parse_args(argv)
     cv2.setNumThreads(1)
@@ -361,6 +388,9 @@ def main(argv: list[str] | None = None) -> int:
             results["import (frames/s)"] = measure_import(backends, inputs)
             results["page (ms)"] = measure_pages(backends, args.gets)
             results["GrabCut box (ms)"] = measure_grabcut(backends, args.hosts, args.repeats - 1)
+            if args.cache_files:
+                fillers = {b.name: filler(tmp / f"filler-{b.name}", args.cache_files) for b in backends}
+                results["GrabCut box (ms)"] |= measure_grabcut(backends, args.hosts, max(args.repeats - 2, 0), fillers)
             results["checkpoint (ms)"] = measure_checkpoints(backends, args.repeats, tmp)
             for b in backends:
                 with b.main.app_context():
@@ -374,7 +404,7 @@ def main(argv: list[str] | None = None) -> int:
 
 def report(results: dict[str, Results]) -> None:
     """Medians, p95 and the ratio S3 / local, the bucket's requests per value, and the goals."""
-    print(f"{'measure':40s} {'local p50':>9s} {'p95':>7s} {'s3 p50':>8s} {'p95':>7s} {'s3/local':>8s} {'n':>4s} "
+    print(f"{'measure':50s} {'local p50':>9s} {'p95':>7s} {'s3 p50':>8s} {'p95':>7s} {'s3/local':>8s} {'n':>4s} "
           f"{'S3 req':>6s}  goal")
     for group, measures in results.items():
         for name, by in measures.items():
@@ -385,12 +415,12 @@ def report(results: dict[str, Results]) -> None:
                 goal = f"s3 >= 0.5 x local: {'met' if ratio >= 0.5 else 'NOT met'}"
             elif group.startswith("page") and not name.endswith("first"):
                 goal = f"p50 and p95 within 10 %: {'met' if max(ratio, ratio95) <= 1.10 else 'NOT met'}"
-            elif name == "cached":
+            elif name.startswith("cached"):
                 goal = f"p50 within 10 %: {'met' if ratio <= 1.10 else 'NOT met'}"
-            elif name == "first touch":
+            elif name.startswith("first touch"):
                 extra = statistics.median(s3) - statistics.median(local)
                 goal = f"p50 within 150 ms: {extra:+.0f} ms, {'met' if extra <= 150 else 'NOT met'}"
-            print(f"{group + ': ' + name:40s} {statistics.median(local):9.1f} {pct(local, 95):7.1f} "
+            print(f"{group + ': ' + name:50s} {statistics.median(local):9.1f} {pct(local, 95):7.1f} "
                   f"{statistics.median(s3):8.1f} {pct(s3, 95):7.1f} {ratio:8.2f} {len(s3):4d} "
                   f"{statistics.median(by['requests']):6.1f}  {goal}")
     print("(S3 req: the median number of HTTP requests the host sent to the bucket per value: per frame for imports)")
