@@ -22,10 +22,11 @@ elsewhere on a shared machine falls on both alike.
 * **GrabCut box**: a new host (a fresh app: empty instance folder and
   ``CACHE_ROOT``, same database and bucket, nothing in memory) boxes a frame
   it has never seen (first touch: the frame's RGB and depth are fetched from
-  storage and decoded), then the same frame again under another object key
-  (cached). Each new host first serves a box on another frame, so its first
-  request (making its S3 client, opening connections) is not timed, as a
-  host that has been serving would not pay it. Then the same on new hosts
+  storage and decoded), then the same frame ``--again`` times more, each
+  under another object key (cached). Each new host first serves a box on
+  another frame, so its first request (making its S3 client, opening
+  connections) is not timed, as a host that has been serving would not pay
+  it. Then the same on new hosts
   whose cache already holds ``--cache-files`` files (20,000: what a 4 GiB
   ``STORAGE_CACHE_BYTES`` holds at ~200 kB a frame), as after a while of
   serving: keeping the cache within its bytes must not cost each download.
@@ -288,7 +289,8 @@ def measure_pages(backends: list[Backend], gets: int) -> Results:
     return results
 
 
-def measure_grabcut(backends: list[Backend], hosts: int, rep: int, fillers: dict[str, Path] | None = None) -> Results:
+def measure_grabcut(backends: list[Backend], hosts: int, again: int, rep: int,
+                    fillers: dict[str, Path] | None = None) -> Results:
     """On frames the page measures never touched (repetition ``rep``'s), a new host per frame; with
     ``fillers``, each new host's ``CACHE_ROOT/storage`` holds that folder's files (a host that has served a while)."""
     results: Results = {}
@@ -306,7 +308,7 @@ def measure_grabcut(backends: list[Backend], hosts: int, rep: int, fillers: dict
             forget_memory()
             box(client, frames[b.name][picks[0]], f"warm{n}")  # the host's first request: not timed
             forget_memory()
-            for name, key in (("first touch", "first"), ("cached", "again")):
+            for name, key in (("first touch", "first"), *(("cached", f"again{k}") for k in range(again))):
                 before = sent()
                 add(results, name + suffix, b, box(client, frames[b.name][i], key), sent() - before)
             if fillers:
@@ -363,6 +365,7 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument("--copies", type=int, default=4, help="copies of each real frame per import")
     parser.add_argument("--synthetic", type=int, default=24, help="synthetic frames per import")
     parser.add_argument("--hosts", type=int, default=8, help="new hosts for the GrabCut first touch")
+    parser.add_argument("--again", type=int, default=5, help="cached boxes per new host, after its first touch")
     parser.add_argument("--cache-files", type=int, default=20_000,
                         help="files in a new host's cache for the second first-touch measure (0: skip it)")
     parser.add_argument("--gets", type=int, default=10, help="cached requests per frame and image")
@@ -387,10 +390,11 @@ def main(argv: list[str] | None = None) -> int:
             print(f"stores: {backends[0].storage_url} and {backends[1].storage_url} (SeaweedFS at {weed.endpoint})")
             results["import (frames/s)"] = measure_import(backends, inputs)
             results["page (ms)"] = measure_pages(backends, args.gets)
-            results["GrabCut box (ms)"] = measure_grabcut(backends, args.hosts, args.repeats - 1)
+            results["GrabCut box (ms)"] = measure_grabcut(backends, args.hosts, args.again, args.repeats - 1)
             if args.cache_files:
                 fillers = {b.name: filler(tmp / f"filler-{b.name}", args.cache_files) for b in backends}
-                results["GrabCut box (ms)"] |= measure_grabcut(backends, args.hosts, max(args.repeats - 2, 0), fillers)
+                results["GrabCut box (ms)"] |= measure_grabcut(backends, args.hosts, args.again, max(args.repeats - 2, 0),
+                                                              fillers)
             results["checkpoint (ms)"] = measure_checkpoints(backends, args.repeats, tmp)
             for b in backends:
                 with b.main.app_context():
