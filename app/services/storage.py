@@ -322,10 +322,10 @@ def migrate(target: Store, *, check_only: bool = False, on_start: Callable[[int]
             on_progress: Callable[[int], None] | None = None) -> MigrateReport:
     """Copy every file of this app's store (``AREAS``) to ``target`` and check each copy.
 
-    A key in ``target`` already with the same size is kept (so running it
-    again after a failure copies only the rest). Each copy is checked: its
-    size, and for media the SHA-256 its name holds. ``check_only`` copies
-    nothing and checks every file (media by their hash too), listing those
+    A file is equal to its copy when their sizes match and, for media, the
+    copy has the SHA-256 its name holds. Equal copies are kept, so running
+    it again after a failure copies only the rest; each new copy is checked
+    so. ``check_only`` copies nothing and lists the files whose copy is
     missing or different in ``report.bad``.
 
     Raises:
@@ -341,11 +341,10 @@ def migrate(target: Store, *, check_only: bool = False, on_start: Callable[[int]
         on_start(len(entries))
 
     def one(entry: Entry) -> str:
-        equal = there.get(entry.key) == entry.size
-        if check_only:
-            return "present" if equal and _intact(target, entry.key) else "bad"
-        if equal:
+        if there.get(entry.key) == entry.size and _intact(target, entry.key):
             return "present"
+        if check_only:
+            return "bad"
         target.put_file(entry.key, source.local_path(entry.key))
         if not _intact(target, entry.key, entry.size):
             target.delete(entry.key)
