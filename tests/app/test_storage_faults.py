@@ -11,8 +11,9 @@ import pytest
 from app.cli import data as cli_data
 from app.extensions import db
 from app.models import Activity, Frame
-from app.services import media
-from app.services.storage import store
+from app.models.exports import ExportJob
+from app.services import exchange, media
+from app.services.storage import StorageUnavailable, store
 from tests.app.factories import image_folder
 from tests.app.test_studies_recruiting import open_study
 from tests.seaweed import SeaweedFS
@@ -87,8 +88,17 @@ def test_pages_answer_503_while_storage_is_down_and_serve_again_when_it_is_back(
     participant = on_server.test_client()  # the open link's example frame, before anyone is admitted
     urls = [(staff, f"/media/{rgb}"), (staff, f"/frames/{frame_id}/thumb.jpg"), (participant, f"/s/o/{token}/example")]
     box = {"frame_id": frame_id, "instance": "a", "box": [5, 5, 40, 30]}
+    with on_server.app_context():
+        job = ExportJob(options=exchange.ExportOptions().to_dict())
+        db.session.add(job)
+        db.session.commit()
+        export_id = job.id
     server.stop()
     try:
+        with on_server.app_context(), pytest.raises(StorageUnavailable):
+            exchange.build_export(export_id)  # the worker's export fails, and its page says why in words
+        page = staff.get(f"/label/exports/{export_id}").get_data(as_text=True)
+        assert "file storage was unreachable; export again later" in page and BUCKET not in page
         for client, url in urls:
             with client.get(url) as response:
                 page = response.get_data(as_text=True)
