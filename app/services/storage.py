@@ -46,7 +46,7 @@ Data = bytes | Callable[[BinaryIO], None]
 
 
 class StorageUnavailable(RuntimeError):
-    """The object store did not answer (connection refused, time-out, 5xx)."""
+    """The object store did not answer (connection refused, time-out, 5xx) or refused (no such bucket, wrong keys)."""
 
 
 class StorageProblem(RuntimeError):
