@@ -90,3 +90,13 @@ def test_storage_migrate_copies_checks_and_runs_again(ctx, runner, tmp_path, sea
                          (["s3://no-such-bucket/x"], "storage s3://no-such-bucket/x answered 404 NoSuchBucket")):
         code, out = migrate(*args)
         assert code != 0 and reason in out.strip().splitlines()[-1] and out.count("Error:") == 1, out
+
+
+def test_a_buckets_copies_on_this_host_stay_within_their_budget(seaweedfs, tmp_path):
+    files = open_store(f"s3://egonet-test/{uuid.uuid4().hex[:12]}", cache=tmp_path / "cache", cache_bytes=10_000)
+    for i in range(30):
+        files.put(f"media/{i:02d}.png", bytes([i]) * 1000)
+        assert files.local_path(f"media/{i:02d}.png").read_bytes() == bytes([i]) * 1000
+        copies = [p for p in (tmp_path / "cache").rglob("*") if p.is_file()]
+        assert sum(p.stat().st_size for p in copies) <= 10_000
+    assert sorted(p.name for p in copies)[-1] == "29.png" and len(copies) >= 9  # the most recent kept
