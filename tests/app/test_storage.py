@@ -6,6 +6,7 @@ import pytest
 
 from app.services import media
 from app.services.storage import StorageUnavailable, open_store, open_url, store
+from tests.app.conftest import make_app
 from tests.seaweed import SeaweedFS
 
 pytestmark = pytest.mark.both_storages
@@ -100,3 +101,9 @@ def test_a_buckets_copies_on_this_host_stay_within_their_budget(seaweedfs, tmp_p
         copies = [p for p in (tmp_path / "cache").rglob("*") if p.is_file()]
         assert sum(p.stat().st_size for p in copies) <= 10_000
     assert sorted(p.name for p in copies)[-1] == "29.png" and len(copies) >= 9  # the most recent kept
+
+
+@pytest.mark.parametrize("gone", ["MEDIA_ROOT", "EXPORT_ROOT"])
+def test_the_old_folder_settings_stop_the_app_naming_storage_url(tmp_path, gone):
+    with pytest.raises(RuntimeError, match=f"{gone} is replaced by STORAGE_URL"):
+        make_app("sqlite://", tmp_path, **{gone: str(tmp_path / "old")})
