@@ -216,7 +216,7 @@ def media_check_command(remove_orphans, grace):
 
 
 @bp.cli.command("storage-migrate")
-@click.option("--to", "url", required=True, help="The folder or s3://bucket/prefix to copy the site's files into.")
+@click.option("--to", "url", required=True, metavar="URL", help="The folder or s3://bucket/prefix to copy the site's files into.")
 @click.option("--check-only", is_flag=True, help="Copy nothing; check that URL holds every file, equal.")
 def storage_migrate_command(url, check_only):
     """Copy every file of STORAGE_URL (media/, checkpoints/, exports/) to URL and check each copy.
