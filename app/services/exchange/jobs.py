@@ -92,8 +92,10 @@ def build_export(export_id: int) -> ExportJob:
         return job
     name = f"export-{job.id}.zip"
     try:
-        # Built in a local file first: a zip's directory is written last, and a bucket takes whole objects.
-        with tempfile.NamedTemporaryFile(suffix=".zip") as out:
+        # Built in a file on this host first (a zip's directory comes last; a bucket takes whole objects).
+        spool = Path(current_app.config["CACHE_ROOT"])
+        spool.mkdir(parents=True, exist_ok=True)
+        with tempfile.NamedTemporaryFile(suffix=".zip", dir=spool) as out:
             report = write_zip(out, ExportOptions.from_dict(job.options), on_start=_progress(job.id, total=True),
                                on_progress=_progress(job.id))
             out.flush()
