@@ -40,13 +40,10 @@ from typing import BinaryIO, Protocol
 
 from flask import current_app
 
+from app.errors import StorageUnavailable
 from egonet.io import write_atomic
 
 Data = bytes | Callable[[BinaryIO], None]
-
-
-class StorageUnavailable(RuntimeError):
-    """The object store did not answer (connection refused, time-out, 5xx) or refused (no such bucket, wrong keys)."""
 
 
 class StorageProblem(RuntimeError):
