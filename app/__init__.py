@@ -202,11 +202,10 @@ def _configure(app: Flask, test_config: dict | None) -> None:
         app.config.from_prefixed_env()
     else:
         app.config.from_mapping(test_config)
-    if "MEDIA_ROOT" in app.config:
-        raise RuntimeError("MEDIA_ROOT is replaced by STORAGE_URL, the folder (or s3://bucket/prefix) that holds media/: "
-                           "set STORAGE_URL to MEDIA_ROOT's parent folder (docs/deployment.md)")
-    if "EXPORT_ROOT" in app.config:
-        raise RuntimeError("EXPORT_ROOT is replaced by STORAGE_URL: exports are kept in its exports/; unset EXPORT_ROOT")
+    for gone, area in (("MEDIA_ROOT", "media"), ("CHECKPOINT_ROOT", "checkpoints"), ("EXPORT_ROOT", "exports")):
+        if gone in app.config:
+            raise RuntimeError(f"{gone} is replaced by STORAGE_URL, the folder (or s3://bucket/prefix) that holds {area}/: "
+                               f"set STORAGE_URL to {gone}'s parent folder (docs/deployment.md)")
     app.config["SQLALCHEMY_DATABASE_URI"] = normalise_database_url(app.config["SQLALCHEMY_DATABASE_URI"])
     os.makedirs(app.instance_path, exist_ok=True)
     if not app.config.get("SECRET_KEY"):
