@@ -40,11 +40,18 @@ How, all inside one region of interest (ROI) at a reduced work size:
    smear onto a wall or table behind the object is cut away even where it
    has the object's colour. Missing readings (0 or NaN) change nothing.
 5. The cut never overrules the flow where the image does not back it: each
-   part where the cut disagrees with the warped mask is kept only when at
-   least half of it lies where the flow is in doubt, on the warped edge's
-   strip (when the work grid is the frame's own pixels; on a reduced grid
-   the warp's soft edge is finer), or where depth says the pixel left the
-   object; elsewhere the warped mask stands.
+   part the cut adds to the warped mask, and each it takes out, is kept
+   only when at least half of it lies where the flow is in doubt, on the
+   warped edge's strip (when the work grid is the frame's own pixels; on a
+   reduced grid the warp's soft edge is finer), or where depth says the
+   pixel left the object, and when three quarters of it changed colour
+   along the flow towards the cut's side (a pixel taken out became more
+   background-like than the point it came from, by more than the usual
+   change along the flow's sure tracks; one added, more object-like), or
+   lie well inside the object's edge where depth puts them outside its
+   range; elsewhere the warped mask stands. A part of the object that looks
+   like the background in both frames (a grey shoe on a grey road) keeps
+   its colour along the flow, so it is not cut off.
 6. Back to full resolution: where the cut agrees with the warp, the warp's
    soft values (sub-pixel); elsewhere the cut, smoothed; upsampled
    bilinearly, then parts smaller than 2 % of the largest are dropped (one
