@@ -103,6 +103,7 @@ _AFFINE_MISS = 1.0  # RANSAC inlier distance for that fit, work-size pixels
 _ITERATIONS = 2  # graph cuts: one with the previous frame's models, one re-fitted
 _SUPPORT = 0.5  # share of a part the cut changes that must lie where the flow is in doubt
 _BACKED = 0.75  # ... and that its colours must have moved towards the cut's side (see _backed)
+_NOISE_STRIDE = 2  # the usual colour change along the flow is measured on every 2nd row and column
 _SPECK = 0.02  # parts smaller than this fraction of the largest are dropped
 _MIN_SAMPLES = 40  # fewest pixels per side to fit a colour model on (5 components)
 _DEPTH_TOL_M = 0.08  # depth slack around the object's range (motion, sensor noise), metres
@@ -550,14 +551,17 @@ def _backed(warp: _Warp, models: tuple[np.ndarray, np.ndarray], label: np.ndarra
     limb moved off its track) the pixel now shows something else: a pixel
     the cut takes out must have become more background-like than the point
     it came from, and one the cut adds more object-like, by more than the
-    usual change along tracks the flow is sure of (the median, over the
-    ``band`` pixels not in ``doubt``: noise, blur, light). A grey shoe on a
+    usual change along tracks the flow is sure of (the median over the
+    ``band`` pixels not in ``doubt``, on a grid of every ``_NOISE_STRIDE``-th
+    row and column: noise, blur, light). A grey shoe on a
     grey road looks like the road in both frames: the colour models call
     it background, but nothing changed along its track, so the flow's
     answer stands.
     """
     changed = label != warped
-    trusted = np.flatnonzero(band & ~doubt)
+    sample = np.zeros_like(band)
+    sample[::_NOISE_STRIDE, ::_NOISE_STRIDE] = True
+    trusted = np.flatnonzero(band & ~doubt & sample)
     at = np.concatenate([np.flatnonzero(changed), trusted])
     came = _pull(warp.prev_low.astype(np.float32), warp.back).reshape(-1, 3)[at]
     now = warp.next_low.reshape(-1, 3)[at]
