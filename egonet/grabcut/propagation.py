@@ -553,30 +553,23 @@ def _backed(warp: _Warp, models: tuple[np.ndarray, np.ndarray], label: np.ndarra
     it came from, and one the cut adds more object-like, by more than the
     usual change along tracks the flow is sure of (the median over the
     ``band`` pixels not in ``doubt``, on a grid of every ``_NOISE_STRIDE``-th
-    row and column: noise, blur, light). A grey shoe on a
-    grey road looks like the road in both frames: the colour models call
-    it background, but nothing changed along its track, so the flow's
-    answer stands.
+    row and column: noise, blur, light). A grey shoe on a grey road looks
+    like the road in both frames: the colour models call it background, but
+    nothing changed along its track, so the flow's answer stands.
     """
-    changed = label != warped
+    changed = np.flatnonzero(label != warped)
     sample = np.zeros_like(band)
     sample[::_NOISE_STRIDE, ::_NOISE_STRIDE] = True
     trusted = np.flatnonzero(band & ~doubt & sample)
-    at = np.concatenate([np.flatnonzero(changed), trusted])
+    at = np.concatenate([changed, trusted])
     came = _pull(warp.prev_low.astype(np.float32), warp.back).reshape(-1, 3)[at]
-    now = warp.next_low.reshape(-1, 3)[at]
+    now = warp.next_low.reshape(-1, 3)[at].astype(np.float32)
     bgd, fgd = models
-
-    def background_likeness(x: np.ndarray) -> np.ndarray:
-        x = x.astype(np.float32)
-        return _costs(fgd[0], x) - _costs(bgd[0], x)
-
-    rise = background_likeness(now) - background_likeness(came)
-    n_changed = at.size - trusted.size
-    usual = float(np.median(np.abs(rise[n_changed:]))) if trusted.size else 0.0
-    towards = np.where(label.ravel()[at[:n_changed]], -rise[:n_changed], rise[:n_changed])
+    rise = (_costs(fgd[0], now) - _costs(bgd[0], now)) - (_costs(fgd[0], came) - _costs(bgd[0], came))
+    usual = float(np.median(np.abs(rise[changed.size :]))) if trusted.size else 0.0
+    towards = np.where(label.ravel()[changed], -1.0, 1.0) * rise[: changed.size]
     backed = np.zeros(label.size, bool)
-    backed[at[:n_changed][towards > usual]] = True
+    backed[changed[towards > usual]] = True
     return backed.reshape(label.shape)
 
 
