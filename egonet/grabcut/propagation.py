@@ -638,6 +638,8 @@ def carry(prev_rgb: np.ndarray, prev_mask: np.ndarray, next_rgb: np.ndarray, *,
         _apply_depth(gc, core, warp, prev_depth, next_depth)
         # Inside the warped mask only depth hands pixels to the background: the image's support too.
         support |= warped & ((gc == cv2.GC_BGD) | (gc == cv2.GC_PR_BGD))
+        # Depth outside the object's range backs the cut whatever the colours say, but not on the
+        # warped edge's own pixels: there the depth and colour images may disagree by a pixel.
         away = cv2.erode(warped.view(np.uint8), _disk(1)).astype(bool) & (gc == cv2.GC_BGD)
     if min(np.count_nonzero(gc & 1), np.count_nonzero(~gc & 1)) < _MIN_SAMPLES:
         return flow_only()
@@ -648,7 +650,6 @@ def carry(prev_rgb: np.ndarray, prev_mask: np.ndarray, next_rgb: np.ndarray, *,
     area, warped_area = np.count_nonzero(label), np.count_nonzero(warped)
     if _iou(label, warped) < 0.5 or not 0.5 * warped_area <= area <= 2 * warped_area:
         return flow_only(label)  # a failed cut (colours too alike): trust the flow
-    # Where depth puts a pixel outside the object's range, depth backs the cut whatever the colours say.
     guarded = _guard(label, warped, support, _backed(warp, models, label, warped, doubt, band) | away)
     # Where the result agrees with the warp, the warp's soft values place the edge
     # to a fraction of a work-size pixel; elsewhere the cut, smoothed so the
