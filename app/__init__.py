@@ -127,9 +127,8 @@ def _default_config(instance: Path) -> dict:
         STORAGE_CACHE_BYTES=4 * 1024**3,
         # Exports (app.services.exchange.jobs): one up to this many mask pixels
         # and without images is built in the request, bigger ones by the worker
-        # into EXPORT_ROOT; at most EXPORT_MAX_PENDING waiting per person, the
-        # EXPORT_KEEP most recent finished ones kept.
-        EXPORT_ROOT=str(instance / "exports"),
+        # into storage's exports/; at most EXPORT_MAX_PENDING waiting per person,
+        # the EXPORT_KEEP most recent finished ones kept.
         EXPORT_INLINE_MAX_PIXELS=50_000_000,
         EXPORT_MAX_PENDING=2,
         EXPORT_KEEP=10,
@@ -203,9 +202,10 @@ def _configure(app: Flask, test_config: dict | None) -> None:
         app.config.from_prefixed_env()
     else:
         app.config.from_mapping(test_config)
-    if "MEDIA_ROOT" in app.config:
-        raise RuntimeError("MEDIA_ROOT is replaced by STORAGE_URL, the folder (or s3://bucket/prefix) that holds media/: "
-                           "set STORAGE_URL to MEDIA_ROOT's parent folder (docs/deployment.md)")
+    for gone, area in (("MEDIA_ROOT", "media"), ("CHECKPOINT_ROOT", "checkpoints"), ("EXPORT_ROOT", "exports")):
+        if gone in app.config:
+            raise RuntimeError(f"{gone} is replaced by STORAGE_URL, the folder (or s3://bucket/prefix) that holds {area}/: "
+                               f"set STORAGE_URL to {gone}'s parent folder (docs/deployment.md)")
     app.config["SQLALCHEMY_DATABASE_URI"] = normalise_database_url(app.config["SQLALCHEMY_DATABASE_URI"])
     os.makedirs(app.instance_path, exist_ok=True)
     if not app.config.get("SECRET_KEY"):

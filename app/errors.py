@@ -7,7 +7,8 @@ API errors are ``{"error": <short name>, "message": <sentence>, "fields":
 {<field>: <reason>}}``. A request is an API call when its path starts with
 ``/api/`` or it prefers JSON. A 500 rolls the session back first; so does
 a ``MediaError`` about one of the instance's own files, which is the
-server's fault, not the user's.
+server's fault, not the user's. Storage that cannot be reached is a 503
+(``StorageUnavailable``), tried again on the next request.
 """
 
 from pathlib import Path
@@ -17,7 +18,6 @@ from flask_wtf.csrf import CSRFError
 from werkzeug.exceptions import HTTPException, InternalServerError
 
 from app.extensions import db
-from app.services.storage import StorageUnavailable
 from egonet.errors import EgonetError
 from egonet.io import MediaError
 
@@ -53,6 +53,11 @@ class Problem(Exception):
     def from_egonet(cls, exc: EgonetError) -> "Problem":
         """egonet's error as the app's: a 400 naming its field (an argument or a file)."""
         return cls(exc.message, field=exc.field, fields={exc.field: exc.reason} if exc.field else {})
+
+
+class StorageUnavailable(RuntimeError):
+    """The site's object store did not answer (connection refused, time-out, 5xx) or refused (no such bucket,
+    wrong keys). Raised by ``app.services.storage``; a request gets a 503 that names no bucket, the CLI one line."""
 
 
 ERROR_NAMES = {400: "bad_request", 404: "not_found", 409: "conflict", 413: "too_large", 415: "unsupported_media_type"}

@@ -5,8 +5,6 @@ Services queue a job by name (``app.queue.enqueue("train_run", run_id)``);
 calling a job here queues it too. Importing this module creates no queue.
 """
 
-from pathlib import Path
-
 from app.extensions import db
 from app.models import User
 from app.models.training import Checkpoint, TrainingRun
@@ -15,7 +13,7 @@ from app.services import exchange, labelling
 from app.services.scoring import fitting, load_sources, sources
 from app.services.training import (
     TrainingProblem,
-    convert_release,
+    convert_upload,
     execute_run,
     frames_for_prediction,
     predict,
@@ -36,9 +34,9 @@ def train_run(run_id: int) -> None:
 
 
 @job
-def import_weights(run_id: int, path: str) -> None:
-    """Convert an uploaded release into its run's checkpoint; the upload is removed afterwards."""
-    convert_release(run_id, Path(path), delete=True)
+def import_weights(run_id: int, upload: str) -> None:
+    """Convert an uploaded release (its chunks in storage) into its run's checkpoint; the upload is removed afterwards."""
+    convert_upload(run_id, upload)
 
 
 @job

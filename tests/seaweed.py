@@ -66,7 +66,7 @@ class SeaweedFS:
         command = [
             binary, "server", f"-dir={self.folder}", "-ip=127.0.0.1", "-ip.bind=127.0.0.1",
             f"-master.port={p['master']}", f"-volume.port={p['volume']}", f"-filer.port={p['filer']}",
-            "-s3", f"-s3.port={p['s3']}", "-s3.port.iceberg=0", "-s3.port.lance=0", "-master.telemetry=false", "-master.volumeSizeLimitMB=64", "-volume.max=0",
+            "-s3", f"-s3.port={p['s3']}", "-s3.port.iceberg=0", "-s3.port.lance=0", "-master.telemetry=false", "-master.electionTimeout=300ms", "-master.volumeSizeLimitMB=64", "-volume.max=0",
         ]
         log = open(self.folder / "weed.log", "ab")  # noqa: SIM115 - the process keeps it
         env = {**os.environ, **self.environ()}  # weed's admin identity: these keys, and no other

@@ -7,8 +7,8 @@ mode and the resolved training configuration (``config``, the dict of
 or cancelled, and reports ``progress``, ``loss`` and ``eta_s`` as it goes;
 ``updated_at`` is the time of the last report.
 
-Each finished fold leaves a ``Checkpoint`` (the file under
-``CHECKPOINT_ROOT``, relative path in ``path``) and one ``Prediction`` per
+Each finished fold leaves a ``Checkpoint`` (the file in storage, its key
+after ``checkpoints/`` in ``path``) and one ``Prediction`` per
 frame it held out. A prediction is a 16-bit PNG in the media store
 (probability x 65535). ``held_out`` is true when the frame was in the
 checkpoint's test set, which is what scoring reads; predictions made later

@@ -31,7 +31,7 @@ from app.errors import Problem
 from app.models import Frame
 from app.models.training import Checkpoint
 from app.services import media
-from app.services.training import checkpoint_root
+from app.services.training import files as checkpoint_files
 from egonet import io
 from egonet.network.activations import LAYERS, pathways
 from egonet.network.builders import build_model
@@ -88,11 +88,10 @@ def figure_path(checkpoint: Checkpoint, frame: Frame, *, in_request: bool) -> Pa
 
 def compute(checkpoint: Checkpoint, frame: Frame) -> Activations:
     """Each pathway's map for the frame (see ``NetworkPredictor.activations``), and why the others are absent."""
-    from egonet.checkpoint import load_checkpoint
     from egonet.predictor import NetworkPredictor
 
     try:
-        predictor = NetworkPredictor.from_checkpoint(load_checkpoint(checkpoint_root() / checkpoint.path))
+        predictor = NetworkPredictor.from_checkpoint(checkpoint_files.load(checkpoint.path))
     except (ValueError, OSError) as exc:
         raise Problem(f"checkpoint {checkpoint.id} cannot be read: {exc}", field="checkpoint") from None
     streams = pathways(predictor.model)

@@ -16,10 +16,9 @@ site's files; a path under the folder is never built elsewhere.
 
 Code that needs a file on disk (OpenCV, torch, ``send_file``) asks for
 ``local_path(key)``: the file itself in a folder; for a bucket a copy in this
-host's cache (``CACHE_ROOT/storage``, about ``STORAGE_CACHE_BYTES``: the
-least recently used dropped first, each process adding at most 1/64 of it
-between trims). A media key's copy is good for ever; another key's copy is
-checked against the bucket's ETag on each call.
+host's cache (``CACHE_ROOT/storage``, at most ``STORAGE_CACHE_BYTES``, the
+least recently used dropped first). A media key's copy is good for ever;
+another key's copy is checked against the bucket's ETag on each call.
 
 A bucket that cannot be reached raises ``StorageUnavailable`` (the app
 answers 503 and tries again on the next request); a missing key raises
@@ -29,23 +28,26 @@ answers 503 and tries again on the next request); a missing key raises
 from __future__ import annotations
 
 import contextlib
+import hashlib
 import os
 import shutil
 import tempfile
 from collections.abc import Callable, Iterator
-from dataclasses import dataclass
+from concurrent.futures import ThreadPoolExecutor
+from dataclasses import dataclass, field
 from pathlib import Path
 from typing import BinaryIO, Protocol
 
 from flask import current_app
 
+from app.errors import StorageUnavailable
 from egonet.io import write_atomic
 
 Data = bytes | Callable[[BinaryIO], None]
 
 
-class StorageUnavailable(RuntimeError):
-    """The object store did not answer (connection refused, time-out, 5xx)."""
+class StorageProblem(RuntimeError):
+    """A storage operation that cannot go ahead (a bad URL, a copy that does not match); one line says why."""
 
 
 @dataclass(frozen=True)
@@ -96,7 +98,10 @@ class LocalStore:
         return self._path(key).read_bytes()
 
     def local_path(self, key: str) -> Path:
-        return self._path(key)
+        path = self._path(key)
+        if not path.is_file():
+            raise FileNotFoundError(f"storage has no {key}")
+        return path
 
     def exists(self, key: str) -> bool:
         return self._path(key).is_file()
@@ -133,7 +138,7 @@ class S3Store:
             raise ValueError(f"STORAGE_URL {url!r} names no bucket: use s3://bucket/prefix")
         self.url, self.bucket, self.prefix = url, bucket, prefix.strip("/")
         self.cache, self.cache_bytes = cache, cache_bytes
-        self._fetched = 0  # bytes this process copied into the cache since it last trimmed it
+        self._cached: int | None = None  # the cache's bytes as this process counts them (walked when over budget)
         # Fail within seconds when the store is down: a page answers 503, not a hung worker.
         config = Config(connect_timeout=3, read_timeout=30, retries={"max_attempts": 2, "mode": "standard"})
         self.client = boto3.client("s3", config=config)
@@ -153,11 +158,10 @@ class S3Store:
             status = exc.response.get("ResponseMetadata", {}).get("HTTPStatusCode", 0)
             if error.get("Code") in ("404", "NoSuchKey", "NotFound"):
                 raise FileNotFoundError(f"storage has no {key}") from exc
-            if status >= 500:
-                raise StorageUnavailable(f"storage answered {status}") from exc
-            raise
+            # A 5xx, or a bucket that is missing or refuses these keys: the store is not usable as configured.
+            raise StorageUnavailable(f"storage {self.url} answered {status} {error.get('Code', '')}".rstrip()) from exc
         except BotoCoreError as exc:  # connection refused, time-outs, closed connections
-            raise StorageUnavailable(f"storage is unreachable ({type(exc).__name__})") from exc
+            raise StorageUnavailable(f"storage {self.url} is unreachable ({type(exc).__name__})") from exc
 
     def put(self, key: str, data: Data) -> None:
         if callable(data):
@@ -201,12 +205,13 @@ class S3Store:
             os.replace(tmp, path)
         finally:
             Path(tmp).unlink(missing_ok=True)
-        # Trimming stats every copy (about 2 s for 20,000 of them): once per 1/64 of the
-        # budget this process fetched, not on every download.
-        self._fetched += path.stat().st_size
-        if self._fetched > self.cache_bytes // 64:
-            self._fetched = 0
-            _trim(self.cache, self.cache_bytes, keep=path)
+        # Walking a large cache costs far more than a download, so it is walked only when it may be over budget,
+        # and then trimmed to 90 %: once per tenth of the budget downloaded, not on every copy.
+        size = path.stat().st_size
+        if self._cached is None or self._cached + size > self.cache_bytes:
+            self._cached = _trim(self.cache, self.cache_bytes * 9 // 10, keep=path)
+        else:
+            self._cached += size
         return path
 
     def exists(self, key: str) -> bool:
@@ -237,8 +242,8 @@ class S3Store:
                     yield Entry(item["Key"][len(base):], item["Size"], item["LastModified"].timestamp())
 
 
-def _trim(folder: Path, budget: int, *, keep: Path) -> None:
-    """Delete the least recently used copies under ``folder`` until they fit in ``budget`` bytes."""
+def _trim(folder: Path, budget: int, *, keep: Path) -> int:
+    """Delete the least recently used copies under ``folder`` until they fit in ``budget`` bytes; the bytes left."""
     files = []
     for dirpath, _, names in os.walk(folder):
         for name in names:
@@ -254,6 +259,7 @@ def _trim(folder: Path, budget: int, *, keep: Path) -> None:
             with contextlib.suppress(OSError):
                 path.unlink()
             total -= size
+    return total
 
 
 def open_store(url: str, *, cache: Path, cache_bytes: int) -> Store:
@@ -265,12 +271,107 @@ def open_store(url: str, *, cache: Path, cache_bytes: int) -> Store:
     return LocalStore(url.removeprefix("file://"))
 
 
+def open_url(url: str) -> Store:
+    """A folder or bucket with this app's cache settings (an import's source, a migration's target)."""
+    config = current_app.config
+    return open_store(str(url), cache=Path(config["CACHE_ROOT"]) / "storage", cache_bytes=config["STORAGE_CACHE_BYTES"])
+
+
+def open_parent(url: str) -> tuple[Store, str]:
+    """``s3://bucket/prefix/name`` as the store ``s3://bucket/prefix`` and the key ``name`` in it (a folder
+    or an object: an import's source, an export's folder)."""
+    parent, _, name = url.rstrip("/").rpartition("/")
+    if not name or parent in ("s3:", "s3:/"):
+        raise StorageProblem(f"{url}: name a folder in the bucket (s3://bucket/prefix/name)")
+    return open_url(parent), name
+
+
 def store() -> Store:
     """This app's store, made on first use."""
     extensions = current_app.extensions
     if "egonet.storage" not in extensions:
-        config = current_app.config
-        extensions["egonet.storage"] = open_store(
-            str(config["STORAGE_URL"]), cache=Path(config["CACHE_ROOT"]) / "storage", cache_bytes=config["STORAGE_CACHE_BYTES"]
-        )
+        extensions["egonet.storage"] = open_url(current_app.config["STORAGE_URL"])
     return extensions["egonet.storage"]
+
+
+def each(work: Callable[[Entry], str], entries: list[Entry], on_progress: Callable[[int], None] | None = None) -> list[str]:
+    """``work(entry)`` for every entry, eight at a time (a bucket's latency, not its bandwidth, is the limit);
+    the results in order. The first failure stops the rest."""
+    pool = ThreadPoolExecutor(8)
+    try:
+        results = []
+        for result in pool.map(work, entries):
+            results.append(result)
+            if on_progress is not None:
+                on_progress(1)
+        return results
+    finally:
+        pool.shutdown(cancel_futures=True)
+
+
+# Moving the site's files to another store (flask egonet storage-migrate)
+
+AREAS = ("media", "checkpoints", "exports")
+
+
+@dataclass
+class MigrateReport:
+    files: int = 0
+    bytes: int = 0
+    copied: int = 0
+    present: int = 0  # there already, equal
+    bad: list[str] = field(default_factory=list)  # check_only: missing or different there
+
+
+def migrate(target: Store, *, check_only: bool = False, on_start: Callable[[int], None] | None = None,
+            on_progress: Callable[[int], None] | None = None) -> MigrateReport:
+    """Copy every file of this app's store (``AREAS``) to ``target`` and check each copy.
+
+    A file is equal to its copy when their sizes match and, for media, the
+    copy has the SHA-256 its name holds. Equal copies are kept, so running
+    it again after a failure copies only the rest; each new copy is checked
+    so. ``check_only`` copies nothing and lists the files whose copy is
+    missing or different in ``report.bad``.
+
+    Raises:
+        StorageProblem: a copy that does not match (it is deleted), or ``target`` is this store.
+        StorageUnavailable: either store cannot be reached.
+    """
+    source = store()
+    if _same(source.url, target.url):
+        raise StorageProblem(f"{target.url} is the current STORAGE_URL: give another folder or bucket")
+    entries = [entry for area in AREAS for entry in source.list(area)]
+    there = {entry.key: entry.size for area in AREAS for entry in target.list(area)}
+    if on_start is not None:
+        on_start(len(entries))
+
+    def one(entry: Entry) -> str:
+        if there.get(entry.key) == entry.size and _intact(target, entry.key):
+            return "present"
+        if check_only:
+            return "bad"
+        target.put_file(entry.key, source.local_path(entry.key))
+        if not _intact(target, entry.key, entry.size):
+            target.delete(entry.key)
+            raise StorageProblem(f"{entry.key}: the copy in {target.url} does not match the original")
+        return "copied"
+
+    results = each(one, entries, on_progress)
+    return MigrateReport(files=len(entries), bytes=sum(e.size for e in entries), copied=results.count("copied"),
+                         present=results.count("present"),
+                         bad=sorted(e.key for e, result in zip(entries, results, strict=True) if result == "bad"))
+
+
+def _intact(target: Store, key: str, size: int | None = None) -> bool:
+    """Whether ``target``'s copy of ``key`` has ``size`` bytes (when given) and, for media, the hash its name holds."""
+    if key.startswith("media/"):
+        data = target.get(key)
+        return (size is None or len(data) == size) and hashlib.sha256(data).hexdigest() == Path(key).stem
+    folder = key.rpartition("/")[0]
+    return size is None or next((e.size for e in target.list(folder) if e.key == key), None) == size
+
+
+def _same(a: str, b: str) -> bool:
+    if a.startswith("s3://") or b.startswith("s3://"):
+        return a.rstrip("/") == b.rstrip("/")
+    return Path(a).resolve() == Path(b).resolve()

@@ -30,7 +30,7 @@ PASSWORD = "screenshot-of-the-labelling-page"
 
 with tempfile.TemporaryDirectory() as tmp:
     app = create_app({"SQLALCHEMY_DATABASE_URI": f"sqlite:///{tmp}/egonet.sqlite3", "STORAGE_URL": str(tmp),
-                      "CACHE_ROOT": f"{tmp}/cache", "CHECKPOINT_ROOT": f"{tmp}/checkpoints"}, instance_path=tmp)
+                      "CACHE_ROOT": f"{tmp}/cache"}, instance_path=tmp)
     with app.app_context():
         upgrade()
     for command in (["egonet", "demo"], ["egonet", "create-user", "admin", "--role", "admin", "--password", PASSWORD]):

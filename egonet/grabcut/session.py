@@ -23,6 +23,7 @@ from egonet.grabcut.colour import _first_models
 from egonet.grabcut.cut import (_NEAR_GRID, _STROKE_REACH, _box_cut, _box_labels, _depth_box_cut, _depth_first_models,
                                _keep_connected, _recut, _seed_cut, _Terms)
 from egonet.grabcut.depth import _DepthGuide
+from egonet.grabcut.fine import _THIN, _fine_cut
 from egonet.grabcut.frame import GrabCutFrame
 from egonet.grabcut.geometry import _clip_to_box, _downsample, _Geometry, _grow_box
 from egonet.grabcut.refine import _BAND, _GF_RADIUS, _Guide, _upsample_mask
@@ -287,7 +288,10 @@ class GrabCutSession:
         pixels of the cut, a few frame pixels) or is joined to it through
         pixels that changed too; every other pixel keeps its label. (Without
         those rules, re-estimating the models can drop an unrelated part far
-        from the stroke, such as the far end of a thin handle.) A foreground
+        from the stroke, such as the far end of a thin handle.) A stroke
+        narrower than the cut's grid resolves, drawn on a thin part of its
+        colour (a chopstick, a tine), is cut at full resolution along that
+        part instead (see :mod:`~egonet.grabcut.fine`). A foreground
         stroke that reaches outside the box grows the box to take it in.
 
         Args:
@@ -321,18 +325,33 @@ class GrabCutSession:
         new_roi = box != prev.box
         # In a new ROI the cut starts from the current mask (the models carry over either way).
         prior = _downsample(self._mask, guide.geom) if new_roi else prev.low
-        if self._depth is None:
-            low, models = _recut(_Terms.colour(guide), guide, prev.models, strokes, prior, flood=True)
-        else:
-            low, models = _recut(_Terms.depth(self._depth_guide_for(guide)), guide, prev.models, strokes, prior,
-                                 reach=None)
-        snap = _Snapshot(box=box, strokes=strokes, models=models, low=low)
-        if new_roi:
-            # Both masks honour every stroke, so their union does too.
-            mask = self._mask | self._full_mask(guide, snap)
-        else:
-            mask = self._refresh_changed(guide, snap, prev.low, new.fg)
+        # A stroke thinner than the grid resolves, on a thin part of its colour, is cut at full resolution
+        # along that part (``fine``); the grid's label follows.
+        thin = None
+        if self._depth is None and r * min(guide.geom.sx, guide.geom.sy) < _THIN:
+            mask = self._mask.copy()
+            self._apply_strokes(mask, (new,))
+            thin = _fine_cut(self._image, mask, *footprint, new.fg, r)
+        if thin is not None:
+            mask[thin] = new.fg
+            _clip_to_box(mask, box)
             self._apply_strokes(mask, strokes)
+            moved = _downsample(mask != self._mask, guide.geom)
+            snap = _Snapshot(box=box, strokes=strokes, models=prev.models,
+                             low=(prior | moved) if new.fg else (prior & ~moved))
+        else:
+            if self._depth is None:
+                low, models = _recut(_Terms.colour(guide), guide, prev.models, strokes, prior, flood=True)
+            else:
+                low, models = _recut(_Terms.depth(self._depth_guide_for(guide)), guide, prev.models, strokes, prior,
+                                     reach=None)
+            snap = _Snapshot(box=box, strokes=strokes, models=models, low=low)
+            if new_roi:
+                # Both masks honour every stroke, so their union does too.
+                mask = self._mask | self._full_mask(guide, snap)
+            else:
+                mask = self._refresh_changed(guide, snap, prev.low, new.fg)
+                self._apply_strokes(mask, strokes)
         # Local at full resolution too: only what is joined to the stroke through the change moves.
         grid = min(guide.geom.sx, guide.geom.sy)
         mask = _keep_connected(mask, self._mask, *footprint, math.ceil(_NEAR_GRID / grid),

@@ -75,7 +75,6 @@ def make_app(database_url: str, tmp_path, **overrides):
         "SQLALCHEMY_DATABASE_URI": database_url,
         "STORAGE_URL": str(tmp_path),
         "CACHE_ROOT": str(tmp_path / "cache"),
-        "CHECKPOINT_ROOT": str(tmp_path / "checkpoints"),
         "SERVER_NAME": None,
         # Jobs wait for a worker, as with Redis, unless a test asks for the in-process consumer.
         "QUEUE_IN_PROCESS": False,

@@ -179,7 +179,7 @@ def test_train_init_records_the_file_and_the_training_page_shows_it(app, demo, r
         assert run.config["init"] == {"name": init.name, "sha256": digest, "kind": "torchvision-vgg16", "path": str(init)}
         assert run.config["train"]["init_sha256"] == digest
         assert run.config["train"]["lr"] == pytest.approx(1e-6 * 16 * 12)  # the paper's lr, converted
-        state = torch.load(training.checkpoint_root() / run.checkpoints[0].path, map_location="cpu", weights_only=True)
+        state = training.files.load(run.checkpoints[0].path)
     # One step at the paper's tiny lr keeps fc7 near the file's 7.0 (a random start is ~N(0, 0.02)).
     assert float(state["state_dict"]["rgb_stream.layers.fc7.weight"][:8, :8].mean()) == pytest.approx(7.0, abs=1e-2)
     page = admin_client.get(f"/training/runs/{run.id}").get_data(as_text=True)

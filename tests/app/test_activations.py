@@ -10,7 +10,7 @@ from app.models.training import Checkpoint, FoldsMode, RunStatus, TrainingRun
 from app.services import activations, media, training
 from app.services.importing import import_path
 from egonet import io
-from egonet.checkpoint import TrainConfig, checkpoint_state, load_checkpoint, save_checkpoint
+from egonet.checkpoint import TrainConfig, checkpoint_state
 from egonet.network.builders import build_model
 from egonet.predictor import NetworkPredictor
 from tests.app.factories import image_folder
@@ -29,8 +29,7 @@ def saved_checkpoint(model_name="egonet-lite", options=None, *, write=True) -> C
         config = TrainConfig(model=model_name, model_options=options or {}, height=32, width=40)
         state = checkpoint_state(model, config, fold="single", train_keys=[], test_keys=[], epoch=1, iteration=1,
                                  complete=True, metrics={}, history=[], extra={})
-        (training.checkpoint_root() / f"run-{run.id}").mkdir(parents=True, exist_ok=True)
-        save_checkpoint(training.checkpoint_root() / checkpoint.path, state)
+        training.files.save(checkpoint.path, state)
     db.session.add(checkpoint)
     db.session.commit()
     return checkpoint
@@ -50,7 +49,7 @@ def test_the_maps_are_the_predictors_on_the_frames_inputs(frames):
     with_dhg, without = frames
     checkpoint = saved_checkpoint()
     found = activations.compute(checkpoint, with_dhg)
-    predictor = NetworkPredictor.from_checkpoint(load_checkpoint(training.checkpoint_root() / checkpoint.path))
+    predictor = NetworkPredictor.from_checkpoint(training.files.load(checkpoint.path))
     rgb, dhg = io.read_image(media.local_path(with_dhg.rgb_path)), io.read_dhg(media.local_path(with_dhg.dhg_path))
     expected = predictor.activations(rgb, dhg)
     assert set(found.maps) == {"rgb", "dhg"} and found.channels == {"rgb": 256, "dhg": 256} and not found.absent

@@ -20,7 +20,6 @@ from app.services.demo import create_demo
 from app.services.labelling import proposers
 from app.services.scoring import build_report
 from app.services.training import released
-from egonet.checkpoint import load_checkpoint
 from tests.caffe_files import TINY, TINY_RELEASES, release_layers, write_caffemodel, write_lying_blob
 
 
@@ -62,7 +61,7 @@ def test_a_release_becomes_a_run_with_one_checkpoint_that_predicts_scores_and_su
     assert run.status is RunStatus.DONE and run.progress == 1.0 and seen[-1] == 1.0
     (checkpoint,) = run.checkpoints
     assert checkpoint.fold == "released" and checkpoint.test_frame_ids == []
-    state = load_checkpoint(training.checkpoint_root() / checkpoint.path)
+    state = training.files.load(checkpoint.path)
     assert state["config"]["height"] == 48 and state["model"]["options"]["coords"] == "released"
     assert run.config["released"]["sha256"] == state["released"]["sha256"]
     assert tiny_file.exists()  # the CLI's file is the user's: never removed
@@ -116,6 +115,7 @@ def test_cancelling_a_conversion_stops_it(ctx, tiny_file, monkeypatch):
 # --------------------------------------------------------------------------- the page's upload
 
 
+@pytest.mark.both_storages
 def test_the_page_uploads_in_chunks_and_refuses_what_is_no_release(app, admin_client, tiny_file, monkeypatch):
     monkeypatch.setattr(released, "CHUNK_BYTES", 4096)
     data = tiny_file.read_bytes()
@@ -146,9 +146,10 @@ def test_the_page_uploads_in_chunks_and_refuses_what_is_no_release(app, admin_cl
         "EgoNet.caffemodel: not the authors' RGB+DHG release: layer 'conv1_1' weights have shape (1, 3, 3, 3) in the file")
     assert admin_client.post(f"{url}/finish", json={}, headers=JSON).status_code == 404  # the upload is gone
     with app.app_context():
-        assert not list(released.uploads_root().iterdir())
+        assert not training.files.listing(released.UPLOADS)
 
 
+@pytest.mark.both_storages
 def test_a_lying_file_is_refused_in_one_line_naming_it_as_uploaded_and_removed(app, admin_client, tmp_path):
     """Review: a blob shape of 2**63 gave a 500 and left the upload on disk; messages showed the instance's path."""
     for dims in ([2**63, 0], [2**63]):
@@ -160,9 +161,10 @@ def test_a_lying_file_is_refused_in_one_line_naming_it_as_uploaded_and_removed(a
         assert finish.status_code == 400 and finish.json["message"].startswith("lie.caffemodel: "), finish.json
         assert app.instance_path not in finish.json["message"] and start.json["upload"] not in finish.json["message"]
         with app.app_context():
-            assert not list(released.uploads_root().iterdir())
+            assert not training.files.listing(released.UPLOADS)
 
 
+@pytest.mark.both_storages
 def test_upload_limits_and_cancelling(app, admin_client, client, make_user):
     app.config["WEIGHTS_MAX_BYTES"] = 1000
     too_big = admin_client.post("/training/weights/uploads", json={"filename": "a.caffemodel", "size": 1001}, headers=JSON)

@@ -551,7 +551,6 @@ def test_a_run_whose_maps_cannot_be_scored_is_a_note_not_an_error(ctx, app):
 def test_a_small_trained_run_scores_as_a_direct_computation_on_its_held_out_maps(app, runner, tmp_path):
     import torch
 
-    app.config["CHECKPOINT_ROOT"] = str(tmp_path / "checkpoints")
     with app.app_context():
         create_demo(frames_per_activity=5, unlabelled_fraction=0, width=64, height=48)
     threads = torch.get_num_threads()

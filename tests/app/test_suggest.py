@@ -55,9 +55,7 @@ def stored_run(maps: dict[int, np.ndarray], *, threshold: float | None = 0.5, st
                       status=status, config={"activities": list(activities)})
     db.session.add(run)
     db.session.flush()
-    path = training.checkpoint_root() / f"run-{run.id}" / "single.pt"
-    path.parent.mkdir(parents=True, exist_ok=True)
-    path.write_bytes(b"never loaded: the stored maps are used")
+    training.files.put(f"run-{run.id}/single.pt", b"never loaded: the stored maps are used")
     metrics = {"max_f": 0.5} | ({"threshold": threshold} if threshold is not None else {})
     checkpoint = Checkpoint(run=run, fold="single", path=f"run-{run.id}/single.pt", epochs=1, metrics=metrics,
                             test_frame_ids=list(maps))

@@ -15,7 +15,6 @@ from app.models.training import Checkpoint, FoldsMode, Prediction, RunStatus, Tr
 from app.services import ground_truth, media, training
 from app.services.scoring.sources import run_row_name
 from app.services.demo import create_demo
-from egonet.checkpoint import load_checkpoint
 
 TINY = {"model": "egonet-lite", "epochs": 1, "width": 32, "height": 24, "batch_size": 2, "device": "cpu"}
 
@@ -58,10 +57,10 @@ def test_a_run_records_a_checkpoint_per_fold_and_every_held_out_prediction(ctx, 
     assert set(run.metrics["folds"]) == {"cooking", "dining"}
     assert set(run.metrics["mean"]) == {"max_f", "ap", "aop_max_f", "aop_ap"}
     for checkpoint in run.checkpoints:
-        state = load_checkpoint(training.checkpoint_root() / checkpoint.path)
+        state = training.files.load(checkpoint.path)
         assert state["fold"] == checkpoint.fold and state["test_keys"] == checkpoint.test_frame_ids
         assert checkpoint.metrics["history"][0]["epoch"] == 1
-    assert (training.checkpoint_root() / f"run-{run.id}" / "config.json").exists()
+    assert training.files.exists(f"run-{run.id}/config.json")
     # The scorer's interface: every held-out frame once, at its full size, in [0, 1].
     assert training.completed_runs() == [run]
     pairs = list(training.held_out_predictions(run))
@@ -83,7 +82,7 @@ def test_deeplab_obj_learns_the_training_activities_object_classes_and_its_row_s
     assert any(HAND_LABEL in found for found in labels.values())  # the demo's hands are there, and are no class
     for checkpoint in run.checkpoints:
         other = next(a for a in labels if a != checkpoint.fold)
-        options = load_checkpoint(training.checkpoint_root() / checkpoint.path)["model"]["options"]
+        options = training.files.load(checkpoint.path)["model"]["options"]
         assert options["classes"] == sorted(labels[other] - {HAND_LABEL})
         assert checkpoint.metrics["classes"] == len(options["classes"])
     counts = sorted({c.metrics["classes"] for c in run.checkpoints})
@@ -365,9 +364,7 @@ def hand_made_run(*, status=RunStatus.DONE, name="hand made", tags=(), folds=("c
         checkpoint = Checkpoint(run=run, fold=fold, path=f"run-{run.id}/{fold}.pt", epochs=2,
                                 metrics={"max_f": 0.5, "aop_max_f": 0.4, "threshold": 0.3},
                                 test_frame_ids=[frame.id] if frame is not None else [])
-        file = training.checkpoint_root() / checkpoint.path
-        file.parent.mkdir(parents=True, exist_ok=True)
-        file.write_bytes(f"weights of {fold}".encode())
+        training.files.put(checkpoint.path, f"weights of {fold}".encode())
         db.session.add(checkpoint)
         training.history.record_epochs(run.id, fold, [{"epoch": 1, "train_loss": 0.7, "lr": 0.02, "loss": 0.6, "max_f": 0.3},
                                                       {"epoch": 2, "train_loss": 0.5, "lr": 0.01, "loss": 0.55, "max_f": 0.5}])
@@ -446,6 +443,7 @@ def test_admins_rename_and_tag_with_a_version_check(app, ctx, admin_client, make
     # Only admins edit: the access matrix checks every other role gets 403.
 
 
+@pytest.mark.both_storages
 def test_staff_download_checkpoints_and_configuration(app, ctx, client, make_user, tmp_path):
     run = hand_made_run(folds=("desk work",))
     (checkpoint,) = run.checkpoints
@@ -458,7 +456,7 @@ def test_staff_download_checkpoints_and_configuration(app, ctx, client, make_use
         assert response.headers["Content-Disposition"] == f'attachment; filename="run-{run.id}-config.json"'
         body = response.get_json()
         assert body["config"] == {"train": {"width": 32}} and body["checkpoints"][0]["fold"] == "desk work"
-    (training.checkpoint_root() / checkpoint.path).unlink()
+    training.files.delete(checkpoint.path)
     response = client.get(f"/training/checkpoints/{checkpoint.id}/download", headers={"Accept": "application/json"})
     assert response.status_code == 404 and "missing on the server" in response.get_json()["message"]
 
@@ -469,7 +467,7 @@ def test_a_queued_or_running_run_cannot_be_deleted(app, ctx, admin_client):
     assert page.status_code == 409 and b"cancel it first" in page.data and b"confirm-delete" not in page.data
     assert admin_client.post(f"/training/runs/{run.id}/delete").status_code == 409
     assert db.session.get(TrainingRun, run.id) is not None
-    assert (training.checkpoint_root() / f"run-{run.id}").exists()
+    assert training.files.listing(f"run-{run.id}")
 
 
 def test_the_migration_copies_the_history_of_older_runs(ctx):
@@ -568,8 +566,7 @@ def test_inspect_a_trained_run_then_delete_it_leaving_nothing_behind(app, demo, 
         hand_made_run(name="kept", frame=db.session.get(Frame, order[0]), path=paths[0])
         files = [media.local_path(p) for p in paths[1:]]
         kept_files = [media.local_path(paths[0])]
-        folder = training.checkpoint_root() / f"run-{run_id}"
-        assert folder.is_dir() and all(f.exists() for f in files)
+        assert training.files.listing(f"run-{run_id}") and all(f.exists() for f in files)
     confirm = admin_client.get(f"/training/runs/{run_id}/delete").data.decode()
     assert "2 checkpoints" in confirm and f"{len(paths)} predictions and {len(files)} media files" in confirm
     assert "4 epoch records" in confirm
@@ -584,7 +581,9 @@ def test_inspect_a_trained_run_then_delete_it_leaving_nothing_behind(app, demo, 
                                                              else model.id == run_id)).first() is None
         annotation = db.session.get(Annotation, annotation_id)
         assert annotation.proposed_by_run_id is None and annotation.proposed_by_checkpoint_id is None
-    assert not folder.exists() and not any(f.exists() for f in files) and all(f.exists() for f in kept_files)
+    with app.app_context():
+        assert not training.files.listing(f"run-{run_id}")
+    assert not any(f.exists() for f in files) and all(f.exists() for f in kept_files)
     result = runner.invoke(args=["egonet", "media-check"])
     assert result.exit_code == 0 and " 0 missing, 0 orphaned" in result.output, result.output
     assert admin_client.get(f"/training/runs/{run_id}").status_code == 404

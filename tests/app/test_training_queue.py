@@ -19,7 +19,6 @@ ROOT = Path(__file__).resolve().parents[2]
 
 @pytest.mark.slow
 def test_a_run_started_from_the_page_completes_through_the_worker(app, database_url, tmp_path, admin_client):
-    app.config["CHECKPOINT_ROOT"] = str(tmp_path / "checkpoints")
     with app.app_context():
         create_demo(frames_per_activity=2, unlabelled_fraction=0, width=64, height=48)
         ids = list(db.session.execute(db.select(Activity.id).where(Activity.name.in_(["cooking", "dining"]))).scalars())
@@ -34,7 +33,6 @@ def test_a_run_started_from_the_page_completes_through_the_worker(app, database_
         FLASK_SECRET_KEY="worker-test-secret-key-0123456789abcdef",  # no key file in the repository's instance/
         FLASK_STORAGE_URL=str(tmp_path),
         FLASK_CACHE_ROOT=str(tmp_path / "cache"),
-        FLASK_CHECKPOINT_ROOT=str(tmp_path / "checkpoints"),
         OMP_NUM_THREADS="1",
     )
     worker = subprocess.Popen(

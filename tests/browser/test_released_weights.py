@@ -4,7 +4,6 @@ import pytest
 
 from app.extensions import db
 from app.models.training import RunStatus, TrainingRun
-from app.services import media
 from tests.browser.conftest import screenshot, sign_in
 from tests.caffe_files import TINY, release_layers, write_caffemodel
 
@@ -16,7 +15,6 @@ def test_upload_a_release_watch_it_convert(live_app, live_server, page, monkeypa
 
     queued = []
     monkeypatch.setattr("app.tasks.import_weights", lambda *args: queued.append(args))  # the test plays the worker
-    live_app.config["CHECKPOINT_ROOT"] = str(media.Path(live_app.config["STORAGE_URL"]) / "checkpoints")
     sign_in(page, live_app, live_server)
     page.goto(live_server + "/training/")
     page.get_by_text("Import the authors' released weights").click()

@@ -17,7 +17,6 @@ pytestmark = pytest.mark.browser
 
 def test_queue_a_run_watch_it_and_see_a_heatmap(live_app, live_server, page, monkeypatch):
     monkeypatch.setattr("app.tasks.train_run", lambda run_id: None)  # no worker here: the test plays it
-    live_app.config["CHECKPOINT_ROOT"] = str(media.Path(live_app.config["STORAGE_URL"]) / "checkpoints")
     with live_app.app_context():
         create_demo(frames_per_activity=2, unlabelled_fraction=0, seed=1, width=160, height=120)
     sign_in(page, live_app, live_server)
@@ -88,7 +87,6 @@ def test_charts_follow_a_run_compare_runs_browse_frames_and_delete(live_app, liv
     from app.services import training
     from app.services.training.history import record_epochs
 
-    live_app.config["CHECKPOINT_ROOT"] = str(media.Path(live_app.config["STORAGE_URL"]) / "checkpoints")
     page.set_viewport_size({"width": 1280, "height": 800})
     with live_app.app_context():
         create_demo(frames_per_activity=2, unlabelled_fraction=0, seed=2, width=160, height=120)

@@ -50,7 +50,6 @@ def app_config(database_url: str, instance: Path) -> dict:
         "SQLALCHEMY_DATABASE_URI": database_url,
         "STORAGE_URL": str(instance),
         "CACHE_ROOT": str(instance / "cache"),
-        "CHECKPOINT_ROOT": str(instance / "checkpoints"),
         "SECRET_KEY": SECRET,
     }
 

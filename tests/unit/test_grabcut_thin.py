@@ -1,4 +1,4 @@
-"""Thin objects in GrabCut: a stroke's effect is local, and NoC@90 on real frames with thin objects.
+"""Thin objects in GrabCut: a stroke's effect is local, a click follows a thin part, and NoC@90 on real frames.
 
 The NoC@90 protocol and the frames are ``tests/thin_objects.py``'s (the
 same as ``bench/bench_grabcut.py --noc``).
@@ -10,6 +10,7 @@ import pytest
 
 from egonet.grabcut import GrabCutSession, stroke_footprint
 from egonet.grabcut.cut import _flooded
+from egonet.grabcut.fine import _fine_cut
 from tests import thin_objects
 
 NEAR = 16  # px: a stroke's neighbourhood (the engine's is two grid pixels: 3-10 px here)
@@ -115,6 +116,51 @@ def test_a_click_floods_the_coherent_region_it_lands_in():
     assert not (region & sure).any() and region[40:50, 40:48].all() and not (region & ~near).any()
 
 
+def test_a_click_on_a_chopstick_follows_it_at_full_resolution():
+    """A click on an 8-10 px chopstick (2 px on the cut's grid) takes the stick along its length, nothing beside it.
+
+    On main's engine before (10b4b88) the same click took 110 px of the
+    stick, about its own footprint (101 px); now about 2,200.
+    """
+    cases = [c for c in thin_objects.utensil_cases() if c.name.startswith("chopsticks")]
+    if not cases:
+        pytest.skip("no first-person frames in ../shared")
+    case = cases[0]
+    session = GrabCutSession(case.rgb)
+    before = session.box(*thin_objects.loose_box(case.truth))
+    k = thin_objects.click(before, case.truth)
+    assert k.label == "fg" and k.radius < 6
+    after = session.stroke(k.points, k.label, k.radius)
+    footprint = stroke_footprint(after.shape, k.points, k.radius)
+    added = after & ~before
+    assert np.count_nonzero(added & case.truth) > 10 * np.count_nonzero(footprint)
+    assert np.count_nonzero(added & ~case.truth) < 0.01 * np.count_nonzero(added)
+    assert not _far_changes(before, after, footprint).any()
+
+
+def test_a_thin_stroke_follows_a_thin_part_and_leaves_a_wide_one_to_the_grid():
+    """``_fine_cut``: on a 7 px bar the stroke takes the bar along its length; inside a wide patch it declines."""
+    rng = np.random.default_rng(0)
+    image = np.full((300, 600, 3), (190.0, 188.0, 180.0))  # a pale table
+    bar = np.zeros((300, 600), np.uint8)
+    cv2.line(bar, (40, 150), (560, 150), 1, 7)
+    bar = bar.astype(bool)
+    image[bar] = (150, 170, 160)  # a pale green stick
+    image[20:120, 40:200] = (150, 170, 160)  # a wide patch of the same colour, not joined to it
+    image = np.clip(cv2.GaussianBlur(image, (0, 0), 0.7) + rng.normal(0, 4, image.shape), 0, 255).astype(np.uint8)
+    mask = np.zeros((300, 600), bool)
+    crop = np.ones((5, 31), bool)  # a short stroke along the bar's middle
+    mask[148:153, 285:316] = True
+    flip = _fine_cut(image, mask, crop, (148, 285), True, 2.5)
+    assert flip is not None
+    assert (flip | mask)[150, 60:540].all()  # the bar, 240 px each way of the stroke
+    assert np.count_nonzero(flip & ~bar) < 0.05 * np.count_nonzero(flip)
+    assert not flip[20:120, 40:200].any()
+    patch = np.zeros((300, 600), bool)
+    patch[68:73, 100:131] = True
+    assert _fine_cut(image, patch, crop, (68, 100), True, 2.5) is None  # the grid's cut resolves the patch
+
+
 @pytest.mark.slow
 def test_noc90_on_real_frames_with_thin_objects():
     """NoC@90 (the box first, then clicks at the largest error's interior-most point), as the bench runs it.
@@ -140,12 +186,13 @@ def test_noc90_on_real_frames_with_thin_objects():
         assert not any(far), (case.name, far)
     davis = [v for k, v in scores.items() if k in ("camel", "cows", "dog", "goat", "soapbox")]
     assert len(davis) == 5
-    # 2026-12-04: 11.2 on the DAVIS frames and 9.56 on all nine (main's engine before issue 36: 11.6
-    # and 10.0); the goat takes all 20, the chopsticks miss (see docs/benchmarks.md). The goal of
-    # issue 36, 5, is not met.
+    # 2026-12-04: 11.2 on the DAVIS frames and 8.22 on all nine (main's engine before issue 36: 11.6
+    # and 10.0; before the full-resolution cut of thin strokes 9.56); the goat takes all 20, the
+    # chopsticks 8 (they missed before: IoU 0.33 at 20). The goal of issue 36, 5, is not met (see
+    # docs/benchmarks.md).
     assert np.mean(davis) <= 11.8, scores
     assert sum(v < thin_objects.MAX_CLICKS for v in davis) >= 4, scores
     if len(scores) > 5:
-        assert np.mean(list(scores.values())) <= 10.0, scores
+        assert np.mean(list(scores.values())) <= 8.8, scores
         assert scores["fork-00_007850_1"] <= 2 and scores["spoon-02_024150_3"] <= 3, scores
-        assert scores["knife-01_007750_6"] <= 8, scores
+        assert scores["knife-01_007750_6"] <= 8 and scores["chopsticks-02_024150_3"] <= 12, scores

@@ -278,7 +278,6 @@ def suggestion_runs(*, limit: int = 20) -> list[TrainingRun]:
     """Finished action-object runs (not depth runs) with at least one checkpoint file, newest first (the page's choice of run)."""
     from egonet.depth import DEPTH_MODEL
 
-    root = training.checkpoint_root()
     query = (
         db.select(TrainingRun)
         .where(TrainingRun.status == RunStatus.DONE, TrainingRun.model_name != DEPTH_MODEL)
@@ -286,7 +285,7 @@ def suggestion_runs(*, limit: int = 20) -> list[TrainingRun]:
     )
     out = []
     for run in db.session.execute(query).scalars():
-        if any((root / c.path).is_file() for c in run.checkpoints):
+        if any(training.files.exists(c.path) for c in run.checkpoints):
             out.append(run)
             if len(out) == limit:
                 break
@@ -345,11 +344,10 @@ def resolve_run(run_id: int | None, frame: Frame | None = None) -> TrainingRun:
 def _usable_checkpoints(run: TrainingRun, frame: Frame | None) -> list[Checkpoint]:
     """The run's checkpoints with a stored map of the frame, or whose file is there and whose
     model can read the frame (any frame when ``frame`` is None)."""
-    root = training.checkpoint_root()
     readable = frame is None or frame.dhg_path is not None or not _uses_dhg(run)
     return [
         c for c in run.checkpoints
-        if (frame is not None and _stored_prediction(c, frame) is not None) or (readable and (root / c.path).is_file())
+        if (frame is not None and _stored_prediction(c, frame) is not None) or (readable and training.files.exists(c.path))
     ]
 
 

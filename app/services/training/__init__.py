@@ -5,8 +5,9 @@ A run is a ``TrainingRun`` row first, then a job that trains it with
 ``Prediction`` for every held-out frame. The package follows those seams:
 
 * ``control``: start, check, cancel, resume and list runs (every request is
-  checked before anything is queued); ``TrainingProblem``; where checkpoint
-  files go (``CHECKPOINT_ROOT``, one ``run-<id>/`` folder per run).
+  checked before anything is queued); ``TrainingProblem``.
+* ``files``: checkpoints in storage (``checkpoints/run-<id>/…``): load and
+  save one by its path, the scratch folder a run trains in.
 * ``job``: ``execute_run``, the job the worker (``train_run`` of
   ``app.tasks``) or ``flask egonet train`` runs, and its bookkeeping.
 * ``predictions``: run a checkpoint on frames (``predict``), score each map on
@@ -28,7 +29,6 @@ from app.services.training.control import (
     RunRequest,
     TrainingProblem,
     cancel_run,
-    checkpoint_root,
     checkpoints,
     completed_runs,
     create_run,
@@ -43,6 +43,7 @@ from app.services.training.job import execute_run, summarise, train_in_foregroun
 from app.services.training.released import (
     cancel_upload,
     convert_release,
+    convert_upload,
     finish_upload,
     import_in_foreground,
     register_release,
@@ -82,6 +83,7 @@ __all__ = [
     "cancel_run",
     "cancel_upload",
     "convert_release",
+    "convert_upload",
     "finish_upload",
     "import_in_foreground",
     "register_release",
@@ -89,7 +91,6 @@ __all__ = [
     "write_chunk",
     "chart_data",
     "checkpoint_file",
-    "checkpoint_root",
     "checkpoints",
     "completed_runs",
     "create_run",

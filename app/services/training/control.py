@@ -7,9 +7,9 @@ naming its field, never a failed job. ``cancel_run`` marks the row; the job
 sees it at its next report and stops. A failed or cancelled run can be
 queued again (``resume_run``): finished folds are kept.
 
-Checkpoint files live under ``CHECKPOINT_ROOT`` (default
-``instance/checkpoints``), one folder per run: ``run-<id>/<fold>.pt`` and
-``config.json``.
+Checkpoint files live in the site's storage, one folder per run:
+``checkpoints/run-<id>/<fold>.pt`` and ``config.json``
+(``app.services.training.files``).
 """
 
 import dataclasses
@@ -17,7 +17,6 @@ from collections.abc import Iterable
 from dataclasses import dataclass
 from pathlib import Path
 
-from flask import current_app
 from sqlalchemy import update
 
 from app.errors import Problem
@@ -36,12 +35,6 @@ REQUEST_FIELDS = {"height": "size", "width": "size"}
 
 class TrainingProblem(Problem):
     """A run or prediction that cannot go ahead; ``field`` names the bad input."""
-
-
-def checkpoint_root() -> Path:
-    """Where checkpoint files go (``CHECKPOINT_ROOT``, by default ``instance/checkpoints``)."""
-    root = current_app.config.setdefault("CHECKPOINT_ROOT", str(Path(current_app.instance_path) / "checkpoints"))
-    return Path(root)
 
 
 # --------------------------------------------------------------------------- starting

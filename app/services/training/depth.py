@@ -16,7 +16,6 @@ without depth, are never replaced.
 """
 
 from dataclasses import dataclass
-from pathlib import Path
 
 import numpy as np
 
@@ -26,10 +25,14 @@ from app.models.frames import DEPTH_PREDICTED
 from app.models.training import Checkpoint, FoldsMode, RunStatus, TrainingRun
 from app.queue import enqueue
 from app.services import media
-from app.services.training.control import TrainingProblem, _activities, _check_epochs, checkpoint_root
+from app.services.training import files
+from app.services.training.control import TrainingProblem, _activities, _check_epochs
 from egonet import io
 from egonet.depth import DEPTH_MODEL, DepthConfig
 from egonet.errors import EgonetError
+
+CHECKPOINT = "depth.pt"
+"""A depth run's one checkpoint file, in the run's folder."""
 
 
 @dataclass(frozen=True)
@@ -119,7 +122,7 @@ def record_depth_result(run: TrainingRun, result) -> None:
     """The finished run's checkpoint and summary (the caller commits); NaN (no valid pixel) is stored as null."""
     metrics = _json_numbers(result.metrics)
     db.session.add(Checkpoint(
-        run_id=run.id, fold="depth", path=str(result.checkpoint.relative_to(checkpoint_root())),
+        run_id=run.id, fold="depth", path=f"{files.run_folder(run.id)}/{CHECKPOINT}",
         epochs=int(result.metrics["epochs"]), metrics=metrics | {"history": _json_numbers(result.history)},
         test_frame_ids=[int(k) for k in result.test_keys],
     ))
@@ -192,7 +195,6 @@ def predict_depth(activity: str, *, checkpoint_id: int | None = None, device: st
     Raises:
         TrainingProblem: No such activity, or no usable depth checkpoint.
     """
-    from egonet.checkpoint import load_checkpoint
     from egonet.depth import DepthPredictor, assumed_intrinsics, intrinsics_record
     from egonet.dhg import dhg_from_depth
 
@@ -201,7 +203,7 @@ def predict_depth(activity: str, *, checkpoint_id: int | None = None, device: st
         raise TrainingProblem(f"no activity named {activity!r}", status=404, field="activity")
     checkpoint = depth_checkpoint(checkpoint_id)
     try:
-        predictor = DepthPredictor(load_checkpoint(checkpoint_root() / checkpoint.path), device=device)
+        predictor = DepthPredictor(files.load(checkpoint.path), device=device)
     except EgonetError as exc:
         raise TrainingProblem(exc.message, field="checkpoint") from None
     report = DepthReport(checkpoint_id=checkpoint.id)
@@ -235,11 +237,6 @@ def predict_depth(activity: str, *, checkpoint_id: int | None = None, device: st
 
 def depth_config(run: TrainingRun) -> DepthConfig:
     return DepthConfig.from_dict(run.config["depth"])
-
-
-def checkpoint_path(run: TrainingRun) -> Path:
-    """Where a depth run's checkpoint file goes."""
-    return checkpoint_root() / f"run-{run.id}" / "depth.pt"
 
 
 __all__ = [

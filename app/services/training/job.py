@@ -10,9 +10,15 @@ as the epoch ends (``app.services.training.history``). Progress, loss and
 ETA go to the row at most once a second; the web page polls them. A
 resumed run keeps its finished folds, and the fold that was under way
 continues from its last epoch's checkpoint file.
+
+Training writes into this host's scratch folder (``files.scratch``) and each
+checkpoint and ``config.json`` goes to storage as soon as it is written; a
+run that goes on, here or on another host, starts from the files storage
+has (``app.services.training.files``). Under ``torchrun`` only rank 0 writes.
 """
 
 import logging
+import shutil
 import time
 from collections.abc import Callable, Iterable
 from pathlib import Path
@@ -24,8 +30,8 @@ from app.extensions import db
 from app.models import User, is_hand, utcnow
 from app.models.training import FINAL_STATUSES, Checkpoint, Prediction, RunStatus, TrainingRun
 from app.services import ground_truth, media
-from app.services.training.control import RunRequest, TrainingProblem, cancel_run, checkpoint_root, claim_run, create_run
-from app.services.training import depth
+from app.services.training.control import RunRequest, TrainingProblem, cancel_run, claim_run, create_run
+from app.services.training import depth, files
 from app.services.training.predictions import FoldScorer
 from app.services.training.history import record_epochs
 from egonet import io
@@ -64,10 +70,10 @@ def train_in_foreground(
 
 
 class _Recorder:
-    """The engine's callbacks: progress to the row, and each fold's results in one transaction."""
+    """The engine's callbacks: progress to the row, each file to storage, and each fold's results in one transaction."""
 
-    def __init__(self, run_id: int, out_dir: Path, on_progress: Callable | None):
-        self.run_id, self.out_dir, self.on_progress = run_id, out_dir, on_progress
+    def __init__(self, run_id: int, upload: Callable[[], None], on_progress: Callable | None):
+        self.run_id, self.upload, self.on_progress = run_id, upload, on_progress
         self.last_write = 0.0
         self.last_phase = None
         self.maps: list[tuple[int, str]] = []  # (frame id, media path) of the fold under way
@@ -105,14 +111,16 @@ class _Recorder:
         self.scorer.add(int(sample.key), probability, sample.mask)
 
     def epoch(self, fold: str, record: dict) -> None:
+        self.upload()  # the epoch's checkpoint (and config.json) is written: storage gets it now
         record_epochs(self.run_id, fold, [_plain(record)])
         db.session.commit()
 
     def fold_end(self, result) -> None:
+        self.upload()
         checkpoint = Checkpoint(
             run_id=self.run_id,
             fold=result.name,
-            path=str(result.checkpoint.relative_to(checkpoint_root())),
+            path=f"{files.run_folder(self.run_id)}/{result.checkpoint.name}",
             epochs=int(result.metrics["epochs"]),
             metrics=_plain(result.metrics | {"history": result.history}),
             test_frame_ids=[int(k) for k in result.test_keys],
@@ -165,13 +173,13 @@ def execute_run(run_id: int, *, on_progress: Callable | None = None) -> Training
     except ValueError as exc:
         return _fail(run, exc)
     if rank != 0:
-        return _train_as_follower(run, config)
+        return _train_as_follower(run, config, rank)
     if not claim_run(run, "loading frames"):
         return run
-    out_dir = checkpoint_root() / f"run-{run.id}"
-    recorder = _Recorder(run.id, out_dir, on_progress)
+    out_dir = files.scratch(run.id)
     try:
-        samples, folds, start = _plan(run, config)
+        recorder = _Recorder(run.id, files.fetch_run(run.id, out_dir), on_progress)
+        samples, folds, start = _plan(run, config, out_dir)
         cross_validate(
             samples, config, out_dir=out_dir, folds=folds, start=start,
             on_progress=recorder.progress, on_fold_end=recorder.fold_end, on_map=recorder.map, on_epoch=recorder.epoch,
@@ -188,6 +196,8 @@ def execute_run(run_id: int, *, on_progress: Callable | None = None) -> Training
         log.exception("training run %s failed", run_id)
         _fail(run, exc)
         raise
+    finally:
+        shutil.rmtree(out_dir, ignore_errors=True)
     _finish(run)
     return run
 
@@ -201,12 +211,14 @@ def _execute_depth_run(run: TrainingRun, *, on_progress: Callable | None) -> Tra
 
     if not claim_run(run, "loading frames"):
         return run
-    recorder = _Recorder(run.id, checkpoint_root() / f"run-{run.id}", on_progress)
+    out_dir = files.scratch(run.id)
     try:
+        recorder = _Recorder(run.id, files.fetch_run(run.id, out_dir), on_progress)
         result = fit_depth(
-            depth.depth_samples(run), depth.depth_config(run), out_path=depth.checkpoint_path(run),
+            depth.depth_samples(run), depth.depth_config(run), out_path=out_dir / depth.CHECKPOINT,
             on_progress=recorder.progress, on_epoch=lambda record: recorder.epoch("depth", record),
         )
+        recorder.upload()
         depth.record_depth_result(run, result)
         db.session.commit()
     except Cancelled:
@@ -221,6 +233,8 @@ def _execute_depth_run(run: TrainingRun, *, on_progress: Callable | None) -> Tra
         log.exception("depth run %s failed", run.id)
         _fail(run, exc)
         raise
+    finally:
+        shutil.rmtree(out_dir, ignore_errors=True)
     _finish(run)
     return run
 
@@ -249,16 +263,21 @@ def _fail(run: TrainingRun, exc: Exception) -> TrainingRun:
     return run
 
 
-def _train_as_follower(run: TrainingRun, config) -> TrainingRun:
-    """Ranks > 0 under torchrun: the same frames and folds, no database writes."""
+def _train_as_follower(run: TrainingRun, config, rank: int) -> TrainingRun:
+    """Ranks > 0 under torchrun: the same frames, folds and starting files, no database or storage writes."""
     from egonet.train import cross_validate
 
-    samples, folds, start = _plan(run, config)
-    cross_validate(samples, config, out_dir=checkpoint_root() / f"run-{run.id}", folds=folds, start=start)
+    out_dir = files.scratch(run.id, rank)
+    try:
+        files.fetch_run(run.id, out_dir)
+        samples, folds, start = _plan(run, config, out_dir)
+        cross_validate(samples, config, out_dir=out_dir, folds=folds, start=start)
+    finally:
+        shutil.rmtree(out_dir, ignore_errors=True)
     return run
 
 
-def _plan(run: TrainingRun, config):
+def _plan(run: TrainingRun, config, out_dir: Path):
     """The run's samples, the folds still to train, and the checkpoint to continue (if any)."""
     from egonet.train import make_folds
 
@@ -267,7 +286,7 @@ def _plan(run: TrainingRun, config):
     samples = _samples(run.config.get("activity_ids"), classes=learns_classes(config.model))
     resume_id = run.config.get("resume_checkpoint")
     if resume_id is not None:
-        return _resumed_plan(run, samples, resume_id)
+        return _resumed_plan(run, samples, resume_id, out_dir)
     folds = make_folds([s.group for s in samples], mode=config.folds, test_fraction=config.test_fraction)
     finished = {c.fold for c in run.checkpoints}
     return samples, [f for f in folds if f.name not in finished], None
@@ -309,16 +328,15 @@ def _samples(activity_ids: list[int] | None, *, classes: bool = False) -> list:
     return samples
 
 
-def _resumed_plan(run: TrainingRun, samples: list, resume_id: int):
+def _resumed_plan(run: TrainingRun, samples: list, resume_id: int, out_dir: Path):
     """A run that continues a checkpoint: that checkpoint's fold, on the same frames."""
-    from egonet.checkpoint import load_checkpoint
     from egonet.train import Fold, fold_slug
 
     checkpoint = db.session.get(Checkpoint, resume_id)
     if checkpoint is None:
         raise TrainingProblem(f"checkpoint {resume_id} no longer exists")
-    start = load_checkpoint(checkpoint_root() / checkpoint.path)
-    own = checkpoint_root() / f"run-{run.id}" / f"{fold_slug(start['fold'])}.pt"
+    start = files.load(checkpoint.path)
+    own = out_dir / f"{fold_slug(start['fold'])}.pt"
     position = {s.key: i for i, s in enumerate(samples)}
     lost = [k for k in start["train_keys"] + start["test_keys"] if k not in position]
     if lost:

@@ -17,7 +17,6 @@
 
 import json
 import re
-import shutil
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
@@ -29,7 +28,9 @@ from app.extensions import db
 from app.models import Annotation, Instance
 from app.models.training import FINAL_STATUSES, Checkpoint, Prediction, TrainingEpoch, TrainingRun
 from app.services import media
-from app.services.training.control import TrainingProblem, checkpoint_root
+from app.services.storage import store as storage
+from app.services.training import files
+from app.services.training.control import TrainingProblem
 
 MAX_TAGS = 12
 TAG_PATTERN = re.compile(r"[\w][\w .+-]{0,39}")
@@ -108,13 +109,17 @@ def runs_tagged(tag: str | None, *, limit: int = 100) -> list[TrainingRun]:
 
 
 def checkpoint_file(checkpoint: Checkpoint) -> tuple[Path, str]:
-    """The checkpoint's file and the name to download it as (``run-3-cooking-e10.pt``).
+    """The checkpoint's file on this host (a bucket's: this host's checked copy) and the name to download
+    it as (``run-3-cooking-e10.pt``).
 
     Raises:
-        TrainingProblem: 404 when the file is gone from ``CHECKPOINT_ROOT``.
+        TrainingProblem: 404 when the file is gone from storage.
     """
-    path = checkpoint_root() / checkpoint.path
-    if not path.is_file():
+    try:
+        path = files.local_path(checkpoint.path)
+    except FileNotFoundError:
+        path = None
+    if path is None or not path.is_file():
         raise TrainingProblem(f"checkpoint {checkpoint.id}'s file {checkpoint.path} is missing on the server", status=404)
     slug = re.sub(r"[^A-Za-z0-9_.-]+", "-", checkpoint.fold).strip("-") or "fold"
     return path, f"run-{checkpoint.run_id}-{slug}-e{checkpoint.epochs}.pt"
@@ -123,10 +128,9 @@ def checkpoint_file(checkpoint: Checkpoint) -> tuple[Path, str]:
 def run_config(run: TrainingRun) -> dict[str, Any]:
     """A run's configuration as one JSON document: the request, the resolved training config, and the
     engine's ``config.json`` (device, world size, torch version, folds) when training has started."""
-    written = checkpoint_root() / f"run-{run.id}" / "config.json"
     try:
-        engine = json.loads(written.read_text())
-    except (OSError, ValueError):
+        engine = json.loads(files.read(f"{files.run_folder(run.id)}/config.json"))
+    except (FileNotFoundError, ValueError):
         engine = None
     return {
         "run": run.id,
@@ -202,7 +206,7 @@ def _proposal_refs(run_id: int, checkpoint_ids: list[int]):
 
 def deletion_plan(run: TrainingRun) -> DeletionPlan:
     checkpoints = list(run.checkpoints)
-    size = sum(p.stat().st_size for p in (checkpoint_root() / f"run-{run.id}").glob("*") if p.is_file())
+    size = sum(size for _, size, _ in files.listing(files.run_folder(run.id)))
     paths = _prediction_paths(run.id)
     count = db.session.execute(select(db.func.count(Prediction.id)).where(Prediction.run_id == run.id)).scalar_one()
     epochs = db.session.execute(select(db.func.count(TrainingEpoch.id)).where(TrainingEpoch.run_id == run.id)).scalar_one()
@@ -259,11 +263,11 @@ def delete_run(run: TrainingRun) -> dict[str, int]:
 
 
 def _remove_files(run_id: int, paths: set[str]) -> None:
-    """After the commit: the run's media, their cached overlays, and its checkpoint folder."""
+    """After the commit: the run's media, their cached overlays, and its checkpoints in storage."""
     cache = Path(current_app.config["CACHE_ROOT"]) / "predictions"
     for rel in paths:
-        media.local_path(rel).unlink(missing_ok=True)
+        storage().delete(media.AREA + rel)
         stem = Path(rel).stem
         for cached in cache.glob(f"*-{stem}*"):
             cached.unlink(missing_ok=True)
-    shutil.rmtree(checkpoint_root() / f"run-{run_id}", ignore_errors=True)
+    files.delete_folder(files.run_folder(run_id))

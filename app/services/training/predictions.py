@@ -26,7 +26,8 @@ from app.extensions import db
 from app.models import Activity, Frame, Sequence, utcnow
 from app.models.training import Checkpoint, FoldsMode, Prediction, TrainingRun
 from app.services import media
-from app.services.training.control import TrainingProblem, checkpoint_root
+from app.services.training import files
+from app.services.training.control import TrainingProblem
 from egonet import io
 from egonet.metrics import Counts, count_stats, curve_from_counts, threshold_values
 from egonet.overlay import heatmap
@@ -225,7 +226,6 @@ def predict(
     """
     from app.services import ground_truth
     from egonet.predictor import NetworkPredictor
-    from egonet.checkpoint import load_checkpoint
     from egonet.depth import DEPTH_MODEL
     from egonet.train import resolve_device
 
@@ -234,7 +234,7 @@ def predict(
     if checkpoint.run.model_name == DEPTH_MODEL:
         raise TrainingProblem(f"checkpoint {checkpoint.id} predicts depth: use `flask egonet predict-depth`", field="checkpoint")
     try:
-        state = load_checkpoint(checkpoint_root() / checkpoint.path)
+        state = files.load(checkpoint.path)
         predictor = NetworkPredictor.from_checkpoint(state, device=resolve_device(device))
     except ValueError as exc:  # an unreadable checkpoint, or no GPU: the run's problem, not a field's
         raise TrainingProblem(str(exc)) from None

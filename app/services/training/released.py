@@ -13,17 +13,23 @@ progress on the row as training runs have.
 
 The Training page uploads a file in chunks (``start_upload``,
 ``write_chunk``, ``finish_upload``): each request carries at most
-``CHUNK_BYTES``, the file grows in ``CHECKPOINT_ROOT/uploads`` up to the
-size announced (at most ``WEIGHTS_MAX_BYTES``), and is never held in memory.
-The worker deletes the upload once converted; an upload left unfinished is
-removed a day later.
+``CHUNK_BYTES``, stored as an object of its own under the storage key
+``checkpoints/uploads/<token>/`` (so the chunks may reach different web hosts
+behind a load balancer), up to the size announced (at most
+``WEIGHTS_MAX_BYTES``); the file is never held in memory. On finishing, the
+host that checks the file and the worker that converts it each put the
+chunks together in their own cache. The worker deletes the upload once
+converted; an upload left unfinished is removed a day later.
 """
 
+import contextlib
 import json
+import os
 import re
 import secrets
+import tempfile
 import time
-from collections.abc import Callable
+from collections.abc import Callable, Iterator
 from pathlib import Path
 
 from flask import current_app
@@ -33,7 +39,8 @@ from app.extensions import db
 from app.models import User, utcnow
 from app.models.training import Checkpoint, FoldsMode, RunStatus, TrainingRun
 from app.queue import enqueue
-from app.services.training.control import TrainingProblem, checkpoint_root, claim_run
+from app.services.training import files
+from app.services.training.control import TrainingProblem, claim_run
 from egonet.errors import Cancelled, EgonetError
 
 CHUNK_BYTES = 8 * 1024 * 1024
@@ -44,10 +51,10 @@ MAX_PENDING_UPLOADS = 4
 STALE_UPLOAD_S = 24 * 3600
 PROGRESS_INTERVAL_S = 1.0
 _TOKEN = re.compile(r"[0-9a-f]{32}")
-
-
-def uploads_root() -> Path:
-    return checkpoint_root() / "uploads"
+UPLOADS = "uploads"
+"""Uploads in storage: ``checkpoints/uploads/<token>/`` holds the chunks, ``part-<offset>``, and
+while the upload is under way its ``meta.json``."""
+META = "meta.json"
 
 
 def max_bytes() -> int:
@@ -103,7 +110,7 @@ def register_release(
     return run
 
 
-def convert_release(run_id: int, path: Path, *, delete: bool = False, releases=None,
+def convert_release(run_id: int, path: Path, *, releases=None,
                     on_progress: Callable[[int, int], None] | None = None) -> TrainingRun:
     """The job: the release's weights into a checkpoint, its ``Checkpoint`` row, the run done.
 
@@ -114,12 +121,10 @@ def convert_release(run_id: int, path: Path, *, delete: bool = False, releases=N
     Args:
         run_id: A run made by :func:`register_release`.
         path: Its ``.caffemodel``.
-        delete: Remove ``path`` afterwards, whatever happens (an upload).
         releases: As given to :func:`register_release`.
         on_progress: Also called with ``(bytes done, file size)`` (the CLI's bar).
     """
     from egonet.caffe import RELEASES, checkpoint_from_caffemodel
-    from egonet.checkpoint import save_checkpoint
 
     run = db.session.get(TrainingRun, run_id)
     if run is None:
@@ -131,10 +136,10 @@ def convert_release(run_id: int, path: Path, *, delete: bool = False, releases=N
         reporter = _Reporter(run.id, on_progress)
         state = checkpoint_from_caffemodel(path, size=(info["height"], info["width"]), releases=releases or RELEASES,
                                            progress=reporter, name=info["file"])
-        relative = Path(f"run-{run.id}") / "released.pt"
+        relative = f"{files.run_folder(run.id)}/released.pt"
         reporter.say("writing the checkpoint", 0.95)
-        save_checkpoint(checkpoint_root() / relative, state)
-        db.session.add(Checkpoint(run_id=run.id, fold="released", path=relative.as_posix(), epochs=0,
+        files.save(relative, state)
+        db.session.add(Checkpoint(run_id=run.id, fold="released", path=relative, epochs=0,
                                   metrics={"released": state["released"]}, test_frame_ids=[]))
         run.config = dict(run.config) | {"released": info | {"sha256": state["released"]["sha256"]}}
         db.session.execute(
@@ -146,20 +151,21 @@ def convert_release(run_id: int, path: Path, *, delete: bool = False, releases=N
     except Cancelled:
         db.session.rollback()
     except Exception as exc:
-        db.session.rollback()
-        message = (str(exc).strip().splitlines() or [type(exc).__name__])[0]
-        db.session.execute(
-            update(TrainingRun).where(TrainingRun.id == run_id, TrainingRun.status.in_([RunStatus.QUEUED, RunStatus.RUNNING]))
-            .values(status=RunStatus.FAILED, finished_at=utcnow(), eta_s=None, message=f"failed: {message}"[:2000])
-        )
-        db.session.commit()
+        _failed(run_id, exc)
         if not isinstance(exc, EgonetError | TrainingProblem):
             raise
-    finally:
-        if delete:
-            Path(path).unlink(missing_ok=True)
     db.session.refresh(run)
     return run
+
+
+def _failed(run_id: int, exc: Exception) -> None:
+    db.session.rollback()
+    message = (str(exc).strip().splitlines() or [type(exc).__name__])[0]
+    db.session.execute(
+        update(TrainingRun).where(TrainingRun.id == run_id, TrainingRun.status.in_([RunStatus.QUEUED, RunStatus.RUNNING]))
+        .values(status=RunStatus.FAILED, finished_at=utcnow(), eta_s=None, message=f"failed: {message}"[:2000])
+    )
+    db.session.commit()
 
 
 def import_in_foreground(path: Path, *, name: str | None = None, size: tuple[int, int] | None = None,
@@ -209,41 +215,39 @@ def start_upload(*, filename: str, size: int, user: User) -> dict:
             f"the file has {size:,} bytes, more than the {max_bytes():,} allowed (WEIGHTS_MAX_BYTES)",
             field="size", status=413,
         )
-    root = uploads_root()
-    root.mkdir(parents=True, exist_ok=True)
-    _remove_stale(root)
-    if len(list(root.glob("*.json"))) >= MAX_PENDING_UPLOADS:
+    pending = _remove_stale()
+    if pending >= MAX_PENDING_UPLOADS:
         raise TrainingProblem(f"{MAX_PENDING_UPLOADS} uploads are under way already: finish or cancel one", status=409)
     token = secrets.token_hex(16)
-    (root / f"{token}.part").write_bytes(b"")
     meta = {"filename": Path(filename).name, "size": size, "user_id": user.id, "created": time.time()}
-    (root / f"{token}.json").write_text(json.dumps(meta))
+    files.put(f"{UPLOADS}/{token}/{META}", json.dumps(meta).encode())
     return {"upload": token, "chunk_bytes": CHUNK_BYTES}
 
 
 def write_chunk(token: str, *, offset: int, stream, length: int | None, user: User) -> int:
-    """Append one chunk at ``offset`` (the bytes received so far); returns the new total.
+    """Store one chunk at ``offset`` (the bytes received so far); returns the new total.
 
-    A chunk sent again after a lost answer (its offset is already behind
-    the file's end) overwrites the same bytes.
+    Each chunk is an object of its own in storage, so the chunks of one file
+    may reach different web hosts. A chunk sent again after a lost answer
+    (at an offset where a chunk began) replaces that chunk and drops those after it.
 
     Raises:
         TrainingProblem: 404 unknown upload; 411 no length; 413 a chunk over
             ``CHUNK_BYTES`` or past the size announced; 409 an offset ahead
-            of the bytes received (the answer says how many).
+            of the bytes received, or inside a chunk received (the answer says how many).
     """
-    meta, part = _upload(token, user)
-    received = part.stat().st_size
+    meta, parts = _upload(token, user)
+    received = _received(parts)
     if length is None:
         raise TrainingProblem("send each chunk with a Content-Length", status=411)
     if length > CHUNK_BYTES or offset + length > meta["size"]:
         raise TrainingProblem(f"a chunk may hold {CHUNK_BYTES:,} bytes and end at {meta['size']:,} at most",
                               field="body", status=413)
-    if offset > received:
-        raise TrainingProblem(f"offset {offset} is past the {received} bytes received", field="offset", status=409,
-                              received=received)
-    with part.open("r+b") as fh:
-        fh.seek(offset)
+    if offset > received or (offset < received and offset not in parts):
+        raise TrainingProblem(f"offset {offset} is not where the next chunk of the {received} bytes received begins",
+                              field="offset", status=409, received=received)
+
+    def copy(fh) -> None:
         left = length
         while left:
             data = stream.read(min(left, 1 << 20))
@@ -251,57 +255,115 @@ def write_chunk(token: str, *, offset: int, stream, length: int | None, user: Us
                 raise TrainingProblem(f"the chunk ended after {length - left} of {length} bytes", field="body")
             fh.write(data)
             left -= len(data)
-        fh.truncate(offset + length)
+
+    files.put(_part(token, offset), copy)
+    for later in sorted(p for p in parts if p > offset):
+        files.delete(_part(token, later))
     return offset + length
 
 
 def finish_upload(token: str, *, name: str | None, size: tuple[int, int] | None, user: User) -> TrainingRun:
     """The whole file is here: check it is a release, record its run and queue the conversion.
 
+    The chunks stay in storage until the worker (on whichever host) has converted them.
+
     Raises:
         TrainingProblem: 404 unknown upload; 409 bytes missing; 400 not a
             release (``file``; the upload is removed).
     """
-    meta, part = _upload(token, user)
-    received = part.stat().st_size
+    meta, parts = _upload(token, user)
+    received = _received(parts)
     if received != meta["size"]:
         raise TrainingProblem(f"{received:,} of {meta['size']:,} bytes received: send the rest first", status=409,
                               received=received)
-    path = part.with_name(f"{token}-{meta['filename']}")
-    part.rename(path)
-    (part.with_suffix(".json")).unlink(missing_ok=True)
+    files.delete(f"{UPLOADS}/{token}/{META}")  # no longer under way: neither counted as pending nor written to
     run = None
     try:
-        run = register_release(path, name=name, size=size, created_by=user, filename=meta["filename"])
+        with _assembled(token) as path:
+            run = register_release(path, name=name, size=size, created_by=user, filename=meta["filename"])
     finally:
         if run is None:  # refused, or anything unforeseen: the upload goes
-            path.unlink(missing_ok=True)
-    enqueue("import_weights", run.id, str(path))
+            files.delete_folder(f"{UPLOADS}/{token}")
+    enqueue("import_weights", run.id, token)
     return run
+
+
+def convert_upload(run_id: int, token: str) -> TrainingRun:
+    """The worker's job for an upload: the chunks from storage into one file on this host, converted, then removed."""
+    try:
+        with _assembled(token) as path:
+            return convert_release(run_id, path)
+    except Exception as exc:  # the chunks could not be read (storage down): the run says so
+        _failed(run_id, exc)
+        raise
+    finally:
+        files.delete_folder(f"{UPLOADS}/{token}")
 
 
 def cancel_upload(token: str, *, user: User) -> None:
     """Remove an unfinished upload."""
-    _, part = _upload(token, user)
-    part.unlink(missing_ok=True)
-    part.with_suffix(".json").unlink(missing_ok=True)
+    _upload(token, user)
+    files.delete_folder(f"{UPLOADS}/{token}")
 
 
-def _upload(token: str, user: User) -> tuple[dict, Path]:
-    root = uploads_root()
-    meta_path = root / f"{token}.json"
-    if not _TOKEN.fullmatch(token) or not meta_path.is_file():
-        raise TrainingProblem(f"no upload {token[:40]!r} under way (finished, cancelled or older than a day)", status=404)
-    meta = json.loads(meta_path.read_text())
+def _upload(token: str, user: User) -> tuple[dict, dict[int, int]]:
+    """The upload's announcement and its chunks (offset -> bytes)."""
+    gone = TrainingProblem(f"no upload {token[:40]!r} under way (finished, cancelled or older than a day)", status=404)
+    if not _TOKEN.fullmatch(token):
+        raise gone
+    try:
+        meta = json.loads(files.read(f"{UPLOADS}/{token}/{META}"))
+    except FileNotFoundError:
+        raise gone from None
     if meta["user_id"] != user.id:
         raise TrainingProblem("this upload is another user's", status=404)
-    return meta, root / f"{token}.part"
+    parts = {}
+    for path, size, _ in files.listing(f"{UPLOADS}/{token}"):
+        if (name := path.rsplit("/", 1)[1]).startswith("part-"):
+            parts[int(name.removeprefix("part-"))] = size
+    return meta, parts
 
 
-def _remove_stale(root: Path) -> None:
-    """Unfinished uploads older than a day."""
-    cutoff = time.time() - STALE_UPLOAD_S
-    for meta in root.glob("*.json"):
-        if meta.stat().st_mtime < cutoff:
-            meta.with_suffix(".part").unlink(missing_ok=True)
-            meta.unlink(missing_ok=True)
+def _part(token: str, offset: int) -> str:
+    return f"{UPLOADS}/{token}/part-{offset:015d}"
+
+
+def _received(parts: dict[int, int]) -> int:
+    """The bytes received from the start without a gap."""
+    end = 0
+    for offset in sorted(parts):
+        if offset != end:
+            break
+        end += parts[offset]
+    return end
+
+
+@contextlib.contextmanager
+def _assembled(token: str) -> Iterator[Path]:
+    """The upload's chunks, in order, as one file in this host's cache (removed afterwards)."""
+    folder = Path(current_app.config["CACHE_ROOT"]) / "uploads"
+    folder.mkdir(parents=True, exist_ok=True)
+    fd, name = tempfile.mkstemp(dir=folder, suffix=".caffemodel")
+    path = Path(name)
+    try:
+        with os.fdopen(fd, "wb") as fh:
+            for part in sorted(p for p, _, _ in files.listing(f"{UPLOADS}/{token}") if p.rsplit("/", 1)[1].startswith("part-")):
+                fh.write(files.read(part))  # one chunk (at most CHUNK_BYTES) at a time
+        yield path
+    finally:
+        path.unlink(missing_ok=True)
+
+
+def _remove_stale() -> int:
+    """Remove unfinished uploads whose last chunk came more than a day ago; returns how many are left under way."""
+    newest: dict[str, float] = {}
+    pending = set()
+    for path, _, modified in files.listing(UPLOADS):
+        token = path.split("/")[1]
+        newest[token] = max(newest.get(token, 0.0), modified)
+        if path.endswith("/" + META):
+            pending.add(token)
+    for token in [t for t in pending if newest[t] < time.time() - STALE_UPLOAD_S]:
+        files.delete_folder(f"{UPLOADS}/{token}")
+        pending.discard(token)
+    return len(pending)

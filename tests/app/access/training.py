@@ -50,9 +50,7 @@ def make_prediction_fixture(frame: Frame) -> dict:
     """A queued run with one checkpoint and a held-out prediction of ``frame`` (call in an app context)."""
     run = TrainingRun(name="access", model_name="egonet-lite", folds=FoldsMode.LOAO, epochs=1, device="cpu", seed=0, config={"train": {}})
     checkpoint = Checkpoint(run=run, fold="training", path="run-0/training.pt", epochs=1, metrics={"max_f": 0.5}, test_frame_ids=[frame.id])
-    file = training.checkpoint_root() / checkpoint.path
-    file.parent.mkdir(parents=True, exist_ok=True)
-    file.write_bytes(b"a checkpoint's bytes")
+    training.files.put(checkpoint.path, b"a checkpoint's bytes")
     probability = np.linspace(0, 65535, frame.height * frame.width).reshape(frame.height, frame.width).astype(np.uint16)
     prediction = Prediction(run=run, checkpoint=checkpoint, frame=frame, path=media.store(io.encode_png(probability), ".png"), held_out=True)
     db.session.add_all([run, checkpoint, prediction])

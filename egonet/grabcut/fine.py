@@ -1,0 +1,122 @@
+"""A stroke on a thin part, cut at full resolution along that part.
+
+The session's cut runs on a grid a few times coarser than the frame, where
+an 8-10 px chopstick is 2 px wide and blurred into the table: a click on it
+took little more than its own pixels, and the grid's flood leaked from it
+into the table. So a colour stroke narrower than ``_THIN`` grid pixels that
+lies on a thin part of its colour (``_fine_cut``: the pixels like the
+stroke's, joined to it, are at most ``_WIDER`` times its radius wide there)
+is cut at full resolution instead: within ``_REACH`` pixels of it, the
+pixels labelled against it that its side's colours prefer, joined to it
+through such pixels and themselves thin, are cut with OpenCV grabCut's
+energy (the contrast-sensitive links of ``graph._links``; two colour
+mixtures learnt within ``_MODEL_REACH`` pixels of the stroke: its side's
+from the pixels that have its label, the other side's from the rest less
+the pixels like the stroke, which may be the very part it was drawn on).
+Pixels of mixed colour on the part's edge lean ``_BIAS`` nats to the
+stroke's side. A thin part is followed along its length as far as its
+colour holds.
+"""
+
+from __future__ import annotations
+
+import cv2
+import numpy as np
+
+from egonet.grabcut.colour import _costs, _fit_model
+from egonet.grabcut.graph import _CutGraph, _links
+
+_THIN = 2.0  # a colour stroke narrower than this many grid pixels (radius) may be on a part the grid cannot resolve
+_WIDER = 2.0  # ... it is, where the part of its colour is at most this many times its radius wide (+2 px)
+_MIN_PIXELS = 20  # a stroke of fewer pixels (a dot on an edge) has no colour to follow: left to the grid's cut
+_REACH = 240  # full-resolution pixels around the stroke that its cut may change
+_MODEL_REACH = 50  # ... and whose colours, within this many of it, train the two mixtures
+_LIKE = 11.3  # squared Mahalanobis distance to the stroke's colours of a pixel like them (chi-squared, 3 dof, 99 %)
+_BIAS = 4.0  # nats the stroke's side is favoured by, for the part's edge (pixels of mixed colour)
+
+
+def _joined(part: np.ndarray, seed: np.ndarray) -> np.ndarray:
+    """The pixels of ``part | seed`` 8-connected to ``seed``."""
+    count, parts = cv2.connectedComponents((part | seed).view(np.uint8), connectivity=8)
+    joined = np.zeros(count, bool)
+    joined[parts[seed]] = True
+    joined[0] = False
+    return joined[parts]
+
+
+def _fine_cut(image: np.ndarray, mask: np.ndarray, own: np.ndarray, origin: tuple[int, int], fg: bool,
+              radius: float) -> np.ndarray | None:
+    """What a stroke on a thin part gives its label at full resolution, or None when it is on no thin part.
+
+    Args:
+        image: uint8 ``(H, W, 3)`` frame.
+        mask: bool ``(H, W)`` mask with the stroke's pixels applied.
+        own: bool footprint of the stroke, its box at ``origin``.
+        origin: ``(y, x)`` of the footprint's box.
+        fg: The stroke's label.
+        radius: The stroke's radius, pixels.
+
+    Returns:
+        bool ``(H, W)``: the pixels labelled against the stroke to give its
+        label; None when the part it lies on is wider than ``_WIDER`` times
+        its radius (the grid's cut resolves it) or the stroke has fewer than
+        ``_MIN_PIXELS`` pixels.
+    """
+    h, w = mask.shape
+    y0, x0 = origin
+    if np.count_nonzero(own) < _MIN_PIXELS:
+        return None
+    flip = np.zeros((h, w), bool)
+    limit = _WIDER * radius + 2
+    stroke = image[y0 : y0 + own.shape[0], x0 : x0 + own.shape[1]][own].astype(np.float64)
+    inverse = np.linalg.inv(np.cov(stroke.T) + 4.0 * np.eye(3))
+    mean = stroke.mean(axis=0)
+
+    def window(reach: int) -> tuple[int, int, int, int, np.ndarray, np.ndarray, np.ndarray]:
+        """``(r0, c0, r1, c1)``, the stroke's label, the stroke and the pixels like it, within ``reach``."""
+        r0, r1 = max(0, y0 - reach), min(h, y0 + own.shape[0] + reach)
+        c0, c1 = max(0, x0 - reach), min(w, x0 + own.shape[1] + reach)
+        hard = np.zeros((r1 - r0, c1 - c0), bool)
+        hard[y0 - r0 : y0 - r0 + own.shape[0], x0 - c0 : x0 - c0 + own.shape[1]] = own
+        d = image[r0:r1, c0:c1].reshape(-1, 3) - mean
+        like = (np.einsum("ni,ij,nj->n", d, inverse, d) < _LIKE).reshape(hard.shape)
+        return r0, c0, r1, c1, (mask[r0:r1, c0:c1] == fg) | hard, hard, like
+
+    # Thin where the part of the stroke's colour around it is at most ``limit`` wide.
+    *_, side, hard, like = window(int(limit) + 2)
+    width = cv2.distanceTransform(_joined(like & ~side, hard).view(np.uint8), cv2.DIST_L2, 3)
+    if width[hard].max() > limit:
+        return None
+    r0, c0, r1, c1, side, hard, like = window(_REACH)
+    win = image[r0:r1, c0:c1]
+    m = _MODEL_REACH
+    a0, b0 = max(0, y0 - r0 - m), max(0, x0 - c0 - m)
+    a1, b1 = y0 - r0 + own.shape[0] + m, x0 - c0 + own.shape[1] + m
+    near, near_side = win[a0:a1, b0:b1].reshape(-1, 3), side[a0:a1, b0:b1].ravel()
+    if near_side.all():
+        return flip
+    rest = ~near_side & ~like[a0:a1, b0:b1].ravel()
+    rng = np.random.default_rng(0)
+    other_model = _fit_model(near[rest if rest.any() else ~near_side], rng)[0]
+    own_model = _fit_model(near[near_side], rng)[0]
+    x = win.reshape(-1, 3).astype(np.float32)
+    cost_own = _costs(own_model, x).reshape(side.shape)
+    cost_other = _costs(other_model, x).reshape(side.shape) + _BIAS
+    likely = (cost_own < cost_other) & ~side
+    likely[[0, -1], :] = likely[:, [0, -1]] = False
+    # The likely pixels joined to the stroke, less what is wider than ``limit`` (an opening finds it).
+    free = _joined(likely, hard) & ~side
+    size = 2 * int(limit) + 1
+    free &= ~cv2.morphologyEx(free.view(np.uint8), cv2.MORPH_OPEN,
+                              cv2.getStructuringElement(cv2.MORPH_ELLIPSE, (size, size))).view(bool)
+    free = _joined(free, hard) & ~side
+    if not free.any():
+        return flip
+    rows, cols = np.flatnonzero(free.any(axis=1)), np.flatnonzero(free.any(axis=0))
+    p0, p1, q0, q1 = max(0, rows[0] - 1), rows[-1] + 2, max(0, cols[0] - 1), cols[-1] + 2
+    at = np.flatnonzero(free[p0:p1, q0:q1])
+    graph = _CutGraph(_links(win[p0:p1, q0:q1]), side[p0:p1, q0:q1].ravel(), at)
+    cut = np.zeros((p1 - p0) * (q1 - q0), bool)
+    cut[at] = graph.cut(cost_other[p0:p1, q0:q1].ravel()[at], cost_own[p0:p1, q0:q1].ravel()[at])
+    flip[r0 + p0 : r0 + p1, c0 + q0 : c0 + q1] = cut.reshape(p1 - p0, q1 - q0)
+    return flip
