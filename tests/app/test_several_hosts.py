@@ -1,7 +1,8 @@
 """Any host serves anything: a second app server with an empty instance folder and cache, on the same
-database, queue and STORAGE_URL (a SeaweedFS bucket, and a folder the hosts share), serves what the first
-one stored and runs GrabCut and propagation on frames it has never seen; two hosts editing one annotation
-still meet the version check. (tests/system/test_several_hosts.py does the same with two real servers.)"""
+database, queue and STORAGE_URL (a SeaweedFS bucket, and a folder the hosts share), serves the frames,
+masks, thumbnails and checkpoints the first one stored and runs GrabCut and propagation on frames it has
+never seen; two hosts editing one annotation still meet the version check.
+(tests/system/test_several_hosts.py does the same with two real servers.)"""
 
 import uuid
 
@@ -12,12 +13,14 @@ import torch
 from app.extensions import db
 from app.models import Frame
 from app.services import media
-from app.services.storage import open_store, store
+from app.services import training
+from app.services.storage import open_store
 from egonet import io
 from tests.app.conftest import make_app
 from tests.app.test_labelling import get_png, rle
 from tests.app.test_labelling_grabcut import call, forget_everything
 from tests.app.test_propagation import annotate, cup_at, iou, moving_frames
+from tests.app.test_training import hand_made_run
 
 pytestmark = pytest.mark.both_storages
 
@@ -76,20 +79,25 @@ def test_a_new_host_serves_frames_masks_thumbnails_and_runs_grabcut_and_propagat
         assert cached == []
 
 
-def test_a_checkpoint_one_host_saves_another_loads(app, second_host, tmp_path):
-    weights = {"fc.weight": torch.arange(12.0).reshape(3, 4)}
-    torch.save(weights, tmp_path / "fold-1.pt")
+def test_a_checkpoint_one_host_saves_another_serves_and_loads(app, second_host, make_user):
     with app.app_context():
-        store().put_file("checkpoints/run-1/fold-1.pt", tmp_path / "fold-1.pt")
+        (checkpoint,) = hand_made_run(folds=("desk work",)).checkpoints
+        checkpoint_id, key = checkpoint.id, checkpoint.path
+    other = second_host.test_client()
+    other.login_as(make_user("annotator"))
+    url = f"/training/checkpoints/{checkpoint_id}/download"
+    with other.get(url) as response:
+        assert response.status_code == 200 and response.data == b"weights of desk work"
+    with app.app_context():  # replaced on one host: the other serves the new file, not its old copy
+        training.files.put(key, b"better weights")
+    with other.get(url) as response:
+        assert response.data == b"better weights"
+    weights = {"fc.weight": torch.arange(12.0).reshape(3, 4)}
+    with app.app_context():
+        training.files.save(key, weights)
     with second_host.app_context():
-        loaded = torch.load(store().local_path("checkpoints/run-1/fold-1.pt"), map_location="cpu", weights_only=True)
+        loaded = torch.load(training.files.local_path(key), map_location="cpu", weights_only=True)
     torch.testing.assert_close(loaded, weights)
-    with app.app_context():  # replaced on one host: the other loads the new one, not its stale copy
-        torch.save({"fc.weight": torch.zeros(3, 4)}, tmp_path / "fold-1.pt")
-        store().put_file("checkpoints/run-1/fold-1.pt", tmp_path / "fold-1.pt")
-    with second_host.app_context():
-        loaded = torch.load(store().local_path("checkpoints/run-1/fold-1.pt"), map_location="cpu", weights_only=True)
-    assert not loaded["fc.weight"].any()
 
 
 def test_two_hosts_editing_one_annotation_get_a_version_conflict_not_a_lost_write(app, second_host, make_user):
