@@ -143,11 +143,13 @@ def convert_release(run_id: int, path: Path, *, releases=None,
         db.session.add(Checkpoint(run_id=run.id, fold="released", path=relative, epochs=0,
                                   metrics={"released": state["released"]}, test_frame_ids=[]))
         run.config = dict(run.config) | {"released": info | {"sha256": state["released"]["sha256"]}}
-        db.session.execute(
+        done = db.session.execute(
             update(TrainingRun).where(TrainingRun.id == run.id, TrainingRun.status == RunStatus.RUNNING)
             .values(status=RunStatus.DONE, progress=1.0, finished_at=utcnow(), eta_s=None,
                     message=f"done: {state['released']['title']}, sha256 {state['released']['sha256'][:12]}")
-        )
+        ).rowcount
+        if not done:  # cancelled, or taken for dead, in its last moments: no checkpoint row
+            raise Cancelled
         db.session.commit()
     except Cancelled:
         db.session.rollback()
