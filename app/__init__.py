@@ -143,6 +143,9 @@ def _default_config(instance: Path) -> dict:
         # With the SQLite queue the app runs its jobs itself, in a thread (app.queue):
         # no `flask egonet worker` needed on one machine. False: only a worker runs them.
         QUEUE_IN_PROCESS=True,
+        # A running run whose worker has not renewed its lease for this long is taken for dead:
+        # the next worker heartbeat queues it again (app.services.training.control).
+        TRAINING_LEASE_S=300.0,
         MAX_CONTENT_LENGTH=64 * 1024 * 1024,
         SESSION_COOKIE_HTTPONLY=True,
         SESSION_COOKIE_SAMESITE="Lax",
