@@ -125,6 +125,8 @@ def _default_config(instance: Path) -> dict:
         # This host's own files: decoded frames, thumbnails, a bucket's cached copies.
         CACHE_ROOT=str(instance / "cache"),
         STORAGE_CACHE_BYTES=4 * 1024**3,
+        # Files made from those on this host (thumbnails, depth previews, overlays, figures): at most so many bytes.
+        DERIVED_CACHE_BYTES=1024**3,
         # Exports (app.services.exchange.jobs): one up to this many mask pixels
         # and without images is built in the request, bigger ones by the worker
         # into storage's exports/; at most EXPORT_MAX_PENDING waiting per person,

@@ -137,8 +137,8 @@ class S3Store:
         if not bucket:
             raise ValueError(f"STORAGE_URL {url!r} names no bucket: use s3://bucket/prefix")
         self.url, self.bucket, self.prefix = url, bucket, prefix.strip("/")
-        self.cache, self.cache_bytes = cache, cache_bytes
-        self._cached: int | None = None  # the cache's bytes as this process counts them (walked when over budget)
+        self.cache = cache
+        self.copies = HostCache(cache, cache_bytes)
         # Fail within seconds when the store is down: a page answers 503, not a hung worker.
         config = Config(connect_timeout=3, read_timeout=30, retries={"max_attempts": 2, "mode": "standard"})
         self.client = boto3.client("s3", config=config)
@@ -191,11 +191,8 @@ class S3Store:
             with self._reachable(key):
                 tag = self.client.head_object(Bucket=self.bucket, Key=self._key(key))["ETag"].strip('"')
             path = self.cache / f"{key}@{tag}"
-        try:
-            os.utime(path)  # most recently used
+        if self.copies.hit(path):
             return path
-        except FileNotFoundError:
-            pass
         path.parent.mkdir(parents=True, exist_ok=True)
         fd, tmp = tempfile.mkstemp(dir=path.parent, prefix=".tmp-")
         os.close(fd)
@@ -205,13 +202,7 @@ class S3Store:
             os.replace(tmp, path)
         finally:
             Path(tmp).unlink(missing_ok=True)
-        # Walking a large cache costs far more than a download, so it is walked only when it may be over budget,
-        # and then trimmed to 90 %: once per tenth of the budget downloaded, not on every copy.
-        size = path.stat().st_size
-        if self._cached is None or self._cached + size > self.cache_bytes:
-            self._cached = _trim(self.cache, self.cache_bytes * 9 // 10, keep=path)
-        else:
-            self._cached += size
+        self.copies.added(path)
         return path
 
     def exists(self, key: str) -> bool:
@@ -240,6 +231,34 @@ class S3Store:
             for page in pages:
                 for item in page.get("Contents", []):
                     yield Entry(item["Key"][len(base):], item["Size"], item["LastModified"].timestamp())
+
+
+class HostCache:
+    """A folder of this host's own files (a bucket's copies, thumbnails, figures): at most ``budget`` bytes,
+    the least recently used dropped first.
+
+    Walking a large folder costs far more than a download, so it is walked only when this process's count
+    says it may be over budget, and then trimmed to 90 %: once per tenth of the budget added, not per file.
+    """
+
+    def __init__(self, folder: Path, budget: int):
+        self.folder, self.budget = Path(folder), int(budget)
+        self._bytes: int | None = None  # as this process counts them
+
+    def hit(self, path: Path) -> bool:
+        """Whether ``path`` is there (and mark it most recently used)."""
+        try:
+            os.utime(path)
+        except FileNotFoundError:
+            return False
+        return True
+
+    def added(self, path: Path) -> None:
+        size = path.stat().st_size
+        if self._bytes is None or self._bytes + size > self.budget:
+            self._bytes = _trim(self.folder, self.budget * 9 // 10, keep=path)
+        else:
+            self._bytes += size
 
 
 def _trim(folder: Path, budget: int, *, keep: Path) -> int:

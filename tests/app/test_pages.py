@@ -131,10 +131,10 @@ def test_the_review_queue_shows_each_mask_over_its_frame(app, admin_client, tmp_
     assert tuple(np.median(rgba[other][:, :3], axis=0)) == labelling.instance_colour(1)
     assert (rgba[~(small | other)][:, 3] == 0).mean() > 0.97  # transparent around them (bar the outlines' edge)
     assert (rgba[:, :, 3] == 255).sum() > 0 and (rgba[:, :, 3] == 90).sum() > 0  # outlined and faintly filled
-    cache = list((tmp_path / "cache" / "review").iterdir())
+    cache = list((tmp_path / "cache" / "derived" / "review").iterdir())
     assert len(cache) == 1
     with admin_client.get(f"/api/label/annotations/{done_id}/thumb.png") as again:
-        assert again.data == data and list((tmp_path / "cache" / "review").iterdir()) == cache
+        assert again.data == data and list((tmp_path / "cache" / "derived" / "review").iterdir()) == cache
 
 
 def test_the_viewer_gets_every_annotation_to_outline(app, admin_client, tmp_path):

@@ -4,7 +4,6 @@ masks, thumbnails and checkpoints the first one stored and runs GrabCut and prop
 never seen; two hosts editing one annotation still meet the version check.
 (tests/system/test_several_hosts.py does the same with two real servers.)"""
 
-import uuid
 
 import numpy as np
 import pytest
@@ -14,7 +13,7 @@ from app.extensions import db
 from app.models import Frame
 from app.services import media
 from app.services import training
-from app.services.storage import open_store
+
 from egonet import io
 from tests.app.conftest import make_app
 from tests.app.test_labelling import get_png, rle
@@ -119,13 +118,3 @@ def test_two_hosts_editing_one_annotation_get_a_version_conflict_not_a_lost_writ
     kept = first.get(url).get_json()
     assert kept["instances"][0]["label"] == "second host"
     np.testing.assert_array_equal(get_png(first, kept["instances"][0]["mask_url"]), cup_at(1))
-
-
-def test_a_hosts_copies_of_the_bucket_stay_within_its_cache_bytes(seaweedfs, tmp_path):
-    files = open_store(f"s3://egonet-test/{uuid.uuid4().hex[:12]}", cache=tmp_path / "cache", cache_bytes=64_000)
-    for i in range(12):
-        files.put(f"media/{i:02d}.png", bytes([i]) * 10_000)
-    for i in range(12):
-        assert files.local_path(f"media/{i:02d}.png").read_bytes() == bytes([i]) * 10_000
-        assert sum(p.stat().st_size for p in (tmp_path / "cache").rglob("*") if p.is_file()) <= 64_000
-    assert sorted(p.name for p in (tmp_path / "cache").rglob("*.png")) == [f"{i:02d}.png" for i in range(6, 12)]

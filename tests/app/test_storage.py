@@ -103,6 +103,19 @@ def test_a_buckets_copies_on_this_host_stay_within_their_budget(seaweedfs, tmp_p
     assert sorted(p.name for p in copies)[-1] == "29.png" and len(copies) >= 9  # the most recent kept
 
 
+def test_files_made_on_this_host_stay_within_their_budget(app_with):
+    host = app_with(DERIVED_CACHE_BYTES=10_000)
+    with host.app_context():
+        made = []
+        for i in range(30):
+            path = media.derived(f"thumbs/{i:02d}.jpg", lambda i=i: bytes([i]) * 1000)
+            assert path.read_bytes() == bytes([i]) * 1000
+            media.derived("thumbs/00.jpg", lambda: pytest.fail("kept, not made again"))  # in use: kept
+            made = [p for p in media.derived_path("thumbs").iterdir() if p.is_file()]
+            assert sum(p.stat().st_size for p in made) <= 10_000
+        assert {"00.jpg", "29.jpg"} <= {p.name for p in made} and len(made) >= 8
+
+
 @pytest.mark.parametrize("gone", ["MEDIA_ROOT", "EXPORT_ROOT"])
 def test_the_old_folder_settings_stop_the_app_naming_storage_url(tmp_path, gone):
     with pytest.raises(RuntimeError, match=f"{gone} is replaced by STORAGE_URL"):
