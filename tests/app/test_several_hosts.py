@@ -37,7 +37,7 @@ def files_under(folder) -> list[str]:
     return sorted(p.relative_to(folder).as_posix() for p in folder.rglob("*") if p.is_file()) if folder.exists() else []
 
 
-def test_a_new_host_serves_frames_masks_thumbnails_and_runs_grabcut_and_propagation_on_them(
+def test_a_new_host_serves_frames_masks_thumbnails_and_runs_suggest_grabcut_and_propagation_on_them(
         app, second_host, storage_url, tmp_path, make_user, monkeypatch):
     f0, f1, f2 = moving_frames(app)
     user = make_user("annotator", "ann")
@@ -61,7 +61,12 @@ def test_a_new_host_serves_frames_masks_thumbnails_and_runs_grabcut_and_propagat
         assert response.status_code == 200
     np.testing.assert_array_equal(get_png(other, saved["instances"][0]["mask_url"]), cup_at(0))
 
-    # GrabCut (with the frame's depth) on a frame neither host has opened, and propagation from the first host's work.
+    # Suggest (from depth) on a frame neither host has opened ...
+    suggested = other.post(f"/api/label/frames/{f2}/suggest", json={"version": 0})
+    assert suggested.status_code == 200, suggested.get_json()
+    proposals = suggested.get_json()["annotation"]["instances"]
+    assert proposals and max(iou(get_png(other, p["mask_url"]), cup_at(2)) for p in proposals) > 0.8
+    # ... GrabCut (with the frame's depth) on it, and propagation from the first host's work.
     _, mask = call(other, "box", frame_id=f2, instance="k0", box=[33, 35, 83, 85])
     assert iou(mask, cup_at(2)) > 0.8
     carried = other.post(f"/api/label/frames/{f0}/propagate", json={})
