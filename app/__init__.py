@@ -125,11 +125,12 @@ def _default_config(instance: Path) -> dict:
         # This host's own files: decoded frames, thumbnails, a bucket's cached copies.
         CACHE_ROOT=str(instance / "cache"),
         STORAGE_CACHE_BYTES=4 * 1024**3,
+        # Files made from those on this host (thumbnails, depth previews, overlays, figures): at most so many bytes.
+        DERIVED_CACHE_BYTES=1024**3,
         # Exports (app.services.exchange.jobs): one up to this many mask pixels
         # and without images is built in the request, bigger ones by the worker
-        # into EXPORT_ROOT; at most EXPORT_MAX_PENDING waiting per person, the
-        # EXPORT_KEEP most recent finished ones kept.
-        EXPORT_ROOT=str(instance / "exports"),
+        # into storage's exports/; at most EXPORT_MAX_PENDING waiting per person,
+        # the EXPORT_KEEP most recent finished ones kept.
         EXPORT_INLINE_MAX_PIXELS=50_000_000,
         EXPORT_MAX_PENDING=2,
         EXPORT_KEEP=10,
@@ -144,6 +145,9 @@ def _default_config(instance: Path) -> dict:
         # With the SQLite queue the app runs its jobs itself, in a thread (app.queue):
         # no `flask egonet worker` needed on one machine. False: only a worker runs them.
         QUEUE_IN_PROCESS=True,
+        # A running run whose worker has not renewed its lease for this long is taken for dead:
+        # the next worker heartbeat queues it again (app.services.training.control).
+        TRAINING_LEASE_S=300.0,
         MAX_CONTENT_LENGTH=64 * 1024 * 1024,
         SESSION_COOKIE_HTTPONLY=True,
         SESSION_COOKIE_SAMESITE="Lax",
@@ -203,12 +207,10 @@ def _configure(app: Flask, test_config: dict | None) -> None:
         app.config.from_prefixed_env()
     else:
         app.config.from_mapping(test_config)
-    if "MEDIA_ROOT" in app.config:
-        raise RuntimeError("MEDIA_ROOT is replaced by STORAGE_URL, the folder (or s3://bucket/prefix) that holds media/: "
-                           "set STORAGE_URL to MEDIA_ROOT's parent folder (docs/deployment.md)")
-    if "CHECKPOINT_ROOT" in app.config:
-        raise RuntimeError("CHECKPOINT_ROOT is replaced by STORAGE_URL, the folder (or s3://bucket/prefix) that holds "
-                           "checkpoints/: set STORAGE_URL to CHECKPOINT_ROOT's parent folder (docs/deployment.md)")
+    for gone, area in (("MEDIA_ROOT", "media"), ("CHECKPOINT_ROOT", "checkpoints"), ("EXPORT_ROOT", "exports")):
+        if gone in app.config:
+            raise RuntimeError(f"{gone} is replaced by STORAGE_URL, the folder (or s3://bucket/prefix) that holds {area}/: "
+                               f"set STORAGE_URL to {gone}'s parent folder (docs/deployment.md)")
     app.config["SQLALCHEMY_DATABASE_URI"] = normalise_database_url(app.config["SQLALCHEMY_DATABASE_URI"])
     os.makedirs(app.instance_path, exist_ok=True)
     if not app.config.get("SECRET_KEY"):

@@ -7,7 +7,8 @@ API errors are ``{"error": <short name>, "message": <sentence>, "fields":
 {<field>: <reason>}}``. A request is an API call when its path starts with
 ``/api/`` or it prefers JSON. A 500 rolls the session back first; so does
 a ``MediaError`` about one of the instance's own files, which is the
-server's fault, not the user's.
+server's fault, not the user's. Storage that cannot be reached is a 503
+(``StorageUnavailable``), tried again on the next request.
 """
 
 from pathlib import Path
@@ -55,7 +56,8 @@ class Problem(Exception):
 
 
 class StorageUnavailable(RuntimeError):
-    """The object store did not answer (connection refused, time-out, 5xx): 503 (app.services.storage)."""
+    """The site's object store did not answer (connection refused, time-out, 5xx) or refused (no such bucket,
+    wrong keys). Raised by ``app.services.storage``; a request gets a 503 that names no bucket, the CLI one line."""
 
 
 ERROR_NAMES = {400: "bad_request", 404: "not_found", 409: "conflict", 413: "too_large", 415: "unsupported_media_type"}

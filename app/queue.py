@@ -14,7 +14,9 @@ inside an application context.
 
 A running worker records a heartbeat in the queue's own storage every
 ``HEARTBEAT_S`` seconds (``worker_last_seen``), so a page with queued work
-can say when no worker is running.
+can say when no worker is running; with each beat (the first as it starts)
+it also runs ``on_heartbeat`` of ``app.tasks``, the jobs' housekeeping
+(runs whose worker died are queued again).
 
 On one machine no second command is needed: with the default SQLite queue
 (and ``QUEUE_IN_PROCESS``, on by default) the web app runs the consumer
@@ -169,7 +171,7 @@ class AppQueue:
                         return
             self.consuming.set()
             try:
-                beating = threading.Thread(target=_beat, args=(self.huey, stopping),
+                beating = threading.Thread(target=_beat, args=(self.app, self.huey, stopping),
                                            name="egonet-queue-heartbeat", daemon=True)
                 beating.start()
                 while not stopping.is_set():
@@ -210,18 +212,26 @@ def worker_running() -> bool:
     return seen is not None and seen < WORKER_GONE_S
 
 
-def _beat(huey: Huey, stop: threading.Event) -> None:
-    """Record that a consumer of ``huey`` is alive now and every ``HEARTBEAT_S`` until ``stop``."""
-    huey.put(HEARTBEAT_KEY, time.time())
-    while not stop.wait(HEARTBEAT_S):
-        huey.put(HEARTBEAT_KEY, time.time())
+def _beat(app: Flask, huey: Huey, stop: threading.Event) -> None:
+    """Record that a consumer of ``huey`` is alive, and do the jobs' housekeeping, now and every ``HEARTBEAT_S``
+    until ``stop``."""
+    while True:
+        try:
+            huey.put(HEARTBEAT_KEY, time.time())
+            with app.app_context():
+                import_module(JOBS).on_heartbeat()
+        except Exception:  # the queue or the database away for a moment: the next beat tries again
+            logger.exception("worker heartbeat")
+        if stop.wait(HEARTBEAT_S):
+            return
 
 
 def run_worker(*, workers: int = 1) -> None:
     """Consume the current app's jobs until interrupted (``flask egonet worker``), beating every ``HEARTBEAT_S``."""
     huey = current_huey()
     stop = threading.Event()
-    beating = threading.Thread(target=_beat, args=(huey, stop), name="egonet-worker-heartbeat", daemon=True)
+    beating = threading.Thread(target=_beat, args=(current_app._get_current_object(), huey, stop),
+                               name="egonet-worker-heartbeat", daemon=True)
     beating.start()
     # Threads share the process; the training jobs themselves use torch's threads.
     consumer = huey.create_consumer(workers=workers, worker_type="thread", periodic=False)

@@ -18,7 +18,13 @@ from app.services.training import (
     frames_for_prediction,
     predict,
     score_run_frames,
+    take_over_stopped_runs,
 )
+
+
+def on_heartbeat() -> None:
+    """What a worker does with each heartbeat (``app.queue``): runs whose worker died are queued again."""
+    take_over_stopped_runs()
 
 
 @job

@@ -2,9 +2,12 @@
 
 Slow and browser tests carry markers and are skipped unless ``--all`` is
 given (the README's test command and ``.ci/run`` give it). ``--all`` also
-spreads the tests over the machine's cores with pytest-xdist, a file to a
-worker at a time, unless ``-n`` says otherwise (``-n 0`` runs them in one
-process).
+spreads the tests over the machine's cores with pytest-xdist, unless ``-n``
+says otherwise (``-n 0`` runs them in one process). Tests go to the workers
+in collection order and an idle worker takes over half of a busy one's
+queue (``worksteal``): a worker keeps to one database backend for long runs
+(pytest groups the tests by it), and no long file is left for one worker at
+the end.
 """
 
 import functools
@@ -35,7 +38,7 @@ def pytest_cmdline_main(config):
     if config.getoption("--all") and getattr(config.option, "numprocesses", 0) is None and not hasattr(config, "workerinput"):
         config.option.numprocesses = "auto"
         if config.option.dist == "no":
-            config.option.dist = "loadfile"
+            config.option.dist = "worksteal"
 
 
 def pytest_collection_modifyitems(config, items):

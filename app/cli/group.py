@@ -7,16 +7,17 @@ from flask import Blueprint
 from flask.cli import AppGroup
 
 from app.errors import Problem
+from app.services.storage import StorageProblem, StorageUnavailable
 from egonet.errors import EgonetError
 
 
 class EgonetGroup(AppGroup):
-    """The command group; its one handler prints a ``Problem`` or ``EgonetError`` as one line."""
+    """The command group; its one handler prints a ``Problem``, ``EgonetError`` or storage failure as one line."""
 
     def invoke(self, ctx: click.Context):
         try:
             return super().invoke(ctx)
-        except (Problem, EgonetError) as exc:
+        except (Problem, EgonetError, StorageProblem, StorageUnavailable) as exc:
             raise click.ClickException(str(exc)) from None
 
 

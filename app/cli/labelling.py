@@ -12,7 +12,7 @@ EXPORT_STATUS_CHOICES = click.Choice([s.value for s in Status if s is not Status
 
 
 @bp.cli.command("export")
-@click.option("--out", type=click.Path(path_type=Path), required=True, help="New (or empty) folder to write.")
+@click.option("--out", required=True, help="New (or empty) folder to write, or s3://bucket/prefix/name.")
 @click.option("--format", "fmt", type=click.Choice(["png", "coco", "both"]), default="both", show_default=True)
 @click.option("--images", is_flag=True, help="Also copy each exported frame's RGB file into images/.")
 @click.option("--activity", "activities", multiple=True, help="Only this activity (repeat for several) [default: all].")

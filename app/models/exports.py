@@ -22,7 +22,7 @@ class ExportJob(Base):
     """One export: its options, progress (``done`` of ``total`` frames) and, once done, its zip.
 
     ``options`` holds ``app.services.exchange.ExportOptions`` as plain types;
-    ``file_name`` is the zip's name under ``EXPORT_ROOT``.
+    ``file_name`` is the zip's name in storage's ``exports/``.
     """
 
     __tablename__ = "export_job"

@@ -5,7 +5,9 @@ mode and the resolved training configuration (``config``, the dict of
 ``egonet.checkpoint.TrainConfig.to_dict()`` plus the activities used). The worker
 (or ``flask egonet train``) moves it from queued to running to done, failed
 or cancelled, and reports ``progress``, ``loss`` and ``eta_s`` as it goes;
-``updated_at`` is the time of the last report.
+``updated_at`` is the time of the last report or lease renewal: while running,
+the run's lease, and ``started_at`` names the attempt holding it
+(``app.services.training.control``).
 
 Each finished fold leaves a ``Checkpoint`` (the file in storage, its key
 after ``checkpoints/`` in ``path``) and one ``Prediction`` per

@@ -60,9 +60,13 @@ def parameter_count(checkpoint: Checkpoint) -> int:
     return sum(p.numel() for p in model.parameters())
 
 
-def cache_path(checkpoint: Checkpoint, frame: Frame) -> Path:
+def _figure_name(checkpoint: Checkpoint, frame: Frame) -> str:
     dhg = Path(frame.dhg_path).stem if frame.dhg_path else "none"
-    return Path(current_app.config["CACHE_ROOT"]) / "activations" / f"ckpt{checkpoint.id}-{frame.content_hash}-{dhg}.png"
+    return f"activations/ckpt{checkpoint.id}-{frame.content_hash}-{dhg}.png"
+
+
+def cache_path(checkpoint: Checkpoint, frame: Frame) -> Path:
+    return media.derived_path(_figure_name(checkpoint, frame))
 
 
 def inline_limit() -> int:
@@ -77,13 +81,13 @@ def figure_path(checkpoint: Checkpoint, frame: Frame, *, in_request: bool) -> Pa
             (and no figure is cached yet).
         Problem: an unreadable checkpoint, or a frame the model cannot read at all.
     """
-    path = cache_path(checkpoint, frame)
-    if path.exists():
-        return path
-    if in_request and (message := page_message(checkpoint, frame)) is not None:
-        raise TooLargeForRequest(message, field="checkpoint", status=409)
-    media.write_atomic(path, figure_png(compute(checkpoint, frame), frame, checkpoint))
-    return path
+
+    def make() -> bytes:
+        if in_request and (message := page_message(checkpoint, frame)) is not None:
+            raise TooLargeForRequest(message, field="checkpoint", status=409)
+        return figure_png(compute(checkpoint, frame), frame, checkpoint)
+
+    return media.derived(_figure_name(checkpoint, frame), make)
 
 
 def compute(checkpoint: Checkpoint, frame: Frame) -> Activations:

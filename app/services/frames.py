@@ -5,7 +5,6 @@ from pathlib import Path
 
 import cv2
 import numpy as np
-from flask import current_app
 from sqlalchemy import func
 
 from app.extensions import db
@@ -115,7 +114,7 @@ def frame_depth(frame: Frame) -> np.ndarray | None:
 
 def depth_preview(frame: Frame) -> Path:
     """A colour-mapped PNG of the frame's depth (near = warm), cached on disk."""
-    return cached(f"depth-{Path(frame.depth_path).stem}.png", lambda: _colour_depth(io.read_depth(media.local_path(frame.depth_path))))
+    return media.derived(f"depth-{Path(frame.depth_path).stem}.png", lambda: _colour_depth(io.read_depth(media.local_path(frame.depth_path))))
 
 
 def thumbnail_size(frame: Frame) -> tuple[int, int]:
@@ -136,7 +135,7 @@ def thumbnail(frame: Frame) -> Path:
         ok, buf = cv2.imencode(".jpg", cv2.cvtColor(small, cv2.COLOR_RGB2BGR), [cv2.IMWRITE_JPEG_QUALITY, 85])
         return buf.tobytes()
 
-    return cached(f"thumb{size[0]}x{size[1]}-{frame.content_hash}.jpg", make)
+    return media.derived(f"thumb{size[0]}x{size[1]}-{frame.content_hash}.jpg", make)
 
 
 def _colour_depth(depth: np.ndarray) -> bytes:
@@ -148,14 +147,6 @@ def _colour_depth(depth: np.ndarray) -> bytes:
     bgr[~valid] = 0
     ok, buf = cv2.imencode(".png", bgr)
     return buf.tobytes()
-
-
-def cached(name: str, make) -> Path:
-    """Return a derived file under CACHE_ROOT, making it atomically on first use."""
-    path = Path(current_app.config["CACHE_ROOT"]) / name
-    if not path.exists():
-        media.write_atomic(path, make())
-    return path
 
 
 # --------------------------------------------------------------------------
@@ -212,10 +203,10 @@ def normalised_overlay(prediction: Prediction) -> Path:
         stretched = (probability - low) / max(high - low, MIN_NORMALISE_RANGE)
         return io.encode_png(heatmap(stretched))
 
-    return cached(f"predictions/overlay-range-{Path(prediction.path).stem}.png", make)
+    return media.derived(f"predictions/overlay-range-{Path(prediction.path).stem}.png", make)
 
 
 def colour_bar() -> Path:
     """The heat map's colours and opacity from probability 0 (left) to 1 (right), 256 x 12 RGBA, cached."""
     ramp = np.repeat(np.linspace(0.0, 1.0, 256, dtype=np.float32)[None, :], 12, axis=0)
-    return cached("colour-bar-v1.png", lambda: io.encode_png(heatmap(ramp)))
+    return media.derived("colour-bar-v1.png", lambda: io.encode_png(heatmap(ramp)))

@@ -33,7 +33,7 @@ from app.errors import Problem
 from app.extensions import db
 from app.models import HAND_LABEL, Activity, Annotation, Frame, Instance, Role, Sequence, Status, User
 from app.models.frames import DEPTH_PREDICTED
-from app.services import media
+from app.services import media, storage
 from egonet import io
 
 # Zip archives are unpacked to a temporary folder first, within these limits.
@@ -166,7 +166,7 @@ def discover(
 
 
 def import_path(
-    path: Path,
+    path: str | Path,
     *,
     activity: str,
     sequence: str | None = None,
@@ -181,8 +181,10 @@ def import_path(
     on_start: Callable[[int], None] | None = None,
     on_progress: Callable[[int], None] | None = None,
 ) -> ImportReport:
-    """Import a folder of images or a video (see ``discover``) in one transaction.
+    """Import a folder of images, a zip of one, or a video (see ``discover``) in one transaction.
 
+    ``path`` may be in a bucket, ``s3://bucket/prefix/recording`` (a folder
+    there, or one zip or video object): it is downloaded first (``downloaded``).
     Depth, DHG and mask files are matched to frames by file stem (for a
     video, by the frame number: ``12.png`` or ``000012.png`` is frame 12).
     ``depth_source="predicted"`` marks the depth and DHG of the imported
@@ -193,45 +195,60 @@ def import_path(
     Raises:
         ImportProblem: bad options or layout, naming the option or path.
         egonet.io.MediaError: a file that cannot be used, naming the file.
+        StorageUnavailable: the bucket to read from or to write to cannot be reached.
     """
     if stride < 1:
         raise ImportProblem(f"--stride must be >= 1, got {stride}", field="stride")
     if depth_source not in DEPTH_SOURCES:
         raise ImportProblem(f"--depth-source must be one of {', '.join(DEPTH_SOURCES)}, got {depth_source!r}",
                             field="depth_source")
-    path = Path(path)
-    if path.suffix.lower() == ".zip":
-        with unpacked(path) as folder:
-            return import_path(
-                folder,
-                activity=activity,
-                sequence=sequence or path.stem,
-                stride=stride,
-                depth_dir=depth_dir,
-                dhg_dir=dhg_dir,
-                masks_dir=masks_dir,
-                intrinsics=intrinsics,
-                depth_source=depth_source,
-                mask_author=mask_author,
-                mask_status=mask_status,
-                on_start=on_start,
-                on_progress=on_progress,
-            )
-    source = discover(path, depth_dir=depth_dir, dhg_dir=dhg_dir, masks_dir=masks_dir, intrinsics=intrinsics)
-    total, items = _frame_items(source, path, stride)
-    if depth_source == DEPTH_PREDICTED:
-        items = _marked_predicted(items)
-    if on_start:
-        on_start(total)
-    return add_frames(
-        activity=activity,
-        sequence=sequence or source.name,
-        items=items,
-        source=str(path),
-        mask_author=mask_author,
-        mask_status=mask_status,
-        on_progress=on_progress,
-    )
+    with contextlib.ExitStack() as stack:
+        local = stack.enter_context(downloaded(str(path))) if str(path).startswith("s3://") else Path(path)
+        if local.suffix.lower() == ".zip":
+            sequence = sequence or local.stem
+            local = stack.enter_context(unpacked(local))
+        source = discover(local, depth_dir=depth_dir, dhg_dir=dhg_dir, masks_dir=masks_dir, intrinsics=intrinsics)
+        total, items = _frame_items(source, local, stride)
+        if depth_source == DEPTH_PREDICTED:
+            items = _marked_predicted(items)
+        if on_start:
+            on_start(total)
+        return add_frames(
+            activity=activity,
+            sequence=sequence or source.name,
+            items=items,
+            source=str(path),
+            mask_author=mask_author,
+            mask_status=mask_status,
+            on_progress=on_progress,
+        )
+
+
+@contextlib.contextmanager
+def downloaded(url: str) -> Iterator[Path]:
+    """A copy of ``s3://bucket/prefix/name`` in a temporary folder, named ``name`` as there, removed afterwards.
+
+    ``name`` is a folder in the bucket (every object under it is copied) or
+    one object (a zip or a video).
+    """
+    bucket, name = storage.open_parent(url)
+    with tempfile.TemporaryDirectory(prefix="egonet-import-") as tmp:
+        if bucket.exists(name):
+            (Path(tmp) / name).write_bytes(bucket.get(name))
+        else:
+            entries = [e for e in bucket.list(name) if not e.key.endswith("/")]  # some tools add folder markers
+            if not entries:
+                raise ImportProblem(f"{url}: no such folder or object in the bucket", field="path")
+
+            def fetch(entry: storage.Entry) -> str:
+                data = bucket.get(entry.key)  # refuses a key with "..", before it names a path
+                target = Path(tmp, *PurePosixPath(entry.key).parts)
+                target.parent.mkdir(parents=True, exist_ok=True)
+                target.write_bytes(data)
+                return entry.key
+
+            storage.each(fetch, entries)
+        yield Path(tmp) / name
 
 
 def _marked_predicted(items: Iterator[FrameItem]) -> Iterator[FrameItem]:

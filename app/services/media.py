@@ -11,11 +11,13 @@ import contextlib
 import hashlib
 import re
 import time
-from collections.abc import Iterator
+from collections.abc import Callable, Iterator
 from dataclasses import dataclass, field
 from pathlib import Path
 
-from app.services.storage import StorageUnavailable
+from flask import current_app
+
+from app.services.storage import HostCache, StorageUnavailable
 from app.services.storage import store as storage
 from egonet.io import write_atomic  # the one atomic writer: media, caches and checkpoints
 
@@ -29,6 +31,34 @@ def sha256(data: bytes) -> str:
 
 def relative_path(digest: str, suffix: str) -> str:
     return f"{digest[:2]}/{digest}{suffix}"
+
+
+def derived(name: str, make: Callable[[], bytes]) -> Path:
+    """A file made from the site's files (a thumbnail, an overlay, a figure), kept on this host.
+
+    Made atomically on first use under ``CACHE_ROOT/derived``; the folder holds at most
+    ``DERIVED_CACHE_BYTES``, the least recently used dropped first. ``name`` must hold the content
+    hashes of what it is made from, so a kept file never goes stale.
+    """
+    cache = _derived()
+    path = cache.folder / name
+    if not cache.hit(path):
+        write_atomic(path, make())
+        cache.added(path)
+    return path
+
+
+def derived_path(name: str) -> Path:
+    """Where ``derived(name, ...)`` keeps its file (which may not be made yet)."""
+    return _derived().folder / name
+
+
+def _derived() -> HostCache:
+    extensions = current_app.extensions
+    if "egonet.derived" not in extensions:
+        folder = Path(current_app.config["CACHE_ROOT"]) / "derived"
+        extensions["egonet.derived"] = HostCache(folder, current_app.config["DERIVED_CACHE_BYTES"])
+    return extensions["egonet.derived"]
 
 
 def local_path(relative: str) -> Path:

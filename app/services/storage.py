@@ -28,11 +28,13 @@ answers 503 and tries again on the next request); a missing key raises
 from __future__ import annotations
 
 import contextlib
+import hashlib
 import os
 import shutil
 import tempfile
 from collections.abc import Callable, Iterator
-from dataclasses import dataclass
+from concurrent.futures import ThreadPoolExecutor
+from dataclasses import dataclass, field
 from pathlib import Path
 from typing import BinaryIO, Protocol
 
@@ -42,6 +44,10 @@ from app.errors import StorageUnavailable
 from egonet.io import write_atomic
 
 Data = bytes | Callable[[BinaryIO], None]
+
+
+class StorageProblem(RuntimeError):
+    """A storage operation that cannot go ahead (a bad URL, a copy that does not match); one line says why."""
 
 
 @dataclass(frozen=True)
@@ -92,7 +98,10 @@ class LocalStore:
         return self._path(key).read_bytes()
 
     def local_path(self, key: str) -> Path:
-        return self._path(key)
+        path = self._path(key)
+        if not path.is_file():
+            raise FileNotFoundError(f"storage has no {key}")
+        return path
 
     def exists(self, key: str) -> bool:
         return self._path(key).is_file()
@@ -128,7 +137,8 @@ class S3Store:
         if not bucket:
             raise ValueError(f"STORAGE_URL {url!r} names no bucket: use s3://bucket/prefix")
         self.url, self.bucket, self.prefix = url, bucket, prefix.strip("/")
-        self.cache, self.cache_bytes = cache, cache_bytes
+        self.cache = cache
+        self.copies = HostCache(cache, cache_bytes)
         # Fail within seconds when the store is down: a page answers 503, not a hung worker.
         config = Config(connect_timeout=3, read_timeout=30, retries={"max_attempts": 2, "mode": "standard"})
         self.client = boto3.client("s3", config=config)
@@ -148,11 +158,10 @@ class S3Store:
             status = exc.response.get("ResponseMetadata", {}).get("HTTPStatusCode", 0)
             if error.get("Code") in ("404", "NoSuchKey", "NotFound"):
                 raise FileNotFoundError(f"storage has no {key}") from exc
-            if status >= 500:
-                raise StorageUnavailable(f"storage answered {status}") from exc
-            raise
+            # A 5xx, or a bucket that is missing or refuses these keys: the store is not usable as configured.
+            raise StorageUnavailable(f"storage {self.url} answered {status} {error.get('Code', '')}".rstrip()) from exc
         except BotoCoreError as exc:  # connection refused, time-outs, closed connections
-            raise StorageUnavailable(f"storage is unreachable ({type(exc).__name__})") from exc
+            raise StorageUnavailable(f"storage {self.url} is unreachable ({type(exc).__name__})") from exc
 
     def put(self, key: str, data: Data) -> None:
         if callable(data):
@@ -182,11 +191,8 @@ class S3Store:
             with self._reachable(key):
                 tag = self.client.head_object(Bucket=self.bucket, Key=self._key(key))["ETag"].strip('"')
             path = self.cache / f"{key}@{tag}"
-        try:
-            os.utime(path)  # most recently used
+        if self.copies.hit(path):
             return path
-        except FileNotFoundError:
-            pass
         path.parent.mkdir(parents=True, exist_ok=True)
         fd, tmp = tempfile.mkstemp(dir=path.parent, prefix=".tmp-")
         os.close(fd)
@@ -196,7 +202,7 @@ class S3Store:
             os.replace(tmp, path)
         finally:
             Path(tmp).unlink(missing_ok=True)
-        _trim(self.cache, self.cache_bytes, keep=path)
+        self.copies.added(path)
         return path
 
     def exists(self, key: str) -> bool:
@@ -227,8 +233,36 @@ class S3Store:
                     yield Entry(item["Key"][len(base):], item["Size"], item["LastModified"].timestamp())
 
 
-def _trim(folder: Path, budget: int, *, keep: Path) -> None:
-    """Delete the least recently used copies under ``folder`` until they fit in ``budget`` bytes."""
+class HostCache:
+    """A folder of this host's own files (a bucket's copies, thumbnails, figures): at most ``budget`` bytes,
+    the least recently used dropped first.
+
+    Walking a large folder costs far more than a download, so it is walked only when this process's count
+    says it may be over budget, and then trimmed to 90 %: once per tenth of the budget added, not per file.
+    """
+
+    def __init__(self, folder: Path, budget: int):
+        self.folder, self.budget = Path(folder), int(budget)
+        self._bytes: int | None = None  # as this process counts them
+
+    def hit(self, path: Path) -> bool:
+        """Whether ``path`` is there (and mark it most recently used)."""
+        try:
+            os.utime(path)
+        except FileNotFoundError:
+            return False
+        return True
+
+    def added(self, path: Path) -> None:
+        size = path.stat().st_size
+        if self._bytes is None or self._bytes + size > self.budget:
+            self._bytes = _trim(self.folder, self.budget * 9 // 10, keep=path)
+        else:
+            self._bytes += size
+
+
+def _trim(folder: Path, budget: int, *, keep: Path) -> int:
+    """Delete the least recently used copies under ``folder`` until they fit in ``budget`` bytes; the bytes left."""
     files = []
     for dirpath, _, names in os.walk(folder):
         for name in names:
@@ -244,6 +278,7 @@ def _trim(folder: Path, budget: int, *, keep: Path) -> None:
             with contextlib.suppress(OSError):
                 path.unlink()
             total -= size
+    return total
 
 
 def open_store(url: str, *, cache: Path, cache_bytes: int) -> Store:
@@ -255,12 +290,107 @@ def open_store(url: str, *, cache: Path, cache_bytes: int) -> Store:
     return LocalStore(url.removeprefix("file://"))
 
 
+def open_url(url: str) -> Store:
+    """A folder or bucket with this app's cache settings (an import's source, a migration's target)."""
+    config = current_app.config
+    return open_store(str(url), cache=Path(config["CACHE_ROOT"]) / "storage", cache_bytes=config["STORAGE_CACHE_BYTES"])
+
+
+def open_parent(url: str) -> tuple[Store, str]:
+    """``s3://bucket/prefix/name`` as the store ``s3://bucket/prefix`` and the key ``name`` in it (a folder
+    or an object: an import's source, an export's folder)."""
+    parent, _, name = url.rstrip("/").rpartition("/")
+    if not name or parent in ("s3:", "s3:/"):
+        raise StorageProblem(f"{url}: name a folder in the bucket (s3://bucket/prefix/name)")
+    return open_url(parent), name
+
+
 def store() -> Store:
     """This app's store, made on first use."""
     extensions = current_app.extensions
     if "egonet.storage" not in extensions:
-        config = current_app.config
-        extensions["egonet.storage"] = open_store(
-            str(config["STORAGE_URL"]), cache=Path(config["CACHE_ROOT"]) / "storage", cache_bytes=config["STORAGE_CACHE_BYTES"]
-        )
+        extensions["egonet.storage"] = open_url(current_app.config["STORAGE_URL"])
     return extensions["egonet.storage"]
+
+
+def each(work: Callable[[Entry], str], entries: list[Entry], on_progress: Callable[[int], None] | None = None) -> list[str]:
+    """``work(entry)`` for every entry, eight at a time (a bucket's latency, not its bandwidth, is the limit);
+    the results in order. The first failure stops the rest."""
+    pool = ThreadPoolExecutor(8)
+    try:
+        results = []
+        for result in pool.map(work, entries):
+            results.append(result)
+            if on_progress is not None:
+                on_progress(1)
+        return results
+    finally:
+        pool.shutdown(cancel_futures=True)
+
+
+# Moving the site's files to another store (flask egonet storage-migrate)
+
+AREAS = ("media", "checkpoints", "exports")
+
+
+@dataclass
+class MigrateReport:
+    files: int = 0
+    bytes: int = 0
+    copied: int = 0
+    present: int = 0  # there already, equal
+    bad: list[str] = field(default_factory=list)  # check_only: missing or different there
+
+
+def migrate(target: Store, *, check_only: bool = False, on_start: Callable[[int], None] | None = None,
+            on_progress: Callable[[int], None] | None = None) -> MigrateReport:
+    """Copy every file of this app's store (``AREAS``) to ``target`` and check each copy.
+
+    A file is equal to its copy when their sizes match and, for media, the
+    copy has the SHA-256 its name holds. Equal copies are kept, so running
+    it again after a failure copies only the rest; each new copy is checked
+    so. ``check_only`` copies nothing and lists the files whose copy is
+    missing or different in ``report.bad``.
+
+    Raises:
+        StorageProblem: a copy that does not match (it is deleted), or ``target`` is this store.
+        StorageUnavailable: either store cannot be reached.
+    """
+    source = store()
+    if _same(source.url, target.url):
+        raise StorageProblem(f"{target.url} is the current STORAGE_URL: give another folder or bucket")
+    entries = [entry for area in AREAS for entry in source.list(area)]
+    there = {entry.key: entry.size for area in AREAS for entry in target.list(area)}
+    if on_start is not None:
+        on_start(len(entries))
+
+    def one(entry: Entry) -> str:
+        if there.get(entry.key) == entry.size and _intact(target, entry.key):
+            return "present"
+        if check_only:
+            return "bad"
+        target.put_file(entry.key, source.local_path(entry.key))
+        if not _intact(target, entry.key, entry.size):
+            target.delete(entry.key)
+            raise StorageProblem(f"{entry.key}: the copy in {target.url} does not match the original")
+        return "copied"
+
+    results = each(one, entries, on_progress)
+    return MigrateReport(files=len(entries), bytes=sum(e.size for e in entries), copied=results.count("copied"),
+                         present=results.count("present"),
+                         bad=sorted(e.key for e, result in zip(entries, results, strict=True) if result == "bad"))
+
+
+def _intact(target: Store, key: str, size: int | None = None) -> bool:
+    """Whether ``target``'s copy of ``key`` has ``size`` bytes (when given) and, for media, the hash its name holds."""
+    if key.startswith("media/"):
+        data = target.get(key)
+        return (size is None or len(data) == size) and hashlib.sha256(data).hexdigest() == Path(key).stem
+    folder = key.rpartition("/")[0]
+    return size is None or next((e.size for e in target.list(folder) if e.key == key), None) == size
+
+
+def _same(a: str, b: str) -> bool:
+    if a.startswith("s3://") or b.startswith("s3://"):
+        return a.rstrip("/") == b.rstrip("/")
+    return Path(a).resolve() == Path(b).resolve()

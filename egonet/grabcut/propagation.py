@@ -40,11 +40,18 @@ How, all inside one region of interest (ROI) at a reduced work size:
    smear onto a wall or table behind the object is cut away even where it
    has the object's colour. Missing readings (0 or NaN) change nothing.
 5. The cut never overrules the flow where the image does not back it: each
-   part where the cut disagrees with the warped mask is kept only when at
-   least half of it lies where the flow is in doubt, on the warped edge's
-   strip (when the work grid is the frame's own pixels; on a reduced grid
-   the warp's soft edge is finer), or where depth says the pixel left the
-   object; elsewhere the warped mask stands.
+   part the cut adds to the warped mask, and each it takes out, is kept
+   only when at least half of it lies where the flow is in doubt, on the
+   warped edge's strip (when the work grid is the frame's own pixels; on a
+   reduced grid the warp's soft edge is finer), or where depth says the
+   pixel left the object, and when three quarters of it changed colour
+   along the flow towards the cut's side (a pixel taken out became more
+   background-like than the point it came from, by more than the usual
+   change along the flow's sure tracks; one added, more object-like), or
+   lie well inside the object's edge where depth puts them outside its
+   range; elsewhere the warped mask stands. A part of the object that looks
+   like the background in both frames (a grey shoe on a grey road) keeps
+   its colour along the flow, so it is not cut off.
 6. Back to full resolution: where the cut agrees with the warp, the warp's
    soft values (sub-pixel); elsewhere the cut, smoothed; upsampled
    bilinearly, then parts smaller than 2 % of the largest are dropped (one
@@ -82,7 +89,7 @@ import cv2
 import numpy as np
 
 from egonet.errors import EgonetError
-from egonet.grabcut.colour import _fit_model
+from egonet.grabcut.colour import _costs, _fit_model
 
 _WORK_SIZE = 320  # long side of the ROI for flow and cut, pixels
 _MARGIN = 0.5  # ROI margin around the object's box, fraction of its long side
@@ -95,6 +102,8 @@ _AFFINE_POINTS = 2000  # most flow vectors the object's affine motion is fitted 
 _AFFINE_MISS = 1.0  # RANSAC inlier distance for that fit, work-size pixels
 _ITERATIONS = 2  # graph cuts: one with the previous frame's models, one re-fitted
 _SUPPORT = 0.5  # share of a part the cut changes that must lie where the flow is in doubt
+_BACKED = 0.75  # ... and that its colours must have moved towards the cut's side (see _backed)
+_NOISE_STRIDE = 2  # the usual colour change along the flow is measured on every 2nd row and column
 _SPECK = 0.02  # parts smaller than this fraction of the largest are dropped
 _MIN_SAMPLES = 40  # fewest pixels per side to fit a colour model on (5 components)
 _DEPTH_TOL_M = 0.08  # depth slack around the object's range (motion, sensor noise), metres
@@ -319,8 +328,8 @@ def _doubt(warp: _Warp) -> np.ndarray:
     return doubt if moved is None else doubt & (warped != (moved >= 0.5))
 
 
-def _trimap(warp: _Warp, doubt: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-    """GC_* seeds from the warped mask: uint8 ``(h, w)`` labels and the bool core.
+def _trimap(warp: _Warp, doubt: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """GC_* seeds from the warped mask: uint8 ``(h, w)`` labels, the bool core and the bool band around the edge.
 
     The eroded core is sure foreground and pixels beyond the dilated border
     sure background (both by ``_SEED_RADIUS`` of the object's size). In the
@@ -342,7 +351,7 @@ def _trimap(warp: _Warp, doubt: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     gc[warped] = cv2.GC_FGD
     unsure = reach & ~core & (edge | doubt)
     gc[unsure] = np.where(warped[unsure], cv2.GC_PR_FGD, cv2.GC_PR_BGD)
-    return gc, core
+    return gc, core, reach & ~core
 
 
 def _depth_range(depth: np.ndarray, where: np.ndarray) -> tuple[float, float] | None:
@@ -500,27 +509,68 @@ def _look(warp: _Warp, result: np.ndarray) -> float:
                for k in (0.0, 0.5))
 
 
-def _guard(label: np.ndarray, warped: np.ndarray, support: np.ndarray) -> np.ndarray:
+def _guard(label: np.ndarray, warped: np.ndarray, support: np.ndarray, backed: np.ndarray) -> np.ndarray:
     """The cut where the image supports it, else the flow's mask (bool, work size).
 
-    ``support`` is where the image backs the cut against the flow: where the
-    flow is in doubt (:func:`_doubt`), on the thin strip along the warped
-    edge when the work grid is the frame's own (where the cut snaps the
-    edge to the image's), and where depth says a pixel left the object.
-    Each part the cut adds or removes is kept when at least ``_SUPPORT`` of
-    it lies there, and undone otherwise: where the flow is confident, a
+    ``support`` is where the flow may be overruled: where it is in doubt
+    (:func:`_doubt`), on the thin strip along the warped edge when the work
+    grid is the frame's own (where the cut snaps the edge to the image's),
+    and where depth says a pixel left the object. ``backed`` is where the
+    image backs the cut's label against the flow's (:func:`_backed`). Each
+    part the cut adds, and each it removes (apart: a limb the cut moves is
+    an addition beside a removal, each judged on its own), is kept when at
+    least ``_SUPPORT`` of it lies where the flow may be overruled and at
+    least ``_BACKED`` of it is backed, and undone otherwise: where the flow
+    is confident, or where the colours do not say the flow went wrong, a
     colour model that cannot tell the object from its surroundings (a dark
-    mug against a dark hand) does not cut a piece off or add one.
+    mug against a dark hand, a grey shoe on a grey road) does not cut a
+    piece off or add one.
     """
-    changed = label != warped
-    n, parts = cv2.connectedComponents(changed.view(np.uint8), connectivity=8)
+    added, added_parts = cv2.connectedComponents((label & ~warped).view(np.uint8), connectivity=8)
+    removed, removed_parts = cv2.connectedComponents((warped & ~label).view(np.uint8), connectivity=8)
+    n = added + removed - 1
     if n <= 1:
         return label
+    parts = np.where(removed_parts > 0, removed_parts + (added - 1), added_parts)
     size = np.bincount(parts.ravel(), minlength=n)
-    doubted = np.bincount(parts[support], minlength=n)
-    keep = doubted >= _SUPPORT * size
+    keep = (np.bincount(parts[support], minlength=n) >= _SUPPORT * size) & (
+        np.bincount(parts[backed], minlength=n) >= _BACKED * size)
     keep[0] = False
     return np.where(keep[parts], label, warped)
+
+
+def _backed(warp: _Warp, models: tuple[np.ndarray, np.ndarray], label: np.ndarray, warped: np.ndarray,
+            doubt: np.ndarray, band: np.ndarray) -> np.ndarray:
+    """Bool ``(h, w)``: pixels the cut relabelled whose colour moved towards the cut's side along the flow.
+
+    Each pixel of the next ROI came, by the flow, from a point of the
+    previous one. Where the flow is right the colour stays (it is the same
+    surface), so the colour models' verdict (the log-likelihood ratio of
+    background to object) stays too, however alike object and background
+    look. Where the flow is wrong (the object uncovered the background, a
+    limb moved off its track) the pixel now shows something else: a pixel
+    the cut takes out must have become more background-like than the point
+    it came from, and one the cut adds more object-like, by more than the
+    usual change along tracks the flow is sure of (the median over the
+    ``band`` pixels not in ``doubt``, on a grid of every ``_NOISE_STRIDE``-th
+    row and column: noise, blur, light). A grey shoe on a grey road looks
+    like the road in both frames: the colour models call it background, but
+    nothing changed along its track, so the flow's answer stands.
+    """
+    changed = np.flatnonzero(label != warped)
+    sample = np.zeros_like(band)
+    sample[::_NOISE_STRIDE, ::_NOISE_STRIDE] = True
+    trusted = np.flatnonzero(band & ~doubt & sample)
+    at = np.concatenate([changed, trusted])
+    came = _pull(warp.prev_low.astype(np.float32), warp.back).reshape(-1, 3)[at]
+    now = warp.next_low.reshape(-1, 3)[at].astype(np.float32)
+    bgd, fgd = models
+    rise = (_costs(fgd[0], now) - _costs(bgd[0], now)) - (_costs(fgd[0], came) - _costs(bgd[0], came))
+    usual = float(np.median(np.abs(rise[changed.size :]))) if trusted.size else 0.0
+    towards = np.where(label.ravel()[changed], -1.0, 1.0) * rise[: changed.size]
+    backed = np.zeros(label.size, bool)
+    backed[changed[towards > usual]] = True
+    return backed.reshape(label.shape)
 
 
 def _confidence(warp: _Warp, result: np.ndarray, doubt: np.ndarray, cut: np.ndarray | None = None) -> tuple[float, str]:
@@ -576,17 +626,21 @@ def carry(prev_rgb: np.ndarray, prev_mask: np.ndarray, next_rgb: np.ndarray, *,
 
     if np.count_nonzero(warped) < _MIN_SAMPLES:
         return flow_only()  # too small at the work size to cut: the flow's answer stands
-    gc, core = _trimap(warp, doubt)
+    gc, core, band = _trimap(warp, doubt)
     # The cut's to decide: where the flow is in doubt, and, when the work grid is the frame's own
     # pixels, the strip along the warped edge (snapping it to the image's edge). On a reduced grid
     # the warp's soft values place the edge finer than the cut's coarse pixels can.
     support = doubt.copy()
     if (roi.w, roi.h) == (roi.x1 - roi.x0, roi.y1 - roi.y0):
         support |= cv2.morphologyEx(warped.view(np.uint8), cv2.MORPH_GRADIENT, _disk(_EDGE)).astype(bool)
+    away = np.zeros_like(warped)
     if next_depth is not None:
         _apply_depth(gc, core, warp, prev_depth, next_depth)
         # Inside the warped mask only depth hands pixels to the background: the image's support too.
         support |= warped & ((gc == cv2.GC_BGD) | (gc == cv2.GC_PR_BGD))
+        # Depth outside the object's range backs the cut whatever the colours say, but not on the
+        # warped edge's own pixels: there the depth and colour images may disagree by a pixel.
+        away = cv2.erode(warped.view(np.uint8), _disk(1)).astype(bool) & (gc == cv2.GC_BGD)
     if min(np.count_nonzero(gc & 1), np.count_nonzero(~gc & 1)) < _MIN_SAMPLES:
         return flow_only()
     models = _models(warp.prev_low, warp.prev_mask_low >= 0.5) or _models(warp.next_low, (gc & 1).astype(bool))
@@ -596,7 +650,7 @@ def carry(prev_rgb: np.ndarray, prev_mask: np.ndarray, next_rgb: np.ndarray, *,
     area, warped_area = np.count_nonzero(label), np.count_nonzero(warped)
     if _iou(label, warped) < 0.5 or not 0.5 * warped_area <= area <= 2 * warped_area:
         return flow_only(label)  # a failed cut (colours too alike): trust the flow
-    guarded = _guard(label, warped, support)
+    guarded = _guard(label, warped, support, _backed(warp, models, label, warped, doubt, band) | away)
     # Where the result agrees with the warp, the warp's soft values place the edge
     # to a fraction of a work-size pixel; elsewhere the cut, smoothed so the
     # bilinear upsample gives a clean edge instead of work-size stairs.

@@ -167,6 +167,7 @@ def test_ablations_train_recorded_runs_and_write_the_table(app, demo, runner, tm
 
 
 @pytest.mark.slow
+@pytest.mark.one_database
 def test_train_init_records_the_file_and_the_training_page_shows_it(app, demo, runner, tmp_path, admin_client):
     init = tmp_path / "vgg16-synthetic.pth"
     torch.save(full_vgg16(), init)

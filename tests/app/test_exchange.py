@@ -8,6 +8,7 @@ import stat
 import subprocess
 import sys
 import time
+import uuid
 import warnings
 import zipfile
 from pathlib import Path
@@ -23,6 +24,7 @@ from app.models import Annotation, Frame, Instance, Role, Status, User
 from app.models.exports import ExportJob, ExportStatus
 from app.services import exchange, labelling, media
 from app.services.importing import import_path
+from app.services.storage import store as storage
 from app.services.users import create_user
 from egonet import io
 from tests.app.factories import image_folder, rgb_image
@@ -123,6 +125,7 @@ def zipped(data: bytes) -> dict[str, bytes]:
     return {name: archive.read(name) for name in archive.namelist()}
 
 
+@pytest.mark.both_storages
 def test_every_annotation_is_exported_and_the_round_trip_is_bit_for_bit(app, runner, tmp_path):
     folder = recording(tmp_path / "rec")
     expected = labelled_dataset(app, folder)
@@ -158,6 +161,29 @@ def test_every_annotation_is_exported_and_the_round_trip_is_bit_for_bit(app, run
             ("ann", "Good.", "rev"), ("bob", "Nice.", "rev")]
         author = db.session.execute(db.select(User).filter_by(username="ann")).scalar_one()
         assert not author.active and author.password_hash is None  # created by the import, cannot sign in
+
+
+def test_an_export_into_a_bucket_holds_what_a_folder_would(app, runner, tmp_path, seaweedfs):
+    labelled_dataset(app, recording(tmp_path / "rec"))
+    assert runner.invoke(args=["egonet", "export", "--out", str(tmp_path / "folder"), "--images"]).exit_code == 0
+    url = f"s3://egonet-test/exports-{uuid.uuid4().hex[:8]}/labels/"
+    result = runner.invoke(args=["egonet", "export", "--out", url, "--images"])
+    assert result.exit_code == 0 and f"{url}: 4 frames" in result.output, result.output
+    prefix = url.removeprefix("s3://egonet-test/")
+    client = seaweedfs.client()
+    listed = client.list_objects_v2(Bucket="egonet-test", Prefix=prefix)["Contents"]
+    in_bucket = {o["Key"][len(prefix):]: client.get_object(Bucket="egonet-test", Key=o["Key"])["Body"].read() for o in listed}
+    assert in_bucket == files(tmp_path / "folder")
+
+    result = runner.invoke(args=["egonet", "export", "--out", url])
+    assert result.exit_code == 1 and "holds files already" in result.output and result.output.count("\n") == 1
+
+    with app.app_context():  # a frame's file lost half-way: what was written goes again
+        last = db.session.execute(db.select(Frame).order_by(Frame.index.desc())).scalars().first()
+        storage().delete(f"media/{last.rgb_path}")
+    result = runner.invoke(args=["egonet", "export", "--out", url.replace("labels", "never"), "--images"])
+    assert result.exit_code == 1 and isinstance(result.exception, FileNotFoundError)
+    assert "Contents" not in client.list_objects_v2(Bucket="egonet-test", Prefix=prefix.replace("labels", "never"))
 
 
 def test_coco_has_one_entry_per_instance_with_its_annotator_and_status(app, runner, tmp_path):
@@ -307,7 +333,8 @@ def test_the_page_downloads_small_exports_and_says_when_nothing_matches(app, adm
         assert (report.annotations, report.instances) == (6, 6)
 
 
-def test_large_exports_are_built_by_the_worker_with_progress(app, admin_client, make_user, tmp_path):
+@pytest.mark.both_storages
+def test_large_exports_are_built_by_the_worker_with_progress(app, app_with, admin_client, make_user, tmp_path):
     labelled_dataset(app, recording(tmp_path / "rec"))
     form = {"format": "both", "status": ["done", "reviewed"]}
     with admin_client.post("/label/exports", data=form) as response:
@@ -337,8 +364,8 @@ def test_large_exports_are_built_by_the_worker_with_progress(app, admin_client, 
     assert {n: d for n, d in built.items() if not n.startswith("images/")} == zipped(small)
     assert len([n for n in built if n.startswith("images/")]) == 4
 
-    # Another staff member sees it listed, and may fetch it.
-    other = app.test_client()
+    # Another staff member sees it listed, and may fetch it from another host (its own empty cache).
+    other = app_with(STORAGE_URL=app.config["STORAGE_URL"], CACHE_ROOT=str(tmp_path / "host-2")).test_client()
     other.login_as(make_user("reviewer", "viewer"))
     assert f'href="/label/exports/{export_id}/download"' in other.get("/label/").get_data(as_text=True)
     with other.get(f"/label/exports/{export_id}/download") as download:
@@ -346,10 +373,11 @@ def test_large_exports_are_built_by_the_worker_with_progress(app, admin_client, 
 
     # Only the EXPORT_KEEP most recent finished exports are kept, files too.
     app.config.update(EXPORT_KEEP=0, EXPORT_MAX_PENDING=5)
-    zip_path = Path(app.config["EXPORT_ROOT"]) / f"export-{export_id}.zip"
-    assert zip_path.is_file()
-    admin_client.post("/label/exports", data=form | {"images": "1"})
-    assert not zip_path.exists() and admin_client.get(f"/api/label/exports/{export_id}").status_code == 404
+    with app.app_context():
+        assert storage().exists(f"exports/export-{export_id}.zip")
+        admin_client.post("/label/exports", data=form | {"images": "1"})
+        assert not storage().exists(f"exports/export-{export_id}.zip")
+    assert admin_client.get(f"/api/label/exports/{export_id}").status_code == 404
 
 
 def test_a_failed_export_says_why(app, tmp_path):
@@ -367,7 +395,7 @@ def test_a_failed_export_says_why(app, tmp_path):
         db.session.expire_all()
         failed = db.session.get(ExportJob, job.id)
         assert failed.status is ExportStatus.FAILED and failed.message.startswith("nothing to export")
-        assert not list(Path(app.config["EXPORT_ROOT"]).iterdir())  # no partial zip left behind
+        assert not list(storage().list("exports"))  # no partial zip left behind
 
 
 @pytest.mark.slow
@@ -382,7 +410,6 @@ def test_a_queued_export_is_built_by_a_real_worker(app, database_url, admin_clie
         FLASK_SECRET_KEY="worker-test-secret-key-0123456789abcdef",
         FLASK_STORAGE_URL=str(tmp_path),
         FLASK_CACHE_ROOT=str(tmp_path / "cache"),
-        FLASK_EXPORT_ROOT=app.config["EXPORT_ROOT"],
         OMP_NUM_THREADS="1",
     )
     worker = subprocess.Popen([sys.executable, "-m", "flask", "--app", "app", "egonet", "worker"], cwd=ROOT, env=env,

@@ -87,6 +87,8 @@ def test_no_endpoint_answers_500(app, client, make_user, tmp_path_factory, role,
                 assert response.status_code < 500, f"{role} {method} {url}: {response.status_code} {response.get_data()[:300]!r}"
 
 
+# 2**63, the least integer past a BIGINT, goes to each name on its own (a 400 for one name hides the
+# others); the rest go to every name at once.
 OUT_OF_RANGE = ["9223372036854775808", "99999999999999999999", "-9223372036854775809", "1" * 5000]
 # Query parameters the app reads, from its source (a new one is fuzzed without listing it here).
 QUERY_READERS = re.compile(r"""(?:query_ints?|args\.get|args\.getlist|source\.get|source\[|args\[)\(?["'](\w+)["']""")
@@ -152,9 +154,9 @@ def test_no_route_takes_unsafe_text_or_answers_500_to_huge_integers(app, client,
                 send(f"{url}?{query({value: '1'})}", unsafe="\x00" in value)
             send(url, headers={"User-Agent": "a\x00b", "X-Requested-With": "a\x00b"}, unsafe=True)
             for name in names:
-                for value in OUT_OF_RANGE[:2]:
-                    send(f"{url}?{query({name: value})}", unsafe=False)
-            send(f"{url}?{query({n: v for n in QUERY_NAMES for v in OUT_OF_RANGE[2:]})}", unsafe=False)
+                send(f"{url}?{query({name: OUT_OF_RANGE[0]})}", unsafe=False)
+            for value in OUT_OF_RANGE[1:]:
+                send(f"{url}?{query(dict.fromkeys(QUERY_NAMES, value))}", unsafe=False)
         for method in methods:
             if method == "GET":
                 continue

@@ -1,5 +1,6 @@
 import json
-from pathlib import Path
+import uuid
+import zipfile
 
 import cv2
 import numpy as np
@@ -9,6 +10,7 @@ from app.extensions import db
 from app.models import Activity, Annotation, Frame, Status
 from app.services import media
 from app.services.importing import ImportProblem, import_path
+from app.services.storage import store
 from egonet import io
 from egonet.dhg import GRAY, decode_dhg
 from tests.app.factories import image_folder, rgb_image, video_file
@@ -20,11 +22,11 @@ def frames():
     return db.session.execute(db.select(Frame).order_by(Frame.index)).scalars().all()
 
 
-def media_files(app) -> list[Path]:
-    root = Path(app.config["STORAGE_URL"]) / "media"
-    return sorted(p for p in root.rglob("*") if p.is_file()) if root.exists() else []
+def media_files(app) -> list[str]:
+    return sorted(entry.key for entry in store().list("media"))
 
 
+@pytest.mark.both_storages
 def test_folder_import_stores_content_addressed_media(ctx, tmp_path):
     folder = image_folder(tmp_path / "rec", n=4)
     report = import_path(folder, activity="cooking")
@@ -37,7 +39,7 @@ def test_folder_import_stores_content_addressed_media(ctx, tmp_path):
         assert media.sha256(data) == f.content_hash
         assert f.rgb_path == f"{f.content_hash[:2]}/{f.content_hash}.png"
         np.testing.assert_array_equal(io.decode_image(data), rgb_image(i))
-    assert not [p for p in media_files(ctx) if p.name.startswith(".tmp")]
+    assert len(media_files(ctx)) == 4
 
 
 def test_reimport_adds_nothing(ctx, tmp_path):
@@ -64,6 +66,7 @@ def test_video_import_with_stride(ctx, tmp_path):
     assert len({f.content_hash for f in fs}) == 3
 
 
+@pytest.mark.both_storages
 def test_depth_is_paired_by_stem_and_dhg_computed_with_intrinsics(ctx, tmp_path):
     folder = image_folder(tmp_path / "rec", n=2, depth=True, intrinsics=True)
     import_path(folder, activity="desk work")
@@ -95,6 +98,7 @@ def test_npy_depth_and_given_dhg(ctx, tmp_path):
     np.testing.assert_array_equal(io.read_dhg(media.local_path(f.dhg_path)), dhg)
 
 
+@pytest.mark.both_storages
 def test_masks_become_annotations(ctx, tmp_path):
     folder = image_folder(tmp_path / "rec", n=2, masks=True)
     report = import_path(folder, activity="dining", mask_author="wearer", mask_status=Status.REVIEWED)
@@ -113,6 +117,7 @@ def assert_nothing_imported(ctx):
     assert media_files(ctx) == []
 
 
+@pytest.mark.both_storages
 def test_corrupt_image_stops_and_names_the_file(ctx, tmp_path):
     folder = image_folder(tmp_path / "rec", n=4)
     bad = folder / "rgb" / "00002.png"
@@ -130,6 +135,7 @@ def test_depth_size_mismatch_stops_and_names_the_file(ctx, tmp_path):
     assert_nothing_imported(ctx)
 
 
+@pytest.mark.both_storages
 def test_failed_reimport_keeps_earlier_frames_and_media(ctx, tmp_path):
     folder = image_folder(tmp_path / "rec", n=2)
     import_path(folder, activity="cooking")
@@ -172,6 +178,30 @@ def test_bad_paths_and_options(ctx, tmp_path):
     with pytest.raises(ImportProblem, match="--stride"):
         import_path(tmp_path / "empty", activity="x", stride=0)
     assert_nothing_imported(ctx)
+
+
+@pytest.mark.both_storages
+def test_a_recording_in_a_bucket_imports_as_a_folder_does(ctx, runner, tmp_path, seaweedfs):
+    folder = image_folder(tmp_path / "rec", n=3, depth=True, intrinsics=True, masks=True)
+    with zipfile.ZipFile(tmp_path / "take2.zip", "w") as zf:
+        zf.write(folder / "rgb" / "00000.png", "rgb/00000.png")
+    prefix = f"sources-{uuid.uuid4().hex[:8]}"
+    client = seaweedfs.client()
+    for path in [*folder.rglob("*.*"), tmp_path / "take2.zip"]:
+        client.put_object(Bucket="egonet-test", Key=f"{prefix}/{path.relative_to(tmp_path).as_posix()}", Body=path.read_bytes())
+
+    result = runner.invoke(args=["egonet", "import", f"s3://egonet-test/{prefix}/rec/", "--activity", "cooking"])
+    assert result.exit_code == 0, result.output
+    assert ("cooking / rec: 3 frames added (depth: 3, DHG: 3, intrinsics: found), 0 already present, "
+            "3 masks imported") in result.output
+    assert import_path(folder, activity="cooking").skipped == 3  # the same frames as the folder's
+    assert frames()[0].sequence.source == f"s3://egonet-test/{prefix}/rec/"
+    result = runner.invoke(args=["egonet", "import", f"s3://egonet-test/{prefix}/take2.zip", "--activity", "cooking"])
+    assert "cooking / take2: 1 frame added" in result.output, result.output
+
+    for url, reason in ((f"s3://egonet-test/{prefix}/none", "no such folder or object"), ("s3://egonet-test", "name a folder")):
+        result = runner.invoke(args=["egonet", "import", url, "--activity", "cooking"])
+        assert result.exit_code == 1 and reason in result.output and result.output.count("\n") == 1, result.output
 
 
 @pytest.mark.skipif(not (PRIMESENSE).exists(), reason="shared data not present")

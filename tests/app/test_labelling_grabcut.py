@@ -47,6 +47,7 @@ def iou(a, b):
     return (a & b).sum() / max(1, (a | b).sum())
 
 
+@pytest.mark.both_storages
 def test_box_stroke_undo(app, annotator):
     frame_id, *_ = make_frames(app, n=1)
     can_undo, boxed = call(annotator, "box", frame_id=frame_id, instance="a", box=BOX)
@@ -124,6 +125,7 @@ def test_mask_query_is_checked(app, annotator):
             assert response.status_code == 400 and field in response.get_json()["fields"]
 
 
+@pytest.mark.both_storages
 def test_a_session_survives_a_restart_and_other_workers(app, annotator, monkeypatch):
     """The same operations with and without sessions kept in memory give the same masks."""
     frame_id, *_ = make_frames(app, n=1)

@@ -1,25 +1,31 @@
-import os
 import time
+from types import SimpleNamespace
+
+import pytest
 
 from app.services import media
 from app.services.importing import import_path
+from app.services.storage import store
 from tests.app.factories import image_folder
 
+pytestmark = pytest.mark.both_storages
 
-def test_media_check_finds_orphans_and_missing_files(ctx, runner, tmp_path):
+
+def test_media_check_finds_orphans_and_missing_files(ctx, runner, tmp_path, monkeypatch):
     import_path(image_folder(tmp_path / "rec", n=2, depth=True), activity="cooking")
     result = runner.invoke(args=["egonet", "media-check"])
     assert result.exit_code == 0 and "4 files, 4 referenced, 0 missing, 0 orphaned" in result.output
 
     orphan = media.store(b"written before a crash", ".png")
-    old = time.time() - 7200
-    os.utime(media.local_path(orphan), (old, old))
-    fresh = media.store(b"in flight right now", ".png")
-    report = media.check(remove_orphans=True, grace_s=3600)
-    assert set(report.orphans) == {orphan, fresh} and report.removed == [orphan]
-    assert not media.local_path(orphan).exists() and media.local_path(fresh).exists()
+    result = runner.invoke(args=["egonet", "media-check", "--remove-orphans"])
+    assert "1 orphaned, 0 removed" in result.output  # within the grace: a transaction may still be writing it
+    later = time.time() + 7200
+    monkeypatch.setattr(media, "time", SimpleNamespace(time=lambda: later))
+    result = runner.invoke(args=["egonet", "media-check", "--remove-orphans"])
+    assert result.exit_code == 0 and "5 files, 4 referenced, 0 missing, 1 orphaned, 1 removed" in result.output
+    assert not store().exists(f"media/{orphan}") and len(list(store().list("media"))) == 4
 
     victim = sorted(media.referenced_paths())[0]
-    media.local_path(victim).unlink()
+    store().delete(f"media/{victim}")
     result = runner.invoke(args=["egonet", "media-check"])
     assert result.exit_code == 1 and f"missing: {victim}" in result.output

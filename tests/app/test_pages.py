@@ -3,6 +3,7 @@ import re
 
 import cv2
 import numpy as np
+import pytest
 
 from app.extensions import db
 from app.models import Frame, InstanceKind
@@ -24,7 +25,8 @@ def test_empty_index_explains_how_to_start(admin_client):
     assert b"flask --app app egonet demo" in page.data
 
 
-def test_index_grid_viewer_and_media(app, admin_client, tmp_path):
+@pytest.mark.both_storages
+def test_index_grid_viewer_and_media(app, app_with, admin_client, make_user, tmp_path):
     client = admin_client
     with app.app_context():
         import_path(image_folder(tmp_path / "rec", n=3, depth=True), activity="cooking")
@@ -42,10 +44,13 @@ def test_index_grid_viewer_and_media(app, admin_client, tmp_path):
     viewer = client.get(f"/frames/{first['id']}")
     assert viewer.status_code == 200 and b"Depth" in viewer.data and b'id="next"' in viewer.data
     assert f'href="/label/frames/{first["id"]}"'.encode() in viewer.data
+    other_host = app_with(STORAGE_URL=app.config["STORAGE_URL"], CACHE_ROOT=str(tmp_path / "host-2")).test_client()
+    other_host.login_as(make_user("annotator", "ann"))  # another server: its own empty cache, the same storage
     for url, mimetype in ((first["rgb_url"], "image/png"), (first["depth_url"], "image/png"), (f"/frames/{first['id']}/thumb.jpg", "image/jpeg")):
-        with client.get(url) as response:
-            assert response.status_code == 200 and len(response.data) > 100, url
-            assert response.mimetype == mimetype
+        for host in (client, other_host):
+            with host.get(url) as response:
+                assert response.status_code == 200 and len(response.data) > 100, url
+                assert response.mimetype == mimetype
 
 
 def test_errors_are_json_for_the_api_and_pages_for_browsers(admin_client):
@@ -126,10 +131,10 @@ def test_the_review_queue_shows_each_mask_over_its_frame(app, admin_client, tmp_
     assert tuple(np.median(rgba[other][:, :3], axis=0)) == labelling.instance_colour(1)
     assert (rgba[~(small | other)][:, 3] == 0).mean() > 0.97  # transparent around them (bar the outlines' edge)
     assert (rgba[:, :, 3] == 255).sum() > 0 and (rgba[:, :, 3] == 90).sum() > 0  # outlined and faintly filled
-    cache = list((tmp_path / "cache" / "review").iterdir())
+    cache = list((tmp_path / "cache" / "derived" / "review").iterdir())
     assert len(cache) == 1
     with admin_client.get(f"/api/label/annotations/{done_id}/thumb.png") as again:
-        assert again.data == data and list((tmp_path / "cache" / "review").iterdir()) == cache
+        assert again.data == data and list((tmp_path / "cache" / "derived" / "review").iterdir()) == cache
 
 
 def test_the_viewer_gets_every_annotation_to_outline(app, admin_client, tmp_path):

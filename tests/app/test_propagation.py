@@ -77,6 +77,7 @@ def annotator(client, make_user):
     return client
 
 
+@pytest.mark.both_storages
 def test_propagate_to_next_frame_makes_an_in_progress_annotation_that_follows_the_objects(app, annotator):
     f0, f1, _ = moving_frames(app)
     annotate(annotator, f0, cup_at(0), lid())

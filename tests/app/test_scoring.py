@@ -249,6 +249,7 @@ def test_an_expired_trial_is_unanswered_while_the_session_goes_on(app, ctx, tmp_
 # Baselines, and the three conventions
 
 
+@pytest.mark.one_database
 def test_baselines_match_a_direct_computation_and_aop_follows_the_fold_rule(ctx):
     for seed, name in enumerate(BOXES):
         add_activity(name, seed=seed)

@@ -1,9 +1,12 @@
 """The storage module on both backends: a folder and a real SeaweedFS bucket."""
 
+import uuid
+
 import pytest
 
 from app.services import media
-from app.services.storage import StorageUnavailable, open_store, store
+from app.services.storage import StorageUnavailable, open_store, open_url, store
+from tests.app.conftest import make_app
 from tests.seaweed import SeaweedFS
 
 pytestmark = pytest.mark.both_storages
@@ -57,3 +60,63 @@ def test_a_bucket_that_is_down_says_so_and_comes_back(tmp_path):
             os.environ.update(saved)
     finally:
         server.stop()
+
+
+def test_storage_migrate_copies_checks_and_runs_again(ctx, runner, tmp_path, seaweedfs):
+    rel = media.store(b"a frame", ".png")
+    store().put("checkpoints/run-1/fold-1.pt", b"weights")
+    store().put("exports/export-1.zip", b"zip")
+    # From the folder to a bucket, and from a bucket to a folder.
+    to = str(tmp_path / "moved") if store().url.startswith("s3://") else f"s3://egonet-test/moved-{uuid.uuid4().hex[:8]}"
+
+    def migrate(*args):
+        result = runner.invoke(args=["egonet", "storage-migrate", "--to", *args])
+        return result.exit_code, result.output
+
+    code, out = migrate(to, "--check-only")
+    assert code == 1 and "3 files (0.0 MB): 0 present and equal, 3 missing or different" in out
+    assert f"missing or different: media/{rel}" in out
+    code, out = migrate(to)
+    assert code == 0 and "3 copied, 0 there already" in out, out
+    moved = open_url(to)
+    assert [moved.get(k) for k in (f"media/{rel}", "checkpoints/run-1/fold-1.pt", "exports/export-1.zip")] == [
+        b"a frame", b"weights", b"zip"]
+    moved.put(f"media/{rel}", b"a frAme")  # damaged, the same size
+    code, out = migrate(to, "--check-only")
+    assert code == 1 and "2 present and equal, 1 missing or different" in out and f"different: media/{rel}" in out
+    code, out = migrate(to)
+    assert code == 0 and "1 copied, 2 there already" in out and moved.get(f"media/{rel}") == b"a frame"
+
+    for args, reason in (([store().url], "is the current STORAGE_URL"), (["ftp://x/y"], "use a folder or s3://"),
+                         (["s3://no-such-bucket/x"], "storage s3://no-such-bucket/x answered 404 NoSuchBucket")):
+        code, out = migrate(*args)
+        assert code != 0 and reason in out.strip().splitlines()[-1] and out.count("Error:") == 1, out
+
+
+def test_a_buckets_copies_on_this_host_stay_within_their_budget(seaweedfs, tmp_path):
+    files = open_store(f"s3://egonet-test/{uuid.uuid4().hex[:12]}", cache=tmp_path / "cache", cache_bytes=10_000)
+    for i in range(30):
+        files.put(f"media/{i:02d}.png", bytes([i]) * 1000)
+        assert files.local_path(f"media/{i:02d}.png").read_bytes() == bytes([i]) * 1000
+        copies = [p for p in (tmp_path / "cache").rglob("*") if p.is_file()]
+        assert sum(p.stat().st_size for p in copies) <= 10_000
+    assert sorted(p.name for p in copies)[-1] == "29.png" and len(copies) >= 9  # the most recent kept
+
+
+def test_files_made_on_this_host_stay_within_their_budget(app_with):
+    host = app_with(DERIVED_CACHE_BYTES=10_000)
+    with host.app_context():
+        made = []
+        for i in range(30):
+            path = media.derived(f"thumbs/{i:02d}.jpg", lambda i=i: bytes([i]) * 1000)
+            assert path.read_bytes() == bytes([i]) * 1000
+            media.derived("thumbs/00.jpg", lambda: pytest.fail("kept, not made again"))  # in use: kept
+            made = [p for p in media.derived_path("thumbs").iterdir() if p.is_file()]
+            assert sum(p.stat().st_size for p in made) <= 10_000
+        assert {"00.jpg", "29.jpg"} <= {p.name for p in made} and len(made) >= 8
+
+
+@pytest.mark.parametrize("gone", ["MEDIA_ROOT", "EXPORT_ROOT"])
+def test_the_old_folder_settings_stop_the_app_naming_storage_url(tmp_path, gone):
+    with pytest.raises(RuntimeError, match=f"{gone} is replaced by STORAGE_URL"):
+        make_app("sqlite://", tmp_path, **{gone: str(tmp_path / "old")})

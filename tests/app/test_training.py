@@ -72,6 +72,7 @@ def test_a_run_records_a_checkpoint_per_fold_and_every_held_out_prediction(ctx, 
         assert 0.0 <= probability.min() and probability.max() <= 1.0
 
 
+@pytest.mark.one_database
 def test_deeplab_obj_learns_the_training_activities_object_classes_and_its_row_says_how_many(ctx, demo):
     run = train_now(demo, model="deeplab-obj")
     assert run.status is RunStatus.DONE, run.message

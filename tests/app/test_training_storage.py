@@ -8,12 +8,14 @@ import socket
 import subprocess
 import sys
 import time
+from datetime import timedelta
 from pathlib import Path
 
 import pytest
+from sqlalchemy import update
 
 from app.extensions import db
-from app.models import Activity, Frame
+from app.models import Activity, Frame, utcnow
 from app.models.training import Checkpoint, RunStatus, TrainingRun
 from app.services import training
 from app.services.demo import create_demo
@@ -102,6 +104,32 @@ def test_a_run_stopped_after_an_epoch_resumes_on_another_host_from_storage(app, 
         assert [h["epoch"] for h in training.files.load(cooking.path)["history"]] == [1, 2]
 
 
+def test_a_run_whose_worker_stopped_renewing_its_lease_is_taken_over_by_another_host(app, demo, other_host, monkeypatch):
+    queued = []
+    monkeypatch.setattr("app.tasks.train_run", lambda run_id: queued.append(run_id))
+
+    def lease_runs_out_in_second_epoch(progress):
+        if progress.phase == "train" and progress.epoch == 2 and not queued:
+            with other_host.app_context():  # this worker froze past its lease; the other host's heartbeat sees it
+                db.session.execute(update(TrainingRun).where(TrainingRun.id == run_id)
+                                   .values(updated_at=utcnow() - timedelta(seconds=app.config["TRAINING_LEASE_S"] + 1)))
+                db.session.commit()
+                assert training.take_over_stopped_runs() == [run_id]
+
+    with app.app_context():
+        run_id = training.create_run(training.RunRequest(**(RUN | {"epochs": 2}), activity_ids=demo)).id
+        run = training.execute_run(run_id, on_progress=lease_runs_out_in_second_epoch)
+        # The frozen attempt stopped at its next report and left the run to the taker, queued once.
+        assert run.status is RunStatus.QUEUED and queued == [run_id] and run.checkpoints == []
+        assert run.message.startswith("resumed after its worker stopped at ") and names(run_id) == {"config.json", "cooking.pt"}
+
+    seen = []
+    with other_host.app_context():
+        run = training.execute_run(run_id, on_progress=lambda p: seen.append((p.fold, p.epoch, p.phase)))
+        assert run.status is RunStatus.DONE and [c.fold for c in run.checkpoints] == ["cooking", "dining"]
+        assert {e for f, e, phase in seen if f == "cooking" and phase == "train"} == {0, 2}
+
+
 def test_a_released_model_uploaded_through_two_hosts_is_converted_by_a_third(app, app_with, storage_url, tmp_path,
                                                                             other_host, make_user, monkeypatch):
     from app.tasks import import_weights
@@ -172,17 +200,20 @@ def test_an_upload_left_unfinished_for_a_day_is_removed(app, admin_client, monke
         assert {path.split("/")[1] for path, _, _ in training.files.listing(released.UPLOADS)} == {second}
 
 
-def worker(app, database_url: str, storage_url: str, cache: Path) -> subprocess.Popen:
-    """``flask egonet worker`` on a host of its own: the same database, queue and storage, its own cache."""
+def worker(app, database_url: str, storage_url: str, host: Path) -> subprocess.Popen:
+    """``flask egonet worker`` on a host of its own: the same database, queue and storage, its own (empty)
+    instance folder and cache; a lease of 4 s."""
+    (host / "instance").mkdir(parents=True)
     env = dict(os.environ, EGONET_QUEUE_URL=app.config["QUEUE_URL"], FLASK_SQLALCHEMY_DATABASE_URI=database_url,
                FLASK_SECRET_KEY="worker-test-secret-key-0123456789abcdef", FLASK_STORAGE_URL=storage_url,
-               FLASK_CACHE_ROOT=str(cache), OMP_NUM_THREADS="1")
-    return subprocess.Popen([sys.executable, "-m", "flask", "--app", "app", "egonet", "worker"], cwd=ROOT, env=env,
+               FLASK_CACHE_ROOT=str(host / "cache"), FLASK_TRAINING_LEASE_S="4", OMP_NUM_THREADS="1")
+    factory = f"app:create_app(instance_path={str(host / 'instance')!r})"
+    return subprocess.Popen([sys.executable, "-m", "flask", "--app", factory, "egonet", "worker"], cwd=ROOT, env=env,
                             stdout=subprocess.PIPE, stderr=subprocess.STDOUT, text=True, start_new_session=True)
 
 
 @pytest.mark.slow
-def test_a_worker_killed_mid_training_resumes_on_another_host_from_the_last_checkpoint_in_storage(
+def test_a_worker_killed_mid_training_is_taken_over_by_a_worker_on_another_host_from_the_last_checkpoint_in_storage(
         app, demo, database_url, storage_url, tmp_path):
     epochs = 6
     with app.app_context():
@@ -202,10 +233,9 @@ def test_a_worker_killed_mid_training_resumes_on_another_host_from_the_last_chec
         # Mark the stored checkpoint: only a run that goes on from it keeps the mark in its history.
         state["history"][0]["train_loss"] = 123.0
         training.files.save(f"run-{run_id}/cooking.pt", state)
-        run = db.session.get(TrainingRun, run_id)
-        assert run.status is RunStatus.RUNNING  # as a killed worker leaves it: cancel, then resume
-        training.resume_run(training.cancel_run(run))
+        assert db.session.get(TrainingRun, run_id).status is RunStatus.RUNNING  # as the killed worker left it
 
+    # No cancel, no resume: the second worker takes the run over once its lease has expired.
     second = worker(app, database_url, storage_url, tmp_path / "host-b")
     try:
         deadline = time.monotonic() + 180
@@ -221,6 +251,7 @@ def test_a_worker_killed_mid_training_resumes_on_another_host_from_the_last_chec
     with app.app_context():
         run = db.session.get(TrainingRun, run_id)
         assert run.status is RunStatus.DONE, out[-3000:]
+        assert run.config["worker_stopped"] and f"run {run_id}: its worker stopped at" in out
         cooking = next(c for c in run.checkpoints if c.fold == "cooking")
         history = training.files.load(cooking.path)["history"]
         assert [h["epoch"] for h in history] == list(range(1, epochs + 1)) and history[0]["train_loss"] == 123.0

@@ -25,7 +25,7 @@ def test_queued_work_says_no_worker_until_one_beats(app, database_url, admin_cli
 
     env = dict(os.environ, EGONET_QUEUE_URL=app.config["QUEUE_URL"], FLASK_SQLALCHEMY_DATABASE_URI=database_url,
                FLASK_SECRET_KEY="worker-test-secret-key-0123456789abcdef", FLASK_STORAGE_URL=str(tmp_path),
-               FLASK_CACHE_ROOT=str(tmp_path / "cache"), FLASK_EXPORT_ROOT=app.config["EXPORT_ROOT"], OMP_NUM_THREADS="1")  # fmt: skip
+               FLASK_CACHE_ROOT=str(tmp_path / "cache"), OMP_NUM_THREADS="1")  # fmt: skip
     worker = subprocess.Popen([sys.executable, "-m", "flask", "--app", "app", "egonet", "worker"], cwd=ROOT, env=env,
                               stdout=subprocess.PIPE, stderr=subprocess.STDOUT, text=True)  # fmt: skip
     try:

@@ -19,8 +19,10 @@ and accounts, starts gunicorn (``app:create_app()``) and runs the users for
 Users arrive one after another over the first ``ramp`` seconds (like
 locust's spawn rate; a thundering herd of users starting in the same
 millisecond is another test), and each waits a human-like think time between
-actions. The result holds every request's latency, the errors, and how many
-acknowledged saves are missing from the database afterwards.
+actions, times ``pace`` (1 for the figures; the CI test's users think
+faster, so the same requests come closer together). The result holds every
+request's latency, the errors, and how many acknowledged saves are missing
+from the database afterwards.
 
 Used by ``bench/load.py`` (the figures) and ``tests/system/test_load.py``
 (no errors, nothing lost, in CI).
@@ -127,11 +129,11 @@ def target_of(frame_id: int, truth: np.ndarray, rng: np.random.Generator) -> Tar
     return Target(frame_id, h, w, [float(v) for v in box], sample(truth), sample(off if off.any() else inside))
 
 
-async def think(rng: random.Random, low=1.0, high=3.0):
-    await asyncio.sleep(rng.uniform(low, high))
+async def think(rng: random.Random, pace: float, low=1.0, high=3.0):
+    await asyncio.sleep(pace * rng.uniform(low, high))
 
 
-async def annotator(base, cookies, headers, targets, activities, stats, saves, deadline, seed, delay):
+async def annotator(base, cookies, headers, targets, activities, stats, saves, deadline, seed, delay, pace):
     rng = random.Random(seed)
     await asyncio.sleep(delay)
     async with httpx.AsyncClient(base_url=base, cookies=cookies, headers=headers, timeout=30) as client:
@@ -141,16 +143,16 @@ async def annotator(base, cookies, headers, targets, activities, stats, saves, d
             fid, h, w = frame.frame_id, frame.height, frame.width
             await stats.call(client, "GET /api/activities", "GET", "/api/activities")
             await stats.call(client, "GET /activities/<id>", "GET", f"/activities/{rng.choice(activities)}")
-            await think(rng)
+            await think(rng, pace)
             await stats.call(client, "GET /label/frames/<id>", "GET", f"/label/frames/{fid}")
             page = await stats.call(client, "GET /api/label/frames/<id>/annotation", "GET", f"/api/label/frames/{fid}/annotation")
             if page is not None:
                 versions[fid] = page.json()["version"]
-            await think(rng)
+            await think(rng, pace)
             target = {"frame_id": fid, "instance": "o1"}
             await stats.call(client, BOX, "POST", "/api/label/grabcut/box", json={**target, "box": frame.box})
             for _ in range(3):
-                await think(rng, 2.0, 5.0)  # a person looks at the new mask before the next stroke
+                await think(rng, pace, 2.0, 5.0)  # a person looks at the new mask before the next stroke
                 label = rng.choice(["fg", "bg"])
                 x, y = rng.choice(frame.fg if label == "fg" else frame.bg)
                 stroke = {**target, "points": [[x, y], [x + 15, y + 10]], "label": label, "radius": 6}
@@ -163,10 +165,10 @@ async def annotator(base, cookies, headers, targets, activities, stats, saves, d
             if saved is not None:
                 versions[fid] = saved.json()["version"]
                 saves.append((fid, versions[fid], mask))
-            await think(rng)
+            await think(rng, pace)
 
 
-async def participant(base, cookies, headers, stats, deadline, seed, delay):
+async def participant(base, cookies, headers, stats, deadline, seed, delay, pace):
     rng = random.Random(seed)
     await asyncio.sleep(delay)
     async with httpx.AsyncClient(base_url=base, cookies=cookies, headers=headers, timeout=30) as client:
@@ -176,7 +178,7 @@ async def participant(base, cookies, headers, stats, deadline, seed, delay):
                 return
             trial = current.json()["trial"]
             await stats.call(client, "GET /s/trials/<id>/image", "GET", trial["image_url"])
-            await think(rng, 1.5, 4.0)
+            await think(rng, pace, 1.5, 4.0)
             click = {"x": rng.uniform(0, trial["width"] - 1), "y": rng.uniform(0, trial["height"] - 1), "rt_ms": 900.0}
             answer = {"clicks": [click], "none": False, "timed_out": False, "rt_ms": 1000.0, "events": []}
             await stats.call(client, "POST /s/api/trials/<id>", "POST", trial["submit_url"], json=answer)
@@ -278,10 +280,11 @@ def run_load(
     threads: int = 4,
     size: tuple[int, int] = (1280, 960),
     abuse: bool = False,
+    pace: float = 1.0,
 ) -> LoadResult:
     """Run ``users`` simulated users (``participants`` of them in a study) for
-    ``duration`` seconds; with ``abuse``, one more annotator sends the largest
-    allowed GrabCut calls in a loop."""
+    ``duration`` seconds, thinking ``pace`` times a person's time; with
+    ``abuse``, one more annotator sends the largest allowed GrabCut calls in a loop."""
     n_annotators = users - participants
     if n_annotators < 1 or participants < 0:
         raise ValueError(f"need at least one annotator: {users} users, {participants} participants")
@@ -334,9 +337,9 @@ def run_load(
                 delay = ramp * arrival[i] / len(sessions)
                 if kind == "annotator":
                     mine = frames[i % n_annotators :: n_annotators] or frames[:1]
-                    jobs.append(annotator(server.url, cookies, headers, mine, activities, stats, saves, deadline, i, delay))
+                    jobs.append(annotator(server.url, cookies, headers, mine, activities, stats, saves, deadline, i, delay, pace))
                 else:
-                    jobs.append(participant(server.url, cookies, headers, stats, deadline, i, delay))
+                    jobs.append(participant(server.url, cookies, headers, stats, deadline, i, delay, pace))
 
             if abuse:
                 with closing(staff_client(server.url, "abuser", PASSWORD)) as c:

@@ -26,8 +26,10 @@ PATHOLOGICAL = b'["' + b'\\"' * 32_768  # 64 KiB: an unterminated string of esca
 pytestmark = pytest.mark.slow
 
 
-@pytest.fixture
-def server(tmp_path):
+@pytest.fixture(scope="module")
+def server(tmp_path_factory):
+    """One gunicorn for the module's probes: each answers in milliseconds and leaves nothing behind."""
+    tmp_path = tmp_path_factory.mktemp("stalling")
     url, schema = private_schema_url(POSTGRES_URL) if POSTGRES_URL else (f"sqlite:///{tmp_path / 'probe.sqlite3'}", None)
     app = make_app(url, tmp_path)
     with app.app_context():

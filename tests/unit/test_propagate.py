@@ -256,25 +256,44 @@ def test_real_video_every_frame_is_carried_both_ways_no_worse_than_the_flow():
     # camera, legs and tails swinging), upscaled to the app's 1408x1408: the
     # mask carried to the next (and the previous) frame keeps the object's box
     # on every frame, not only on average; the cut, overruled where the image
-    # does not back it, leaves the flow's mean intact and no pair far below
-    # it; and none of these carried masks is called unsure.
-    ours, flow = [], []
+    # does not back it, leaves no object (a window's mean over its pairs, both
+    # ways) below the flow it starts from and no pair more than a pixel's
+    # worth below it; and none of these carried masks is called unsure.
+    ours, flow, objects = [], [], []
     for window in sorted(p for p in REAL_VIDEO.iterdir() if p.is_dir()):
         frames = [(cv2.resize(_read_rgb(p), (1408, 1408), interpolation=cv2.INTER_CUBIC),
                    cv2.resize(cv2.imread(str(p.with_suffix(".png")), cv2.IMREAD_GRAYSCALE), (1408, 1408),
                               interpolation=cv2.INTER_NEAREST) > 127)
                   for p in sorted(window.glob("*.jpg"))]
+        first = len(ours)
         for (rgb0, m0), (rgb1, m1) in zip(frames, frames[1:]):
             for (ra, ma), (rb, mb) in (((rgb0, m0), (rgb1, m1)), ((rgb1, m1), (rgb0, m0))):
                 carried = carry(ra, ma, rb)
                 assert not carried.unsure, (window.name, carried)
                 ours.append(_box_iou(carried.mask, mb))
                 flow.append(_box_iou(warp_mask(ra, ma, rb), mb))
+        objects.append((window.name, np.mean(ours[first:]) - np.mean(flow[first:])))
     ours, flow = np.array(ours), np.array(flow)
     assert len(ours) == 40
     assert ours.min() >= 0.9 and ours.mean() >= 0.95, (ours.min(), ours.mean())
-    assert ours.mean() >= flow.mean() - 0.002, (ours.mean(), flow.mean())
-    assert (ours >= flow - 0.025).all(), np.min(ours - flow)
+    assert ours.mean() >= flow.mean(), (ours.mean(), flow.mean())
+    assert all(d >= 0 for _, d in objects), objects
+    assert (ours >= flow - 0.005).all(), np.min(ours - flow)
+
+
+@pytest.mark.skipif(not REAL_VIDEO.is_dir(), reason="real video fixtures not present")
+@pytest.mark.parametrize(("window", "pairs"), [("soapbox-00094", ((2, 3), (3, 2))), ("goat-00052", ((3, 2),))])
+def test_a_part_that_looks_like_the_background_in_both_frames_is_not_cut_off(window, pairs):
+    # A runner's grey shoe on a grey road, the tip of a goat's beard against
+    # the rocks: the colour models call them background and the cut took them
+    # off (box IoU 0.03-0.055 below the flow's, at the frames' own 480x480),
+    # though their colours did not change along the flow. The flow stands there.
+    folder = REAL_VIDEO / window
+    frames = [(_read_rgb(p), cv2.imread(str(p.with_suffix(".png")), cv2.IMREAD_GRAYSCALE) > 127)
+              for p in sorted(folder.glob("*.jpg"))]
+    for i, j in pairs:
+        (rgb0, m0), (rgb1, m1) = frames[i], frames[j]
+        assert _box_iou(propagate(rgb0, m0, rgb1), m1) >= _box_iou(warp_mask(rgb0, m0, rgb1), m1) - 0.005
 
 
 def test_an_object_gone_from_the_next_frame_is_unsure_and_says_why():

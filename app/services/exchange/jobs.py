@@ -3,14 +3,15 @@
 An export fits a request when it copies no images and its masks hold at
 most ``EXPORT_INLINE_MAX_PIXELS`` pixels (the frames' pixels, once per
 exported annotation); anything bigger is an ``ExportJob`` that ``flask
-egonet worker`` writes as a zip under ``EXPORT_ROOT`` with its progress
+egonet worker`` writes as a zip to storage (``exports/export-<id>.zip``,
+``app.services.storage``, so any host serves the download) with its progress
 on the row, so no request does work whose size the person controls. A
 person has at most ``EXPORT_MAX_PENDING`` exports waiting or under way;
 the ``EXPORT_KEEP`` most recent finished ones are kept, older ones (row
 and zip) go when a new one is asked for.
 """
 
-import os
+import tempfile
 import time
 from collections.abc import Callable
 from pathlib import Path
@@ -24,14 +25,15 @@ from app.models.exports import ExportJob, ExportStatus
 from app.queue import enqueue
 from app.services.exchange.selection import ExchangeProblem, ExportOptions, Plan
 from app.services.exchange.writing import write_zip
+from app.services.storage import StorageUnavailable
+from app.services.storage import store as storage
 
 ACTIVE = (ExportStatus.QUEUED, ExportStatus.RUNNING)
 # The worker writes its progress at most this often (seconds).
 PROGRESS_EVERY_S = 0.5
 
 
-def export_root() -> Path:
-    return Path(current_app.config["EXPORT_ROOT"])
+AREA = "exports/"
 
 
 def fits_a_request(options: ExportOptions, plan: Plan) -> bool:
@@ -88,27 +90,32 @@ def build_export(export_id: int) -> ExportJob:
     db.session.commit()
     if not claimed:
         return job
-    root = export_root()
-    root.mkdir(parents=True, exist_ok=True)
-    final = root / f"export-{job.id}.zip"
-    partial = root / f".export-{job.id}.zip.tmp"
+    name = f"export-{job.id}.zip"
     try:
-        with open(partial, "wb") as out:
+        # Built in a file on this host first (a zip's directory comes last; a bucket takes whole objects).
+        spool = Path(current_app.config["CACHE_ROOT"])
+        spool.mkdir(parents=True, exist_ok=True)
+        with tempfile.NamedTemporaryFile(suffix=".zip", dir=spool) as out:
             report = write_zip(out, ExportOptions.from_dict(job.options), on_start=_progress(job.id, total=True),
                                on_progress=_progress(job.id))
             out.flush()
-            os.fsync(out.fileno())
-        os.replace(partial, final)
+            size = out.tell()
+            storage().put_file(AREA + name, Path(out.name))
     except BaseException as exc:
-        partial.unlink(missing_ok=True)
         db.session.rollback()
-        _finish(job.id, status=ExportStatus.FAILED, message=str(exc) or type(exc).__name__)
+        _finish(job.id, status=ExportStatus.FAILED, message=_failure(exc))
         raise
     _finish(job.id, status=ExportStatus.DONE, done=report.frames, total=report.frames,
-            annotations=report.annotations, instances=report.instances, file_name=final.name,
-            size_bytes=final.stat().st_size)
+            annotations=report.annotations, instances=report.instances, file_name=name, size_bytes=size)
     db.session.expire_all()
     return get_export(export_id)
+
+
+def _failure(exc: BaseException) -> str:
+    """What the export's page says went wrong (never the bucket's name: the log has it)."""
+    if isinstance(exc, StorageUnavailable):
+        return "file storage was unreachable; export again later"
+    return str(exc) or type(exc).__name__
 
 
 def _progress(export_id: int, *, total: bool = False) -> Callable[[int], None]:
@@ -137,7 +144,7 @@ def _finish(export_id: int, **values) -> None:
 
 
 def export_file(job: ExportJob) -> Path:
-    """The finished export's zip.
+    """The finished export's zip on this host's disk (a bucket's: this host's cached copy).
 
     Raises:
         ExchangeProblem: 409 while it is not done, 410 when its file is gone.
@@ -145,10 +152,10 @@ def export_file(job: ExportJob) -> Path:
     if job.status is not ExportStatus.DONE or not job.file_name:
         raise ExchangeProblem(f"export {job.id} is {job.status.value}, not ready to download", status=409,
                               field="export_id")
-    path = export_root() / job.file_name
-    if not path.is_file():
-        raise ExchangeProblem(f"export {job.id}: its file is gone; export again", status=410, field="export_id")
-    return path
+    try:
+        return storage().local_path(AREA + job.file_name)
+    except FileNotFoundError:
+        raise ExchangeProblem(f"export {job.id}: its file is gone; export again", status=410, field="export_id") from None
 
 
 def _prune() -> None:
@@ -159,5 +166,5 @@ def _prune() -> None:
     ).scalars().all()
     for job in finished:
         if job.file_name:
-            (export_root() / job.file_name).unlink(missing_ok=True)
+            storage().delete(AREA + job.file_name)
         db.session.delete(job)

@@ -1,5 +1,6 @@
-"""Writing an export: through one ``write(relative_path, data)`` callback, into a folder or a zip."""
+"""Writing an export: through one ``write(relative_path, data)`` callback, into a folder (or a bucket) or a zip."""
 
+import contextlib
 import json
 import os
 import shutil
@@ -13,7 +14,7 @@ from typing import IO
 import numpy as np
 
 from app.models import Annotation, Frame, Instance
-from app.services import media
+from app.services import media, storage
 from app.services.exchange.selection import (
     CATEGORY,
     COCO_FILE,
@@ -170,18 +171,30 @@ def _coco_object(object_id: int, image_id: int, annotation: Annotation, instance
 
 
 def export_folder(
-    out: Path,
+    out: str | Path,
     options: ExportOptions,
     *,
     on_start: Callable[[int], None] | None = None,
     on_progress: Callable[[int], None] | None = None,
 ) -> ExportReport:
-    """Export into the folder ``out``, which must not exist or be empty.
+    """Export into the folder ``out``, which must not exist or be empty, or into
+    ``s3://bucket/prefix/name``, which must hold nothing yet.
 
-    The files are written into a temporary folder beside ``out`` and moved
-    into place at the end, so an export that fails (or matches nothing)
-    leaves nothing behind.
+    A folder's files are written into a temporary folder beside ``out`` and
+    moved into place at the end; a bucket's are deleted again if the export
+    fails; so an export that fails (or matches nothing) leaves nothing behind.
     """
+    if str(out).startswith("s3://"):
+        bucket, name = storage.open_parent(str(out))
+        if next(iter(bucket.list(name)), None) is not None:
+            raise ExchangeProblem(f"{out}: holds files already; choose a new folder (--out)", field="out")
+        try:
+            return write_export(lambda relative, data: bucket.put(f"{name}/{relative}", data), options,
+                                on_start=on_start, on_progress=on_progress)
+        except BaseException:
+            with contextlib.suppress(storage.StorageUnavailable):
+                bucket.delete_prefix(name)
+            raise
     out = Path(out)
     if out.exists() and (not out.is_dir() or any(out.iterdir())):
         raise ExchangeProblem(f"{out}: exists and is not an empty folder; choose a new one (--out)", field="out")

@@ -275,7 +275,7 @@ def mask_thumbnail(annotation: Annotation) -> Path:
         ok, buf = cv2.imencode(".png", cv2.cvtColor(picture, cv2.COLOR_RGBA2BGRA))
         return buf.tobytes()
 
-    return frames_service.cached(f"review/mask-{digest}.png", make)
+    return media.derived(f"review/mask-{digest}.png", make)
 
 
 def _shrunk(mask: np.ndarray, size: tuple[int, int]) -> np.ndarray:

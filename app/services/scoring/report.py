@@ -184,7 +184,7 @@ def _run_signature(run: TrainingRun) -> str | None:
     if not isinstance(run.config, dict) or "train" not in run.config:
         return None
     train = {k: v for k, v in run.config["train"].items() if k not in _NOT_THE_EXPERIMENT}
-    rest = {k: v for k, v in run.config.items() if k != "train"}
+    rest = {k: v for k, v in run.config.items() if k not in ("train", "worker_stopped")}
     what = {"model": run.model_name, "options": run.model_options, "folds": str(run.folds), "train": train, **rest}
     return json.dumps(what, sort_keys=True, default=str)
 

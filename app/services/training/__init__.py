@@ -35,6 +35,7 @@ from app.services.training.control import (
     resume_run,
     runs,
     start_run,
+    take_over_stopped_runs,
     trained_on,
 )
 from app.services.training.frames import FramePage, frame_page, score_run_frames, unscored_count
@@ -117,6 +118,7 @@ __all__ = [
     "score_run_frames",
     "start_run",
     "summarise",
+    "take_over_stopped_runs",
     "train_in_foreground",
     "trained_on",
     "unscored_count",

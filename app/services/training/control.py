@@ -7,16 +7,29 @@ naming its field, never a failed job. ``cancel_run`` marks the row; the job
 sees it at its next report and stops. A failed or cancelled run can be
 queued again (``resume_run``): finished folds are kept.
 
+A running run holds a lease: its ``updated_at``, renewed by every progress
+report and by a thread while the job works (``holding_lease``). Each claim
+stamps ``started_at``, which names the attempt: only the attempt that
+claimed the run renews it. A run whose lease is older than
+``TRAINING_LEASE_S`` lost its worker (killed, its host gone): the next
+worker heartbeat, on any host, queues it again (``take_over_stopped_runs``)
+and it goes on from the files storage has.
+
 Checkpoint files live in the site's storage, one folder per run:
 ``checkpoints/run-<id>/<fold>.pt`` and ``config.json``
 (``app.services.training.files``).
 """
 
 import dataclasses
-from collections.abc import Iterable
+import logging
+import threading
+from collections.abc import Iterable, Iterator
+from contextlib import contextmanager
 from dataclasses import dataclass
+from datetime import timedelta
 from pathlib import Path
 
+from flask import current_app
 from sqlalchemy import update
 
 from app.errors import Problem
@@ -28,6 +41,7 @@ from app.services import ground_truth
 from egonet.errors import EgonetError
 
 MAX_EPOCHS = 10_000
+log = logging.getLogger(__name__)
 
 #: TrainConfig's options -> the request's fields, where they differ (the form and CLI give one size).
 REQUEST_FIELDS = {"height": "size", "width": "size"}
@@ -296,6 +310,79 @@ def claim_run(run: TrainingRun, message: str) -> bool:
     db.session.commit()
     db.session.refresh(run)
     return bool(claimed)
+
+
+def renew_lease(run_id: int, attempt) -> bool:
+    """Renew the lease of the attempt that claimed the run at ``attempt`` (its ``started_at``); False once it is not
+    running that attempt any more (cancelled, failed, or taken over after its lease expired)."""
+    renewed = db.session.execute(
+        update(TrainingRun)
+        .where(TrainingRun.id == run_id, TrainingRun.status == RunStatus.RUNNING, TrainingRun.started_at == attempt)
+        .values(updated_at=utcnow())
+    ).rowcount
+    db.session.commit()
+    return bool(renewed)
+
+
+@contextmanager
+def holding_lease(run: TrainingRun) -> Iterator[None]:
+    """Renew the claimed run's lease from a thread every third of ``TRAINING_LEASE_S`` while the body runs, so
+    a long step (loading frames, an epoch's last batch, a big upload) never looks like a dead worker."""
+    app, run_id, attempt = current_app._get_current_object(), run.id, run.started_at
+    stop = threading.Event()
+
+    def renew() -> None:
+        with app.app_context():
+            while not stop.wait(app.config["TRAINING_LEASE_S"] / 3):
+                try:
+                    if not renew_lease(run_id, attempt):
+                        return
+                except Exception:  # the database away for a moment: the next turn tries again
+                    log.exception("renewing the lease of run %s", run_id)
+                    db.session.rollback()
+
+    thread = threading.Thread(target=renew, name=f"egonet-lease-run-{run_id}", daemon=True)
+    thread.start()
+    try:
+        yield
+    finally:
+        stop.set()
+        thread.join()
+
+
+def take_over_stopped_runs() -> list[int]:
+    """Queue again the running runs whose lease expired (their worker died); returns their ids.
+
+    Each is taken by one conditional UPDATE, so of several workers doing this
+    at once exactly one queues it. A training or depth run goes on from the
+    files storage has; a released model's conversion fails (its upload is
+    gone with the worker: import it again).
+    """
+    cutoff = utcnow() - timedelta(seconds=current_app.config["TRAINING_LEASE_S"])
+    stale = db.session.execute(
+        db.select(TrainingRun.id, TrainingRun.updated_at, TrainingRun.folds)
+        .where(TrainingRun.status == RunStatus.RUNNING, TrainingRun.updated_at < cutoff)
+    ).all()
+    taken = []
+    for run_id, seen, folds in stale:
+        stopped = f"its worker stopped at {seen:%Y-%m-%d %H:%M:%S} UTC"
+        released = folds is FoldsMode.RELEASED
+        changed = db.session.execute(
+            update(TrainingRun)
+            .where(TrainingRun.id == run_id, TrainingRun.status == RunStatus.RUNNING, TrainingRun.updated_at < cutoff)
+            .values(status=RunStatus.FAILED if released else RunStatus.QUEUED, eta_s=None,
+                    finished_at=utcnow() if released else None,
+                    message=f"failed: {stopped}; import the weights again" if released else f"resumed after {stopped}")
+        ).rowcount
+        if changed and not released:
+            run = db.session.get(TrainingRun, run_id)
+            run.config = dict(run.config) | {"worker_stopped": [*run.config.get("worker_stopped", []), seen.isoformat()]}
+        db.session.commit()
+        if changed and not released:
+            log.warning("run %s: %s; queued again", run_id, stopped)
+            enqueue("train_run", run_id)
+            taken.append(run_id)
+    return taken
 
 
 def cancel_run(run: TrainingRun) -> TrainingRun:

@@ -15,6 +15,11 @@ Training writes into this host's scratch folder (``files.scratch``) and each
 checkpoint and ``config.json`` goes to storage as soon as it is written; a
 run that goes on, here or on another host, starts from the files storage
 has (``app.services.training.files``). Under ``torchrun`` only rank 0 writes.
+
+While it trains, the run holds a lease (``control.holding_lease``): a worker
+killed mid-run leaves it running only until the lease expires, then another
+worker queues it again and it goes on from storage's files. An attempt
+whose run was taken over meanwhile stops at its next report.
 """
 
 import logging
@@ -30,7 +35,7 @@ from app.extensions import db
 from app.models import User, is_hand, utcnow
 from app.models.training import FINAL_STATUSES, Checkpoint, Prediction, RunStatus, TrainingRun
 from app.services import ground_truth, media
-from app.services.training.control import RunRequest, TrainingProblem, cancel_run, claim_run, create_run
+from app.services.training.control import RunRequest, TrainingProblem, cancel_run, claim_run, create_run, holding_lease
 from app.services.training import depth, files
 from app.services.training.predictions import FoldScorer
 from app.services.training.history import record_epochs
@@ -72,8 +77,8 @@ def train_in_foreground(
 class _Recorder:
     """The engine's callbacks: progress to the row, each file to storage, and each fold's results in one transaction."""
 
-    def __init__(self, run_id: int, upload: Callable[[], None], on_progress: Callable | None):
-        self.run_id, self.upload, self.on_progress = run_id, upload, on_progress
+    def __init__(self, run: TrainingRun, upload: Callable[[], None], on_progress: Callable | None):
+        self.run_id, self.attempt, self.upload, self.on_progress = run.id, run.started_at, upload, on_progress
         self.last_write = 0.0
         self.last_phase = None
         self.maps: list[tuple[int, str]] = []  # (frame id, media path) of the fold under way
@@ -89,9 +94,10 @@ class _Recorder:
         self.last_write, self.last_phase = now, phase
         where = f"fold {progress.fold_index + 1}/{progress.folds} ({progress.fold})"
         doing = {"train": f"epoch {progress.epoch}/{progress.epochs}", "evaluate": "scoring held-out frames", "done": "done"}
-        status = db.session.execute(
-            update(TrainingRun)
-            .where(TrainingRun.id == self.run_id)
+        ours = db.session.execute(
+            update(TrainingRun)  # renews the lease of this attempt, while the run is still its own
+            .where(TrainingRun.id == self.run_id, TrainingRun.status == RunStatus.RUNNING,
+                   TrainingRun.started_at == self.attempt)
             .values(
                 progress=progress.fraction,
                 loss=progress.loss,
@@ -99,10 +105,9 @@ class _Recorder:
                 message=f"{where}: {doing[progress.phase]}",
                 updated_at=utcnow(),
             )
-            .returning(TrainingRun.status)
-        ).scalar_one()
+        ).rowcount
         db.session.commit()
-        if status == RunStatus.CANCELLED:
+        if not ours:  # cancelled, or taken over by another worker after this one's lease expired
             raise Cancelled
 
     def map(self, fold: str, sample, probability: np.ndarray) -> None:
@@ -178,12 +183,13 @@ def execute_run(run_id: int, *, on_progress: Callable | None = None) -> Training
         return run
     out_dir = files.scratch(run.id)
     try:
-        recorder = _Recorder(run.id, files.fetch_run(run.id, out_dir), on_progress)
-        samples, folds, start = _plan(run, config, out_dir)
-        cross_validate(
-            samples, config, out_dir=out_dir, folds=folds, start=start,
-            on_progress=recorder.progress, on_fold_end=recorder.fold_end, on_map=recorder.map, on_epoch=recorder.epoch,
-        )
+        with holding_lease(run):
+            recorder = _Recorder(run, files.fetch_run(run.id, out_dir), on_progress)
+            samples, folds, start = _plan(run, config, out_dir)
+            cross_validate(
+                samples, config, out_dir=out_dir, folds=folds, start=start,
+                on_progress=recorder.progress, on_fold_end=recorder.fold_end, on_map=recorder.map, on_epoch=recorder.epoch,
+            )
     except Cancelled:
         db.session.rollback()
         db.session.refresh(run)
@@ -213,14 +219,15 @@ def _execute_depth_run(run: TrainingRun, *, on_progress: Callable | None) -> Tra
         return run
     out_dir = files.scratch(run.id)
     try:
-        recorder = _Recorder(run.id, files.fetch_run(run.id, out_dir), on_progress)
-        result = fit_depth(
-            depth.depth_samples(run), depth.depth_config(run), out_path=out_dir / depth.CHECKPOINT,
-            on_progress=recorder.progress, on_epoch=lambda record: recorder.epoch("depth", record),
-        )
-        recorder.upload()
-        depth.record_depth_result(run, result)
-        db.session.commit()
+        with holding_lease(run):
+            recorder = _Recorder(run, files.fetch_run(run.id, out_dir), on_progress)
+            result = fit_depth(
+                depth.depth_samples(run), depth.depth_config(run), out_path=out_dir / depth.CHECKPOINT,
+                on_progress=recorder.progress, on_epoch=lambda record: recorder.epoch("depth", record),
+            )
+            recorder.upload()
+            depth.record_depth_result(run, result)
+            db.session.commit()
     except Cancelled:
         db.session.rollback()
         db.session.refresh(run)

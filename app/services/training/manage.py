@@ -21,7 +21,6 @@ from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
-from flask import current_app
 from sqlalchemy import delete, or_, select, update
 
 from app.extensions import db
@@ -264,7 +263,7 @@ def delete_run(run: TrainingRun) -> dict[str, int]:
 
 def _remove_files(run_id: int, paths: set[str]) -> None:
     """After the commit: the run's media, their cached overlays, and its checkpoints in storage."""
-    cache = Path(current_app.config["CACHE_ROOT"]) / "predictions"
+    cache = media.derived_path("predictions")
     for rel in paths:
         storage().delete(media.AREA + rel)
         stem = Path(rel).stem

@@ -20,7 +20,6 @@ from collections.abc import Callable, Iterable, Iterator
 from pathlib import Path
 
 import numpy as np
-from flask import current_app
 
 from app.extensions import db
 from app.models import Activity, Frame, Sequence, utcnow
@@ -136,12 +135,8 @@ def prediction_overlay(prediction: Prediction) -> Path:
     Prediction files are content-addressed, so the overlay is cached under
     the file's name and never goes stale.
     """
-    root = Path(current_app.config["CACHE_ROOT"]) / "predictions"
-    path = root / f"overlay-{Path(prediction.path).stem}.png"
-    if not path.exists():
-        probability = read_probability(prediction.path)
-        media.write_atomic(path, io.encode_png(heatmap(probability)))
-    return path
+    return media.derived(f"predictions/overlay-{Path(prediction.path).stem}.png",
+                         lambda: io.encode_png(heatmap(read_probability(prediction.path))))
 
 
 def prediction_picture(prediction: Prediction, kind: str) -> Path:
@@ -162,14 +157,14 @@ def prediction_picture(prediction: Prediction, kind: str) -> Path:
     annotation = ground_truth.ground_truths([frame.id]).get(frame.id)
     truth_name = Path(annotation.mask_path).stem if annotation is not None and annotation.mask_path else "none"
     source = Path(prediction.path).stem if kind == "prediction" else Path(frame.rgb_path).stem
-    path = Path(current_app.config["CACHE_ROOT"]) / "predictions" / f"{kind}-{source}-{truth_name}-{Path(frame.rgb_path).stem}.png"
-    if not path.exists():
+
+    def make() -> bytes:
         rgb = io.read_image(media.local_path(frame.rgb_path))
         truth = ground_truth.mask_of(annotation) if annotation is not None else np.zeros(rgb.shape[:2], bool)
         layer = read_probability(prediction.path, shape=rgb.shape[:2]) if kind == "prediction" else truth.astype(np.float32)
-        picture = egonet_overlay(rgb, layer, outline=truth, max_width=PICTURE_WIDTH)
-        media.write_atomic(path, io.encode_png(picture))
-    return path
+        return io.encode_png(egonet_overlay(rgb, layer, outline=truth, max_width=PICTURE_WIDTH))
+
+    return media.derived(f"predictions/{kind}-{source}-{truth_name}-{Path(frame.rgb_path).stem}.png", make)
 
 
 # --------------------------------------------------------------------------- predicting

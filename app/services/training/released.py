@@ -40,7 +40,7 @@ from app.models import User, utcnow
 from app.models.training import Checkpoint, FoldsMode, RunStatus, TrainingRun
 from app.queue import enqueue
 from app.services.training import files
-from app.services.training.control import TrainingProblem, claim_run
+from app.services.training.control import TrainingProblem, claim_run, holding_lease
 from egonet.errors import Cancelled, EgonetError
 
 CHUNK_BYTES = 8 * 1024 * 1024
@@ -134,19 +134,22 @@ def convert_release(run_id: int, path: Path, *, releases=None,
             return run
         info = run.config["released"]
         reporter = _Reporter(run.id, on_progress)
-        state = checkpoint_from_caffemodel(path, size=(info["height"], info["width"]), releases=releases or RELEASES,
-                                           progress=reporter, name=info["file"])
-        relative = f"{files.run_folder(run.id)}/released.pt"
-        reporter.say("writing the checkpoint", 0.95)
-        files.save(relative, state)
+        with holding_lease(run):
+            state = checkpoint_from_caffemodel(path, size=(info["height"], info["width"]),
+                                               releases=releases or RELEASES, progress=reporter, name=info["file"])
+            relative = f"{files.run_folder(run.id)}/released.pt"
+            reporter.say("writing the checkpoint", 0.95)
+            files.save(relative, state)
         db.session.add(Checkpoint(run_id=run.id, fold="released", path=relative, epochs=0,
                                   metrics={"released": state["released"]}, test_frame_ids=[]))
         run.config = dict(run.config) | {"released": info | {"sha256": state["released"]["sha256"]}}
-        db.session.execute(
+        done = db.session.execute(
             update(TrainingRun).where(TrainingRun.id == run.id, TrainingRun.status == RunStatus.RUNNING)
             .values(status=RunStatus.DONE, progress=1.0, finished_at=utcnow(), eta_s=None,
                     message=f"done: {state['released']['title']}, sha256 {state['released']['sha256'][:12]}")
-        )
+        ).rowcount
+        if not done:  # cancelled, or taken for dead, in its last moments: no checkpoint row
+            raise Cancelled
         db.session.commit()
     except Cancelled:
         db.session.rollback()
@@ -194,7 +197,7 @@ class _Reporter:
             .values(progress=fraction, message=message, updated_at=utcnow()).returning(TrainingRun.status)
         ).scalar_one()
         db.session.commit()
-        if status == RunStatus.CANCELLED:
+        if status != RunStatus.RUNNING:  # cancelled, or failed once its worker was taken for dead
             raise Cancelled
 
 

@@ -11,14 +11,15 @@ manage the object classes (an empty name is not on the list: 404).
 ``url_values`` makes a finished export (row and zip) for its page and download.
 """
 
+import io as io_
 import zipfile
-from pathlib import Path
 
 from app.extensions import db
 from app.models import Annotation, Frame, Instance, Role, Status
 from app.models.exports import ExportJob, ExportStatus
 from app.services.exchange import ExportOptions
 from app.services import media
+from app.services.storage import store as storage
 from app.services.importing import import_path
 from app.services.users import create_user
 from egonet import io
@@ -80,10 +81,9 @@ def url_values(app, tmp_path) -> dict:
         export = ExportJob(status=ExportStatus.DONE, options=ExportOptions().to_dict(), file_name="export-access.zip")
         db.session.add(export)
         db.session.commit()
-        root = Path(app.config["EXPORT_ROOT"])
-        root.mkdir(parents=True, exist_ok=True)
-        with zipfile.ZipFile(root / export.file_name, "w") as archive:
+        with zipfile.ZipFile(zipped := io_.BytesIO(), "w") as archive:
             archive.writestr("annotations.json", "{}")
+        storage().put(f"exports/{export.file_name}", zipped.getvalue())
         return {"frame_id": frame.id, "annotation_id": annotation.id, "position": 0, "export_id": export.id}
 
 
