@@ -183,6 +183,7 @@ def app_with(database_url, tmp_path):
 
     yield make
     for other in made:
+        other.extensions["egonet.queue"].stop_consumer()  # the in-process one, when a test turned it on
         with other.app_context():
             db.engine.dispose()
 
