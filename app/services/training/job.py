@@ -179,33 +179,15 @@ def execute_run(run_id: int, *, on_progress: Callable | None = None) -> Training
         return _fail(run, exc)
     if rank != 0:
         return _train_as_follower(run, config, rank)
-    if not claim_run(run, "loading frames"):
-        return run
-    out_dir = files.scratch(run.id)
-    try:
-        with holding_lease(run):
-            recorder = _Recorder(run, files.fetch_run(run.id, out_dir), on_progress)
-            samples, folds, start = _plan(run, config, out_dir)
-            cross_validate(
-                samples, config, out_dir=out_dir, folds=folds, start=start,
-                on_progress=recorder.progress, on_fold_end=recorder.fold_end, on_map=recorder.map, on_epoch=recorder.epoch,
-            )
-    except Cancelled:
-        db.session.rollback()
-        db.session.refresh(run)
-        return run
-    except KeyboardInterrupt:  # Ctrl-C in `flask egonet train`: resumable like a cancelled run
-        db.session.rollback()
-        cancel_run(run)
-        raise
-    except Exception as exc:
-        log.exception("training run %s failed", run_id)
-        _fail(run, exc)
-        raise
-    finally:
-        shutil.rmtree(out_dir, ignore_errors=True)
-    _finish(run)
-    return run
+
+    def train(out_dir: Path, recorder: _Recorder) -> None:
+        samples, folds, start = _plan(run, config, out_dir)
+        cross_validate(
+            samples, config, out_dir=out_dir, folds=folds, start=start,
+            on_progress=recorder.progress, on_fold_end=recorder.fold_end, on_map=recorder.map, on_epoch=recorder.epoch,
+        )
+
+    return _claimed_and_run(run, train, on_progress=on_progress)
 
 
 def _execute_depth_run(run: TrainingRun, *, on_progress: Callable | None) -> TrainingRun:
@@ -215,29 +197,38 @@ def _execute_depth_run(run: TrainingRun, *, on_progress: Callable | None) -> Tra
     """
     from egonet.depth import fit_depth
 
+    def train(out_dir: Path, recorder: _Recorder) -> None:
+        result = fit_depth(
+            depth.depth_samples(run), depth.depth_config(run), out_path=out_dir / depth.CHECKPOINT,
+            on_progress=recorder.progress, on_epoch=lambda record: recorder.epoch("depth", record),
+        )
+        recorder.upload()
+        depth.record_depth_result(run, result)
+        db.session.commit()
+
+    return _claimed_and_run(run, train, on_progress=on_progress)
+
+
+def _claimed_and_run(run: TrainingRun, train: Callable[[Path, "_Recorder"], None], *,
+                     on_progress: Callable | None) -> TrainingRun:
+    """Claim the run, then ``train(out_dir, recorder)`` in this host's scratch folder (the run's files in
+    storage fetched into it) while holding its lease; running -> done, failed, or left cancelled."""
     if not claim_run(run, "loading frames"):
         return run
     out_dir = files.scratch(run.id)
     try:
         with holding_lease(run):
-            recorder = _Recorder(run, files.fetch_run(run.id, out_dir), on_progress)
-            result = fit_depth(
-                depth.depth_samples(run), depth.depth_config(run), out_path=out_dir / depth.CHECKPOINT,
-                on_progress=recorder.progress, on_epoch=lambda record: recorder.epoch("depth", record),
-            )
-            recorder.upload()
-            depth.record_depth_result(run, result)
-            db.session.commit()
+            train(out_dir, _Recorder(run, files.fetch_run(run.id, out_dir), on_progress))
     except Cancelled:
         db.session.rollback()
         db.session.refresh(run)
         return run
-    except KeyboardInterrupt:
+    except KeyboardInterrupt:  # Ctrl-C in `flask egonet train`: resumable like a cancelled run
         db.session.rollback()
         cancel_run(run)
         raise
     except Exception as exc:
-        log.exception("depth run %s failed", run.id)
+        log.exception("training run %s failed", run.id)
         _fail(run, exc)
         raise
     finally:
