@@ -81,13 +81,18 @@ def test_a_reviewer_corrects_someone_elses_mask_with_a_stroke(live_app, live_ser
         assert saved.fixed_by.username == "rev" and saved.status.value == "done"
 
 
+def box_the_object(page) -> None:
+    """A box around the frame's object, cut and saved."""
+    drag(page, [(85, 55), (245, 185)])
+    page.wait_for_function("() => window.labelPage.instances()[0]?.area > 0")
+    settle(page)
+
+
 def test_mark_done_clicked_twice_marks_the_frame_done_once(live_app, live_server, page):
     f0, *_ = dark_frames(live_app)
     sign_in(page, live_app, live_server, username="ann", role="annotator")
     open_frame(page, live_server, f0)
-    drag(page, [(85, 55), (245, 185)])
-    page.wait_for_function("() => window.labelPage.instances()[0]?.area > 0")
-    settle(page)
+    box_the_object(page)
     saves = []
     page.on("request", lambda r: saves.append(r.post_data_json) if r.method == "PUT" and r.url.endswith("/annotation") else None)
     page.dblclick("#mark-done")
@@ -138,9 +143,7 @@ def test_a_refused_box_says_why_and_leaves_nothing_behind(live_app, live_server,
     assert page.locator("#save-state").get_attribute("data-state") != "error" and page.is_hidden("#retry-op")
     screenshot(page, "traps-3-refused-box")
     # An object already there stays selected and whole.
-    drag(page, [(85, 55), (245, 185)])
-    page.wait_for_function("() => window.labelPage.instances()[0]?.area > 0")
-    settle(page)
+    box_the_object(page)
     whole = instances(page)
     drag(page, [(-4, -4), (W + 4, H + 4)])
     page.wait_for_function("() => document.querySelector('#message').textContent.includes('covers the whole frame')")
@@ -152,9 +155,7 @@ def test_a_drag_inside_the_selected_box_draws_a_new_object(live_app, live_server
     f0, *_ = dark_frames(live_app)
     sign_in(page, live_app, live_server, username="ann", role="annotator")
     open_frame(page, live_server, f0)
-    drag(page, [(85, 55), (245, 185)])
-    page.wait_for_function("() => window.labelPage.instances()[0]?.area > 0")
-    settle(page)
+    box_the_object(page)
     first = instances(page)[0]
     drag(page, [(120, 90), (200, 150)])  # inside the selected object's box, away from its edges
     page.wait_for_function("() => window.labelPage.instances().length === 2")
