@@ -89,7 +89,9 @@ def test_strokes_on_real_video_change_nothing_far():
         return after
 
     run = thin_objects.noc(lambda b: session.box(*b), stroke, case.truth)
-    assert run.noc is not None and run.noc <= 12 and len(far) >= 5
+    assert run.noc is not None and run.noc <= 12
+    while len(far) < 5:  # the box alone now takes the camel near 0.9: a few more clicks past it, each local too
+        stroke(thin_objects.click(session.mask, case.truth))
     assert far == [0] * len(far)
 
 
