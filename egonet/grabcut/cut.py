@@ -24,6 +24,10 @@ energy:
   the stroke (``_STROKE_REACH``); its models are re-estimated from the
   whole ROI.
 
+A box's cut then goes on with a foreground model of the pixels that are
+clearly the object's (``_sharpened``), so the background the box holds
+(the ground between legs) stops shaping it.
+
 A box whose cut keeps little of it and misses one of its edges is cut
 again with a path along the image's ridges to that edge as object
 (``_crossing``, the box prior), when the path is of one material.
