@@ -253,8 +253,10 @@ def _sharpened(terms: _Terms, gc: np.ndarray, low: np.ndarray, models: np.ndarra
     (``_cut``'s ``sharpen``; the background model from all the others, as
     before), for ``_SHARPEN_ITERATIONS`` more re-estimations and cuts. An
     object of several colours can lose a whole colour that way (a goat's dark
-    legs among dark rocks): the continued cut is taken only if it keeps at
-    least ``_SHARPEN_KEEP`` of the label.
+    legs among dark rocks), or move the edge where the colours are alike: the
+    continued cut is taken only if it keeps at least ``_SHARPEN_KEEP`` of the
+    label and its own models place the pixels it dropped on the background's
+    side by more than ``_SHARPEN_MARGIN`` nats on average.
 
     Args:
         terms: The grid's terms.
@@ -265,9 +267,16 @@ def _sharpened(terms: _Terms, gc: np.ndarray, low: np.ndarray, models: np.ndarra
     Returns:
         ``(label, models)``: the continued cut's, or ``low`` and ``models``.
     """
+    if not low.any():
+        return low, models
     sharp, sharp_models = _cut(terms, gc.copy(), models, _SHARPEN_ITERATIONS, sharpen=_SHARPEN_MARGIN)
     if np.count_nonzero(sharp) < _SHARPEN_KEEP * np.count_nonzero(low):
         return low, models
+    dropped = np.flatnonzero(low & ~sharp)
+    if len(dropped):
+        cost_bg, cost_fg = terms.costs(sharp_models, dropped)
+        if float(np.mean(cost_bg - cost_fg)) > -_SHARPEN_MARGIN:
+            return low, models
     return sharp, sharp_models
 
 
