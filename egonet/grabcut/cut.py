@@ -85,6 +85,7 @@ _FINE_BAND = 6  # a box's cut on the full grid moves the coarse label's edge by 
 _SHARPEN_MARGIN = 2.0  # a box's cut goes on with a foreground model of pixels it favours by this much (nats)
 _SHARPEN_ITERATIONS = 2  # ... for this many re-estimations and cuts (on the coarse grid: ``_sharpened``)
 _SHARPEN_KEEP = 0.5  # ... and is taken only if it keeps at least this fraction of the label
+_SHARPEN_EDGE = 0.05  # ... and not at all when the label covers more than this fraction of the box's outline
 
 # The terms of one cut: ``learn(bg, fg, models) -> models`` re-estimates both
 # models from the flat pixels ``bg`` and ``fg`` (bool masks); ``costs(models, pixels) -> (cost_bg, cost_fg)``
@@ -256,7 +257,10 @@ def _sharpened(terms: _Terms, gc: np.ndarray, low: np.ndarray, models: np.ndarra
     legs among dark rocks), or move the edge where the colours are alike: the
     continued cut is taken only if it keeps at least ``_SHARPEN_KEEP`` of the
     label and its own models place the pixels it dropped on the background's
-    side by more than ``_SHARPEN_MARGIN`` nats on average.
+    side by more than ``_SHARPEN_MARGIN`` nats on average. It trusts the
+    margin as background, so a box whose label runs along more than
+    ``_SHARPEN_EDGE`` of its outline (a box through the object, whose margin
+    holds more of it) is not sharpened.
 
     Args:
         terms: The grid's terms.
@@ -268,6 +272,12 @@ def _sharpened(terms: _Terms, gc: np.ndarray, low: np.ndarray, models: np.ndarra
         ``(label, models)``: the continued cut's, or ``low`` and ``models``.
     """
     if not low.any():
+        return low, models
+    ys, xs = np.nonzero(gc >= cv2.GC_PR_BGD)
+    inner = low[ys.min() : ys.max() + 1, xs.min() : xs.max() + 1]
+    ring = np.ones(inner.shape, bool)
+    ring[1:-1, 1:-1] = False
+    if inner[ring].mean() > _SHARPEN_EDGE:
         return low, models
     sharp, sharp_models = _cut(terms, gc.copy(), models, _SHARPEN_ITERATIONS, sharpen=_SHARPEN_MARGIN)
     if np.count_nonzero(sharp) < _SHARPEN_KEEP * np.count_nonzero(low):
