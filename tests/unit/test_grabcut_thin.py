@@ -9,7 +9,8 @@ import numpy as np
 import pytest
 
 from egonet.grabcut import GrabCutSession, stroke_footprint
-from egonet.grabcut.cut import _crossing, _flooded
+from egonet.grabcut.colour import _first_models
+from egonet.grabcut.cut import _crossing, _flooded, _sharpened, _Terms
 from egonet.grabcut.fine import _fine_cut
 from tests import thin_objects
 
@@ -237,3 +238,27 @@ def test_the_box_leaves_out_the_background_it_holds():
     case = thin_objects.davis_case(thin_objects.REAL_VIDEO / "camel-00024")
     mask = GrabCutSession(case.rgb).box(*thin_objects.loose_box(case.truth))
     assert thin_objects.iou(mask, case.truth) > 0.8  # 0.826 on 2026-12-04
+
+
+def test_sharpening_drops_the_margins_colour_from_the_object_unless_the_box_cuts_through_it():
+    """``_sharpened``: a pocket of the margin's colour inside the label goes; a label along the box's outline stays."""
+    rng = np.random.default_rng(0)
+    image = np.clip(rng.normal(100, 6, (80, 100, 3)), 0, 255)  # the margin's grey, and the pocket's
+    image[20:60, 20:80] = (200, 60, 50)  # the object: a red block with a grey pocket cut into it
+    image[30:60, 35:65] = np.clip(rng.normal(100, 6, (30, 30, 3)), 0, 255)
+    image = image.astype(np.uint8)
+    terms = _Terms.of_image(image)
+    box = np.zeros((80, 100), bool)
+    box[10:70, 10:90] = True
+    low = np.zeros_like(box)
+    low[20:60, 20:80] = True  # the first cut kept the pocket too
+    gc = np.where(box, np.where(low, cv2.GC_PR_FGD, cv2.GC_PR_BGD), cv2.GC_BGD).astype(np.uint8)
+    models = _first_models(image, np.where(box, cv2.GC_PR_FGD, cv2.GC_BGD).astype(np.uint8), rng)
+    sharp, _ = _sharpened(terms, gc, low, models)
+    assert not sharp[35:58, 38:62].any() and sharp[20:28, 20:80].all()  # the pocket went, the block stayed
+    # The block running out to the box's left edge (as where a box cuts through an object): left as it is.
+    along = low.copy()
+    along[20:60, 10:20] = True
+    gc = np.where(box, np.where(along, cv2.GC_PR_FGD, cv2.GC_PR_BGD), cv2.GC_BGD).astype(np.uint8)
+    image[20:60, 10:20] = (200, 60, 50)
+    assert _sharpened(_Terms.of_image(image), gc, along, models)[0] is along
