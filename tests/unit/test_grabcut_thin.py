@@ -238,14 +238,15 @@ def test_noc90_on_real_frames_with_thin_objects():
         assert not any(far), (case.name, far)
     davis = [v for k, v in scores.items() if k in ("camel", "cows", "dog", "goat", "soapbox")]
     assert len(davis) == 5
-    # 2026-12-04: 11.2 on the DAVIS frames and 7.89 on all nine (main's engine before issue 36: 11.6
+    # 2026-12-04: 10.8 on the DAVIS frames and 7.67 on all nine (main's engine before issue 36: 11.6
     # and 10.0; before the full-resolution cut of thin strokes 9.56, with it reaching 240 px and
-    # without the box prior 8.22); the goat takes all 20, the chopsticks 7 (they missed before: IoU
-    # 0.33 at 20), the knife 5 (7 without the box prior). The goal of issue 36, 5, is not met (see
-    # docs/benchmarks.md).
-    assert np.mean(davis) <= 11.4, scores
+    # without the box prior 8.22; before the flood went past colours like the stroke's 11.2 and
+    # 7.89, the soapbox 15 against 13); the goat takes all 20, the chopsticks 7 (they missed before:
+    # IoU 0.33 at 20), the knife 5 (7 without the box prior). The goal of issue 36, 5, is not met
+    # (see docs/benchmarks.md).
+    assert np.mean(davis) <= 11.0, scores
     assert sum(v < thin_objects.MAX_CLICKS for v in davis) >= 4, scores
     if len(scores) > 5:
-        assert np.mean(list(scores.values())) <= 7.9, scores
+        assert np.mean(list(scores.values())) <= 7.7, scores
         assert scores["fork-00_007850_1"] <= 2 and scores["spoon-02_024150_3"] <= 3, scores
         assert scores["knife-01_007750_6"] <= 5 and scores["chopsticks-02_024150_3"] <= 7, scores
