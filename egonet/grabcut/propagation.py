@@ -54,9 +54,15 @@ How, all inside one region of interest (ROI) at a reduced work size:
    its colour along the flow, so it is not cut off.
 6. Back to full resolution: where the cut agrees with the warp, the warp's
    soft values (sub-pixel); elsewhere the cut, smoothed; upsampled
-   bilinearly, then parts smaller than 2 % of the largest are dropped (one
-   stray speck would ruin the mask's box), unless the flow carried the
-   object there (a tail's tip, a foot past a thin ankle).
+   bilinearly. On a work grid coarser than the frame, around the cut's
+   changes the session's guided filter (:mod:`egonet.grabcut.refine`)
+   brings the cut's edge to the next frame's own edges. Then parts smaller
+   than 2 % of the largest are dropped (one stray speck would ruin the
+   mask's box), unless the flow carried the object there (a tail's tip, a
+   foot past a thin ankle). Last, on a coarse grid, a side of the mask's
+   box that the cut moved by less than one work-size pixel from the
+   flow's is put back where the flow has it: the cut cannot place an edge
+   finer than its grid, the warp's soft values can.
 
 A cut that disagrees grossly with the warped mask (overlap below 0.5, or less
 than half or more than twice its area) is a cut that failed (colours of the
