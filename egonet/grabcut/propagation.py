@@ -61,8 +61,8 @@ How, all inside one region of interest (ROI) at a reduced work size:
    mask's box), unless the flow carried the object there (a tail's tip, a
    foot past a thin ankle). Last, on a coarse grid, a side of the mask's
    box that the cut moved by less than one work-size pixel from the
-   flow's is put back where the flow has it: the cut cannot place an edge
-   finer than its grid, the warp's soft values can.
+   flow's is put back where the flow has it: the cut decides whole work
+   pixels, the warp's soft values place the edge within one.
 
 A cut that disagrees grossly with the warped mask (overlap below 0.5, or less
 than half or more than twice its area) is a cut that failed (colours of the
@@ -673,7 +673,7 @@ def carry(prev_rgb: np.ndarray, prev_mask: np.ndarray, next_rgb: np.ndarray, *,
         # ... and on a coarse grid brought to the frame's own edges by the guided filter.
         mask = _sharpened(mask, guarded, warped, roi, next_rgb)
     mask = _drop_specks(mask, fallback)
-    if roi.coarse and mask.any():
+    if roi.coarse and mask.any() and fallback.any():
         mask = _flow_extent(mask, fallback, roi)
     confidence, reason = _confidence(warp, guarded, doubt)
     return Carried(mask, confidence, confidence < UNSURE, reason)
@@ -708,13 +708,17 @@ def _sharpened(mask: np.ndarray, guarded: np.ndarray, warped: np.ndarray, roi: _
 def _flow_extent(mask: np.ndarray, fallback: np.ndarray, roi: _Roi) -> np.ndarray:
     """``mask`` with each side of its box the flow's where the cut moved it by less than a work-size pixel.
 
-    On a coarse grid the cut cannot place an edge finer than its pixels,
-    while the warp's soft values place it to a fraction of one: where the
-    carried mask's box side lies within one work-size pixel of the flow's
-    (``fallback``'s), the flow's pixels between the two sides stand (only
-    within the mask's extent along the side, so the flow's pixels cannot
-    widen the other sides). A side the cut moved by a work-size pixel or
-    more is a change the guard (:func:`_guard`) judged; it stays.
+    On a coarse grid the cut decides whole work-size pixels, while the warp's
+    soft values place the flow's edge to a fraction of one: a side of the
+    carried mask's box within one work-size pixel of the flow's
+    (``fallback``'s) is a disagreement below the cut's own resolution, and
+    the flow's pixels between the two sides stand (only within the mask's
+    extent along the side, so they cannot widen the other sides). This
+    keeps the box from ever being worse than the flow's by the cut's
+    quantisation; it gives up the cut's sub-pixel moves that were right
+    (more than those that were wrong; docs/benchmarks.md has the cost). A
+    side the cut moved by a work-size pixel or more is a change the guard
+    (:func:`_guard`) judged; it stays.
     """
     box, flow = _box(mask), _box(fallback)
     step = ((roi.x1 - roi.x0) / roi.w, (roi.y1 - roi.y0) / roi.h)
