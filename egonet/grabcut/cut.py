@@ -61,6 +61,7 @@ from skimage.segmentation import watershed
 
 from egonet.grabcut.colour import _costs, _first_models, _fit_model, _learn
 from egonet.grabcut.depth import (_Z_SCALE, _depth_costs, _DepthGuide, _fallback_z, _first_model, _learn_depth)
+from egonet.grabcut.fine import _like
 from egonet.grabcut.geometry import _Geometry
 from egonet.grabcut.graph import _CutGraph, _links
 from egonet.grabcut.refine import _Guide
@@ -538,16 +539,41 @@ def _recut(terms: _Terms, guide: _Guide, models: np.ndarray, strokes: tuple[_Str
         last = strokes[-1]
         hits = [(*hit, True)] + [(*guide.footprint(s), s.fg == last.fg) for s in strokes[:-1]
                                  if guide.footprint(s) is not None]
-        # What surely is of the other label: the sure pixels, and those its colour model clearly prefers.
+        # What surely is of the other label: the sure pixels, and those its colour model clearly prefers
+        # unless they are like the stroke's own colours (``_unlike``).
         cost_bg, cost_fg = terms.costs(models, np.arange(gc.size))
         favour = (cost_fg - cost_bg) if last.fg else (cost_bg - cost_fg)
-        sure = (gc == (cv2.GC_BGD if last.fg else cv2.GC_FGD)) | (favour.reshape(gc.shape) > _SURE_MARGIN)
-        region = _flooded(guide.image, ~prior if last.fg else prior, hits, _STROKE_REACH if reach is None else reach,
-                          _FLOOD_SMOOTH, sure)
+        reach = _STROKE_REACH if reach is None else reach
+        clear = (favour.reshape(gc.shape) > _SURE_MARGIN) & _unlike(guide.image, *hit, reach)
+        sure = (gc == (cv2.GC_BGD if last.fg else cv2.GC_FGD)) | clear
+        region = _flooded(guide.image, ~prior if last.fg else prior, hits, reach, _FLOOD_SMOOTH, sure)
         low = (low | region) if last.fg else (low & ~region)
     if hit is not None:
         low = _keep_connected(low, prior, *hit, _NEAR_GRID)
     return low, models
+
+
+def _unlike(image: np.ndarray, crop: np.ndarray, origin: tuple[int, int], reach: int) -> np.ndarray:
+    """The grid's pixels unlike the colours under a stroke (``fine._like``), tested within ``reach`` of it.
+
+    Pixels further away, and all of them under a stroke of fewer than 2
+    pixels, count as unlike.
+
+    The flood stops at pixels the other label's colour model clearly
+    prefers, but that model, learnt from the whole box, often holds the very
+    colours the stroke was drawn on (a goat's white leg and the white rocks
+    behind it, a driver's arm and the wall): a pixel like the stroke's own
+    colours is no sure sign of the other label, so it does not stop the flood
+    (it may still be cut off by the image's edges).
+    """
+    y0, x0 = origin
+    pixels = image[y0 : y0 + crop.shape[0], x0 : x0 + crop.shape[1]][crop]
+    unlike = np.ones(image.shape[:2], bool)
+    if len(pixels) >= 2:
+        r0, c0 = max(0, y0 - reach), max(0, x0 - reach)
+        window = image[r0 : y0 + crop.shape[0] + reach, c0 : x0 + crop.shape[1] + reach]
+        unlike[r0 : r0 + window.shape[0], c0 : c0 + window.shape[1]] = ~_like(pixels, window).reshape(window.shape[:2])
+    return unlike
 
 
 def _flooded(image: np.ndarray, against: np.ndarray, hits: list[tuple[np.ndarray, tuple[int, int], bool]],

@@ -44,6 +44,18 @@ def _joined(part: np.ndarray, seed: np.ndarray) -> np.ndarray:
     return joined[parts]
 
 
+def _like(stroke: np.ndarray, pixels: np.ndarray) -> np.ndarray:
+    """Which ``pixels`` (``(n, 3)``) are like the colours of a stroke's ``stroke`` (``(k, 3)``, k >= 2).
+
+    Like them: within ``_LIKE`` (squared Mahalanobis distance) of their mean,
+    under their covariance widened by 4 (2 levels of noise each channel).
+    """
+    stroke = stroke.astype(np.float64)
+    inverse = np.linalg.inv(np.cov(stroke.T) + 4.0 * np.eye(3))
+    d = pixels.reshape(-1, 3) - stroke.mean(axis=0)
+    return np.einsum("ni,ij,nj->n", d, inverse, d) < _LIKE
+
+
 def _fine_cut(image: np.ndarray, mask: np.ndarray, own: np.ndarray, origin: tuple[int, int], fg: bool,
               radius: float) -> np.ndarray | None:
     """What a stroke on a thin part gives its label at full resolution, or None when it is on no thin part.
@@ -68,9 +80,7 @@ def _fine_cut(image: np.ndarray, mask: np.ndarray, own: np.ndarray, origin: tupl
         return None
     flip = np.zeros((h, w), bool)
     limit = _WIDER * radius + 2
-    stroke = image[y0 : y0 + own.shape[0], x0 : x0 + own.shape[1]][own].astype(np.float64)
-    inverse = np.linalg.inv(np.cov(stroke.T) + 4.0 * np.eye(3))
-    mean = stroke.mean(axis=0)
+    stroke = image[y0 : y0 + own.shape[0], x0 : x0 + own.shape[1]][own]
 
     def window(reach: int) -> tuple[int, int, int, int, np.ndarray, np.ndarray, np.ndarray]:
         """``(r0, c0, r1, c1)``, the stroke's label, the stroke and the pixels like it, within ``reach``."""
@@ -78,8 +88,7 @@ def _fine_cut(image: np.ndarray, mask: np.ndarray, own: np.ndarray, origin: tupl
         c0, c1 = max(0, x0 - reach), min(w, x0 + own.shape[1] + reach)
         hard = np.zeros((r1 - r0, c1 - c0), bool)
         hard[y0 - r0 : y0 - r0 + own.shape[0], x0 - c0 : x0 - c0 + own.shape[1]] = own
-        d = image[r0:r1, c0:c1].reshape(-1, 3) - mean
-        like = (np.einsum("ni,ij,nj->n", d, inverse, d) < _LIKE).reshape(hard.shape)
+        like = _like(stroke, image[r0:r1, c0:c1]).reshape(hard.shape)
         return r0, c0, r1, c1, (mask[r0:r1, c0:c1] == fg) | hard, hard, like
 
     # Thin where the part of the stroke's colour around it is at most ``limit`` wide.

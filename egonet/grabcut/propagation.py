@@ -54,9 +54,15 @@ How, all inside one region of interest (ROI) at a reduced work size:
    its colour along the flow, so it is not cut off.
 6. Back to full resolution: where the cut agrees with the warp, the warp's
    soft values (sub-pixel); elsewhere the cut, smoothed; upsampled
-   bilinearly, then parts smaller than 2 % of the largest are dropped (one
-   stray speck would ruin the mask's box), unless the flow carried the
-   object there (a tail's tip, a foot past a thin ankle).
+   bilinearly. On a work grid coarser than the frame, around the cut's
+   changes the session's guided filter (:mod:`egonet.grabcut.refine`)
+   brings the cut's edge to the next frame's own edges. Then parts smaller
+   than 2 % of the largest are dropped (one stray speck would ruin the
+   mask's box), unless the flow carried the object there (a tail's tip, a
+   foot past a thin ankle). Last, on a coarse grid, a side of the mask's
+   box that the cut moved by less than one work-size pixel from the
+   flow's is put back where the flow has it: the cut decides whole work
+   pixels, the warp's soft values place the edge within one.
 
 A cut that disagrees grossly with the warped mask (overlap below 0.5, or less
 than half or more than twice its area) is a cut that failed (colours of the
@@ -90,6 +96,8 @@ import numpy as np
 
 from egonet.errors import EgonetError
 from egonet.grabcut.colour import _costs, _fit_model
+from egonet.grabcut.geometry import _Geometry
+from egonet.grabcut.refine import _Guide, _upsample_mask
 
 _WORK_SIZE = 320  # long side of the ROI for flow and cut, pixels
 _MARGIN = 0.5  # ROI margin around the object's box, fraction of its long side
@@ -132,6 +140,11 @@ class _Roi:
         if part.shape[1] == self.w and part.shape[0] == self.h:
             return np.ascontiguousarray(part)
         return cv2.resize(part, (self.w, self.h), interpolation=interpolation)
+
+    @property
+    def coarse(self) -> bool:
+        """Whether the work grid is coarser than the frame's own pixels."""
+        return (self.w, self.h) != (self.x1 - self.x0, self.y1 - self.y0)
 
     def paste(self, low: np.ndarray, shape: tuple[int, int]) -> np.ndarray:
         """A float work-size map in [0, 1] upsampled into a bool full-frame mask (threshold 0.5)."""
@@ -631,7 +644,7 @@ def carry(prev_rgb: np.ndarray, prev_mask: np.ndarray, next_rgb: np.ndarray, *,
     # pixels, the strip along the warped edge (snapping it to the image's edge). On a reduced grid
     # the warp's soft values place the edge finer than the cut's coarse pixels can.
     support = doubt.copy()
-    if (roi.w, roi.h) == (roi.x1 - roi.x0, roi.y1 - roi.y0):
+    if not roi.coarse:
         support |= cv2.morphologyEx(warped.view(np.uint8), cv2.MORPH_GRADIENT, _disk(_EDGE)).astype(bool)
     away = np.zeros_like(warped)
     if next_depth is not None:
@@ -653,10 +666,72 @@ def carry(prev_rgb: np.ndarray, prev_mask: np.ndarray, next_rgb: np.ndarray, *,
     guarded = _guard(label, warped, support, _backed(warp, models, label, warped, doubt, band) | away)
     # Where the result agrees with the warp, the warp's soft values place the edge
     # to a fraction of a work-size pixel; elsewhere the cut, smoothed so the
-    # bilinear upsample gives a clean edge instead of work-size stairs.
+    # bilinear upsample gives a clean edge instead of work-size stairs ...
     soft = np.where(guarded == warped, warp.warped_low, cv2.GaussianBlur(guarded.astype(np.float32), (0, 0), 0.7))
+    mask = roi.paste(soft, shape)
+    if roi.coarse:
+        # ... and on a coarse grid brought to the frame's own edges by the guided filter.
+        mask = _sharpened(mask, guarded, warped, roi, next_rgb)
+    mask = _drop_specks(mask, fallback)
+    if roi.coarse and mask.any() and fallback.any():
+        mask = _flow_extent(mask, fallback, roi)
     confidence, reason = _confidence(warp, guarded, doubt)
-    return Carried(_drop_specks(roi.paste(soft, shape), fallback), confidence, confidence < UNSURE, reason)
+    return Carried(mask, confidence, confidence < UNSURE, reason)
+
+
+def _sharpened(mask: np.ndarray, guarded: np.ndarray, warped: np.ndarray, roi: _Roi,
+               next_rgb: np.ndarray) -> np.ndarray:
+    """``mask`` with the cut's changes to the warped mask refined at full resolution.
+
+    Around each work-size pixel where ``guarded`` differs from ``warped`` (and
+    one pixel beyond), the full-resolution mask is the session's guided-filter
+    upsampling of ``guarded`` (:func:`egonet.grabcut.refine._upsample_mask`):
+    the cut's edge follows the next frame's colours instead of the work grid.
+    Elsewhere the warp's soft edge stands.
+    """
+    near = cv2.dilate((guarded != warped).view(np.uint8), _disk(1))
+    if not near.any():
+        return mask
+    x, y, w, h = cv2.boundingRect(near)
+    rect = (roi.x0, roi.y0, roi.x1, roi.y1)
+    guide = _Guide.build(_Geometry(rect, rect, roi.w, roi.h), next_rgb)
+    part, (oy, ox) = _upsample_mask(guide, next_rgb, guarded, (y, y + h, x, x + w))
+    # The full-resolution pixels whose nearest work-size pixel is near a change (as _upsample_mask maps them).
+    near_c = np.minimum(((np.arange(ox, ox + part.shape[1]) - roi.x0 + 0.5) * guide.geom.sx).astype(np.intp), roi.w - 1)
+    near_r = np.minimum(((np.arange(oy, oy + part.shape[0]) - roi.y0 + 0.5) * guide.geom.sy).astype(np.intp), roi.h - 1)
+    take = near[np.ix_(near_r, near_c)].astype(bool)
+    out = mask.copy()
+    out[oy : oy + part.shape[0], ox : ox + part.shape[1]][take] = part[take]
+    return out
+
+
+def _flow_extent(mask: np.ndarray, fallback: np.ndarray, roi: _Roi) -> np.ndarray:
+    """``mask`` with each side of its box the flow's where the cut moved it by less than a work-size pixel.
+
+    On a coarse grid the cut decides whole work-size pixels, while the warp's
+    soft values place the flow's edge to a fraction of one: a side of the
+    carried mask's box within one work-size pixel of the flow's
+    (``fallback``'s) is a disagreement below the cut's own resolution, and
+    the flow's pixels between the two sides stand (only within the mask's
+    extent along the side, so they cannot widen the other sides). This
+    keeps the box from ever being worse than the flow's by the cut's
+    quantisation; it gives up the cut's sub-pixel moves that were right
+    (more than those that were wrong; docs/benchmarks.md has the cost). A
+    side the cut moved by a work-size pixel or more is a change the guard
+    (:func:`_guard`) judged; it stays.
+    """
+    box, flow = _box(mask), _box(fallback)
+    step = ((roi.x1 - roi.x0) / roi.w, (roi.y1 - roi.y0) / roi.h)
+    out = mask.copy()
+    for side in range(4):
+        gap = box[side] - flow[side]
+        if gap == 0 or abs(gap) >= step[side % 2]:
+            continue
+        lo, hi = sorted((box[side], flow[side]))
+        # Columns lo:hi within the mask's rows (x sides), or rows lo:hi within its columns (y sides).
+        strip = (np.s_[box[1] : box[3], lo:hi] if side % 2 == 0 else np.s_[lo:hi, box[0] : box[2]])
+        out[strip] = fallback[strip]
+    return out
 
 
 def propagate(prev_rgb: np.ndarray, prev_mask: np.ndarray, next_rgb: np.ndarray, *,

@@ -3,6 +3,7 @@
 import doctest
 import importlib
 import io
+import math
 import pkgutil
 import subprocess
 import sys
@@ -14,6 +15,8 @@ import pytest
 import egonet.grabcut as grabcut
 from egonet import synth
 from egonet.grabcut import GrabCutSession, stroke_footprint
+from egonet.grabcut.cut import _NEAR_GRID, _STROKE_REACH, _keep_connected
+from egonet.grabcut.strokes import _polyline_distance_mask
 
 
 def _iou(a: np.ndarray, b: np.ndarray) -> float:
@@ -216,11 +219,16 @@ def test_fg_stroke_outside_box_grows_it(session, scene):
                                              ([(130, 75), (140, 78)], "bg")])
 def test_stroke_update_is_local_and_exact(session, points, label):
     # The first stroke after a box: redoing only the changed window equals
-    # redoing the whole ROI (then combined the stroke's way).
+    # redoing the whole ROI (then combined the stroke's way, and kept local:
+    # changes not joined to the stroke revert, ``cut._keep_connected``).
     before = session.mask
     mask = session.stroke(points, label, 3)
     full = session._full_mask(session._guide, session._now)
-    np.testing.assert_array_equal(mask, (before | full) if label == "fg" else (before & full))
+    grid = min(session._guide.geom.sx, session._guide.geom.sy)
+    local = _keep_connected((before | full) if label == "fg" else (before & full), before,
+                            *_polyline_distance_mask(mask.shape, np.asarray(points, float), 3),
+                            math.ceil(_NEAR_GRID / grid), math.ceil(_STROKE_REACH / grid))
+    np.testing.assert_array_equal(mask, local)
 
 
 def test_strokes_only_move_the_mask_their_way():

@@ -256,9 +256,9 @@ def test_real_video_every_frame_is_carried_both_ways_no_worse_than_the_flow():
     # camera, legs and tails swinging), upscaled to the app's 1408x1408: the
     # mask carried to the next (and the previous) frame keeps the object's box
     # on every frame, not only on average; the cut, overruled where the image
-    # does not back it, leaves no object (a window's mean over its pairs, both
-    # ways) below the flow it starts from and no pair more than a pixel's
-    # worth below it; and none of these carried masks is called unsure.
+    # does not back it, leaves no carried mask and so no object (a window's
+    # mean over its pairs, both ways) below the flow it starts from; and none
+    # of these carried masks is called unsure.
     ours, flow, objects = [], [], []
     for window in sorted(p for p in REAL_VIDEO.iterdir() if p.is_dir()):
         frames = [(cv2.resize(_read_rgb(p), (1408, 1408), interpolation=cv2.INTER_CUBIC),
@@ -278,7 +278,7 @@ def test_real_video_every_frame_is_carried_both_ways_no_worse_than_the_flow():
     assert ours.min() >= 0.9 and ours.mean() >= 0.95, (ours.min(), ours.mean())
     assert ours.mean() >= flow.mean(), (ours.mean(), flow.mean())
     assert all(d >= 0 for _, d in objects), objects
-    assert (ours >= flow - 0.005).all(), np.min(ours - flow)
+    assert (ours >= flow).all(), np.min(ours - flow)
 
 
 @pytest.mark.skipif(not REAL_VIDEO.is_dir(), reason="real video fixtures not present")
@@ -294,6 +294,20 @@ def test_a_part_that_looks_like_the_background_in_both_frames_is_not_cut_off(win
     for i, j in pairs:
         (rgb0, m0), (rgb1, m1) = frames[i], frames[j]
         assert _box_iou(propagate(rgb0, m0, rgb1), m1) >= _box_iou(warp_mask(rgb0, m0, rgb1), m1) - 0.005
+
+
+@pytest.mark.skipif(not REAL_VIDEO.is_dir(), reason="real video fixtures not present")
+def test_a_box_side_the_cut_moves_by_less_than_a_work_pixel_is_the_flow_s():
+    # The camel's feet, frame 1 to 2 at 1408x1408 (a work pixel is 4.4 frame
+    # pixels): the cut adds a foot the flow left behind, its bottom a work
+    # pixel row below the truth's, 3 frame pixels below the flow's bottom
+    # (box IoU 0.978 against the flow's 0.981). The flow's side stands.
+    frames = [(cv2.resize(_read_rgb(p), (1408, 1408), interpolation=cv2.INTER_CUBIC),
+               cv2.resize(cv2.imread(str(p.with_suffix(".png")), cv2.IMREAD_GRAYSCALE), (1408, 1408),
+                          interpolation=cv2.INTER_NEAREST) > 127)
+              for p in sorted((REAL_VIDEO / "camel-00024").glob("*.jpg"))[1:3]]
+    (rgb1, m1), (rgb2, m2) = frames
+    assert _box_iou(propagate(rgb1, m1, rgb2), m2) >= _box_iou(warp_mask(rgb1, m1, rgb2), m2)
 
 
 def test_an_object_gone_from_the_next_frame_is_unsure_and_says_why():
