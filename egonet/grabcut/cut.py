@@ -86,7 +86,7 @@ _FINE_BAND = 6  # a box's cut on the full grid moves the coarse label's edge by 
 _SHARPEN_MARGIN = 2.0  # a box's cut goes on with a foreground model of pixels it favours by this much (nats)
 _SHARPEN_ITERATIONS = 2  # ... for this many re-estimations and cuts (on the coarse grid: ``_sharpened``)
 _SHARPEN_KEEP = 0.5  # ... and is taken only if it keeps at least this fraction of the label
-_SHARPEN_EDGE = 0.05  # ... and not at all when the label covers more than this fraction of the box's outline
+_SHARPEN_EDGE = 0.02  # ... and not at all when the label covers more than this fraction of the box's outline
 
 # The terms of one cut: ``learn(bg, fg, models) -> models`` re-estimates both
 # models from the flat pixels ``bg`` and ``fg`` (bool masks); ``costs(models, pixels) -> (cost_bg, cost_fg)``
