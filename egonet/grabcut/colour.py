@@ -165,6 +165,6 @@ def _refit(x: np.ndarray, model: np.ndarray) -> np.ndarray:
     return np.concatenate([weights, means.ravel(), covs.ravel()])
 
 
-def _learn(x: np.ndarray, is_fg: np.ndarray, models: np.ndarray) -> np.ndarray:
-    """Both ``(2, 65)`` models re-estimated from the samples ``x (N, 3)`` split by ``is_fg`` (both sides non-empty)."""
-    return np.stack([_refit(x[~is_fg], models[0]), _refit(x[is_fg], models[1])])
+def _learn(x: np.ndarray, bg: np.ndarray, fg: np.ndarray, models: np.ndarray) -> np.ndarray:
+    """Both ``(2, 65)`` models re-estimated from the samples ``x (N, 3)``: ``x[bg]`` and ``x[fg]`` (both non-empty)."""
+    return np.stack([_refit(x[bg], models[0]), _refit(x[fg], models[1])])

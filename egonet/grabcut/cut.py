@@ -24,6 +24,10 @@ energy:
   the stroke (``_STROKE_REACH``); its models are re-estimated from the
   whole ROI.
 
+A box's cut then goes on with a foreground model of the pixels that are
+clearly the object's (``_sharpened``), so the background the box holds
+(the ground between legs) stops shaping it.
+
 A box whose cut keeps little of it and misses one of its edges is cut
 again with a path along the image's ridges to that edge as object
 (``_crossing``, the box prior), when the path is of one material.
@@ -79,11 +83,15 @@ _CROSSING_BAND = 0.1  # the box prior's bands along the box's edges, a fraction 
 _COHERENT = 0.4  # ... a path counts if its colours spread at most this many times as much as the box's
 _CROSSING_ITERATIONS = 2  # re-estimation + cut with the path as sure object
 _FINE_BAND = 6  # a box's cut on the full grid moves the coarse label's edge by at most this many grid pixels
+_SHARPEN_MARGIN = 2.0  # a box's cut goes on with a foreground model of pixels it favours by this much (nats)
+_SHARPEN_ITERATIONS = 2  # ... for this many re-estimations and cuts (on the coarse grid: ``_sharpened``)
+_SHARPEN_KEEP = 0.5  # ... and is taken only if it keeps at least this fraction of the label
+_SHARPEN_EDGE = 0.02  # ... and not at all when the label covers more than this fraction of the box's outline
 
-# The terms of one cut: ``learn(is_fg, models) -> models`` re-estimates both
-# models from the flat labels; ``costs(models, pixels) -> (cost_bg, cost_fg)``
+# The terms of one cut: ``learn(bg, fg, models) -> models`` re-estimates both
+# models from the flat pixels ``bg`` and ``fg`` (bool masks); ``costs(models, pixels) -> (cost_bg, cost_fg)``
 # are ``-log p`` of the flat pixels under each; ``links`` the pairwise links.
-_Learn = Callable[[np.ndarray, np.ndarray], np.ndarray]
+_Learn = Callable[[np.ndarray, np.ndarray, np.ndarray], np.ndarray]
 _Costs = Callable[[np.ndarray, np.ndarray], tuple[np.ndarray, np.ndarray]]
 
 
@@ -96,19 +104,19 @@ class _Terms:
     @classmethod
     def colour(cls, guide: _Guide) -> _Terms:
         x = guide.pixels
-        return cls(guide.links, lambda is_fg, models: _learn(x, is_fg, models),
+        return cls(guide.links, lambda bg, fg, models: _learn(x, bg, fg, models),
                    lambda models, pixels: (_costs(models[0], x[pixels]), _costs(models[1], x[pixels])))
 
     @classmethod
     def of_image(cls, image: np.ndarray) -> _Terms:
         """Colour terms of a uint8 ``(h, w, 3)`` image that has no guide (a coarse grid, the whole frame)."""
         x = image.reshape(-1, 3).astype(np.float32)
-        return cls(_links(image), lambda is_fg, models: _learn(x, is_fg, models),
+        return cls(_links(image), lambda bg, fg, models: _learn(x, bg, fg, models),
                    lambda models, pixels: (_costs(models[0], x[pixels]), _costs(models[1], x[pixels])))
 
     @classmethod
     def depth(cls, guide: _DepthGuide) -> _Terms:
-        return cls(guide.links, lambda is_fg, models: _learn_depth(guide, is_fg, models),
+        return cls(guide.links, lambda bg, fg, models: _learn_depth(guide, bg, fg, models),
                    lambda models, pixels: _depth_costs(guide, models, pixels))
 
 
@@ -118,8 +126,8 @@ def _graph_for(terms: _Terms, gc: np.ndarray) -> _CutGraph:
     return _CutGraph(terms.links, (flat & 1).astype(bool), np.flatnonzero(flat >= cv2.GC_PR_BGD))
 
 
-def _cut(terms: _Terms, gc: np.ndarray, models: np.ndarray, iterations: int, *,
-         frozen: bool = False, graph: _CutGraph | None = None) -> tuple[np.ndarray, np.ndarray]:
+def _cut(terms: _Terms, gc: np.ndarray, models: np.ndarray, iterations: int, *, frozen: bool = False,
+         graph: _CutGraph | None = None, sharpen: float | None = None) -> tuple[np.ndarray, np.ndarray]:
     """Iterate re-estimation and the minimum cut, as ``cv2.grabCut`` in ``GC_EVAL`` mode.
 
     Each iteration re-estimates the models from the current labels
@@ -139,6 +147,9 @@ def _cut(terms: _Terms, gc: np.ndarray, models: np.ndarray, iterations: int, *,
         graph: A graph of the same grid made for the same undecided pixels
             and fixed labels (``_graph_for``), already cut with other costs:
             its flow is reused. None makes a new one.
+        sharpen: Fit the foreground model only on its pixels that the
+            current models place on the foreground's side by more than this
+            (nats; ``_sharpened``). None: on all of them.
 
     Returns:
         ``(label, models)``: the bool foreground label and the new models.
@@ -151,7 +162,12 @@ def _cut(terms: _Terms, gc: np.ndarray, models: np.ndarray, iterations: int, *,
         is_fg = (flat & 1).astype(bool)
         learn = not frozen and is_fg.any() and not is_fg.all()
         if learn:
-            models = terms.learn(is_fg, models)
+            fg = is_fg
+            if sharpen is not None:
+                cost_bg, cost_fg = terms.costs(models, np.arange(is_fg.size))
+                fg = is_fg & (cost_bg - cost_fg > sharpen)
+                fg = fg if fg.any() else is_fg
+            models = terms.learn(~is_fg, fg, models)
         before = flat[free] & 1
         flat[free] = np.where(graph.cut(*terms.costs(models, free)), cv2.GC_PR_FGD, cv2.GC_PR_BGD)
         if not learn or np.count_nonzero(before != (flat[free] & 1)) <= _CONVERGED * max(1, len(free)):
@@ -200,7 +216,7 @@ def _upsampled_labels(geom: _Geometry, coarse_low: np.ndarray) -> np.ndarray:
 
 
 def _coarse_to_fine(fine: _Terms, geom: _Geometry, gc: np.ndarray, coarse: _Terms, coarse_gc: np.ndarray,
-                    models: np.ndarray, iterations: int) -> tuple[np.ndarray, np.ndarray]:
+                    models: np.ndarray, iterations: int, *, sharpen: bool = False) -> tuple[np.ndarray, np.ndarray]:
     """A box's iterations: all but the last on the coarse grid, the last on the full one.
 
     While the models settle, a cut on a quarter of the pixels does as well;
@@ -215,13 +231,64 @@ def _coarse_to_fine(fine: _Terms, geom: _Geometry, gc: np.ndarray, coarse: _Term
         coarse_gc: The coarse grid's box labels; updated in place.
         models: The models to start from.
         iterations: Iterations in all.
+        sharpen: Continue the coarse cut with ``_sharpened`` before the full grid.
 
     Returns:
         ``(label, models)``.
     """
     coarse_low, models = _cut(coarse, coarse_gc, models, iterations - 1)
+    if sharpen:
+        coarse_low, models = _sharpened(coarse, coarse_gc, coarse_low, models)
     gc[...] = _upsampled_labels(geom, coarse_low)
     return _cut(fine, gc, models, 1)
+
+
+def _sharpened(terms: _Terms, gc: np.ndarray, low: np.ndarray, models: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """A box's cut continued with a foreground model of the pixels that are clearly the object's.
+
+    A box's foreground model starts from everything in the box, so it also
+    learns the background the box holds (the ground between an animal's
+    legs, a fence behind its back); where that background is also in the
+    margin, both models explain it and the cut keeps it. Here the
+    foreground model is fitted only on the pixels of the label that the
+    models place on the object's side by more than ``_SHARPEN_MARGIN`` nats
+    (``_cut``'s ``sharpen``; the background model from all the others, as
+    before), for ``_SHARPEN_ITERATIONS`` more re-estimations and cuts. An
+    object of several colours can lose a whole colour that way (a goat's dark
+    legs among dark rocks), or move the edge where the colours are alike: the
+    continued cut is taken only if it keeps at least ``_SHARPEN_KEEP`` of the
+    label and its own models place the pixels it dropped on the background's
+    side by more than ``_SHARPEN_MARGIN`` nats on average. It trusts the
+    margin as background, so a box whose label runs along more than
+    ``_SHARPEN_EDGE`` of its outline (a box through the object, whose margin
+    holds more of it) is not sharpened.
+
+    Args:
+        terms: The grid's terms.
+        gc: The grid's labels after the box's cut (``low`` undecided in the box); not changed.
+        low: The box's label on that grid.
+        models: Its models.
+
+    Returns:
+        ``(label, models)``: the continued cut's, or ``low`` and ``models``.
+    """
+    if not low.any():
+        return low, models
+    ys, xs = np.nonzero(gc >= cv2.GC_PR_BGD)
+    inner = low[ys.min() : ys.max() + 1, xs.min() : xs.max() + 1]
+    ring = np.ones(inner.shape, bool)
+    ring[1:-1, 1:-1] = False
+    if inner[ring].mean() > _SHARPEN_EDGE:
+        return low, models
+    sharp, sharp_models = _cut(terms, gc.copy(), models, _SHARPEN_ITERATIONS, sharpen=_SHARPEN_MARGIN)
+    if np.count_nonzero(sharp) < _SHARPEN_KEEP * np.count_nonzero(low):
+        return low, models
+    dropped = np.flatnonzero(low & ~sharp)
+    if len(dropped):
+        cost_bg, cost_fg = terms.costs(sharp_models, dropped)
+        if float(np.mean(cost_bg - cost_fg)) > -_SHARPEN_MARGIN:
+            return low, models
+    return sharp, sharp_models
 
 
 def _box_cut(frame: np.ndarray, guide: _Guide, gc: np.ndarray, work_size: int) -> tuple[np.ndarray, np.ndarray]:
@@ -252,7 +319,8 @@ def _box_cut(frame: np.ndarray, guide: _Guide, gc: np.ndarray, work_size: int) -
         small_geom, small_gc = coarse
         image = _resize(frame, small_geom)
         initial = _first_models(image, small_gc, np.random.default_rng(0))
-        low, models = _coarse_to_fine(terms, geom, gc, _Terms.of_image(image), small_gc, initial, _BOX_ITERATIONS)
+        low, models = _coarse_to_fine(terms, geom, gc, _Terms.of_image(image), small_gc, initial, _BOX_ITERATIONS,
+                                      sharpen=True)
     if low[rows, cols].mean() < _SPARSE:
         low, models = _rescue(frame, guide, start, low, models, work_size, graph)
     if low[rows, cols].mean() < _SPARSE:
@@ -727,7 +795,7 @@ def _seed_cut(terms: _Terms, geom: _Geometry, seed: np.ndarray, band: int,
         ``(label, models)``: the seed itself when ``band`` is 0.
     """
     models = first(np.where(seed, cv2.GC_PR_FGD, cv2.GC_BGD).astype(np.uint8))
-    models = terms.learn(seed.ravel(), models)
+    models = terms.learn(~seed.ravel(), seed.ravel(), models)
     if band <= 0:
         return seed.copy(), models
     return _cut(terms, _seed_labels(geom, seed, band), models, _BOX_ITERATIONS)

@@ -247,8 +247,8 @@ def _fallback_z(guide: _DepthGuide) -> float:
     return float(guide.features[..., 3][guide.valid].mean()) if guide.valid.any() else 0.0
 
 
-def _learn_depth(guide: _DepthGuide, is_fg: np.ndarray, models: np.ndarray) -> np.ndarray:
-    """Both ``(2, 105)`` models re-estimated from the ROI's pixels split by ``is_fg`` (flat, both sides non-empty).
+def _learn_depth(guide: _DepthGuide, bg: np.ndarray, fg: np.ndarray, models: np.ndarray) -> np.ndarray:
+    """Both ``(2, 105)`` models re-estimated from the ROI's flat pixels ``bg`` and ``fg`` (both non-empty).
 
     Each pixel joins its most likely component of its own side and the
     models are refitted from those (OpenCV's learning step, with depth).
@@ -257,7 +257,7 @@ def _learn_depth(guide: _DepthGuide, is_fg: np.ndarray, models: np.ndarray) -> n
     valid = guide.valid.ravel()
     fallback = _fallback_z(guide)
     out = []
-    for model, side in ((models[0], ~is_fg), (models[1], is_fg)):
+    for model, side in ((models[0], bg), (models[1], fg)):
         xs, vs = x[side], valid[side]
         out.append(_fit_components(xs, vs, _best_rows(_component_scores(model, xs, vs)), fallback))
     return np.stack(out)

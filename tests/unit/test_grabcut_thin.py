@@ -9,7 +9,8 @@ import numpy as np
 import pytest
 
 from egonet.grabcut import GrabCutSession, stroke_footprint
-from egonet.grabcut.cut import _crossing, _flooded
+from egonet.grabcut.colour import _first_models
+from egonet.grabcut.cut import _crossing, _flooded, _sharpened, _Terms
 from egonet.grabcut.fine import _fine_cut
 from tests import thin_objects
 
@@ -89,7 +90,9 @@ def test_strokes_on_real_video_change_nothing_far():
         return after
 
     run = thin_objects.noc(lambda b: session.box(*b), stroke, case.truth)
-    assert run.noc is not None and run.noc <= 12 and len(far) >= 5
+    assert run.noc is not None and run.noc <= 12
+    while len(far) < 5:  # the box alone now takes the camel near 0.9: a few more clicks past it, each local too
+        stroke(thin_objects.click(session.mask, case.truth))
     assert far == [0] * len(far)
 
 
@@ -238,15 +241,51 @@ def test_noc90_on_real_frames_with_thin_objects():
         assert not any(far), (case.name, far)
     davis = [v for k, v in scores.items() if k in ("camel", "cows", "dog", "goat", "soapbox")]
     assert len(davis) == 5
-    # 2026-12-04: 10.8 on the DAVIS frames and 7.67 on all nine (main's engine before issue 36: 11.6
+    # 2026-12-04: 9.2 on the DAVIS frames and 6.78 on all nine (main's engine before issue 36: 11.6
     # and 10.0; before the full-resolution cut of thin strokes 9.56, with it reaching 240 px and
     # without the box prior 8.22; before the flood went past colours like the stroke's 11.2 and
-    # 7.89, the soapbox 15 against 13); the goat takes all 20, the chopsticks 7 (they missed before:
-    # IoU 0.33 at 20), the knife 5 (7 without the box prior). The goal of issue 36, 5, is not met
-    # (see docs/benchmarks.md).
-    assert np.mean(davis) <= 11.0, scores
+    # 7.89, with it 10.8 and 7.67; with the box's sharpened foreground model too, the camel 8 -> 4,
+    # the cows 10 -> 8, the dog 3 -> 2, the soapbox 13 -> 12); the goat takes all 20, the chopsticks
+    # 7 (they missed before: IoU 0.33 at 20), the knife 5 (7 without the box prior). The goal of
+    # issue 36, 5, is not met (see docs/benchmarks.md).
+    assert np.mean(davis) <= 9.4, scores
     assert sum(v < thin_objects.MAX_CLICKS for v in davis) >= 4, scores
     if len(scores) > 5:
-        assert np.mean(list(scores.values())) <= 7.7, scores
+        assert np.mean(list(scores.values())) <= 6.8, scores
         assert scores["fork-00_007850_1"] <= 2 and scores["spoon-02_024150_3"] <= 3, scores
         assert scores["knife-01_007750_6"] <= 5 and scores["chopsticks-02_024150_3"] <= 7, scores
+
+
+def test_the_box_leaves_out_the_background_it_holds():
+    """The camel (DAVIS): the box's cut, sharpened (``_sharpened``), leaves out the sand between its legs.
+
+    Before the box's foreground model was fitted again on what is clearly
+    object, the box kept the sand and the fence of the camel's colours: IoU 0.63.
+    """
+    case = thin_objects.davis_case(thin_objects.REAL_VIDEO / "camel-00024")
+    mask = GrabCutSession(case.rgb).box(*thin_objects.loose_box(case.truth))
+    assert thin_objects.iou(mask, case.truth) > 0.8  # 0.826 on 2026-12-04
+
+
+def test_sharpening_drops_the_margins_colour_from_the_object_unless_the_box_cuts_through_it():
+    """``_sharpened``: a pocket of the margin's colour inside the label goes; a label along the box's outline stays."""
+    rng = np.random.default_rng(0)
+    image = np.clip(rng.normal(100, 6, (80, 100, 3)), 0, 255)  # the margin's grey, and the pocket's
+    image[20:60, 20:80] = (200, 60, 50)  # the object: a red block with a grey pocket cut into it
+    image[30:60, 35:65] = np.clip(rng.normal(100, 6, (30, 30, 3)), 0, 255)
+    image = image.astype(np.uint8)
+    terms = _Terms.of_image(image)
+    box = np.zeros((80, 100), bool)
+    box[10:70, 10:90] = True
+    low = np.zeros_like(box)
+    low[20:60, 20:80] = True  # the first cut kept the pocket too
+    gc = np.where(box, np.where(low, cv2.GC_PR_FGD, cv2.GC_PR_BGD), cv2.GC_BGD).astype(np.uint8)
+    models = _first_models(image, np.where(box, cv2.GC_PR_FGD, cv2.GC_BGD).astype(np.uint8), rng)
+    sharp, _ = _sharpened(terms, gc, low, models)
+    assert not sharp[35:58, 38:62].any() and sharp[20:28, 20:80].all()  # the pocket went, the block stayed
+    # The block running out to the box's left edge (as where a box cuts through an object): left as it is.
+    along = low.copy()
+    along[20:60, 10:20] = True
+    gc = np.where(box, np.where(along, cv2.GC_PR_FGD, cv2.GC_PR_BGD), cv2.GC_BGD).astype(np.uint8)
+    image[20:60, 10:20] = (200, 60, 50)
+    assert _sharpened(_Terms.of_image(image), gc, along, models)[0] is along
