@@ -6,8 +6,9 @@ spreads the tests over the machine's cores with pytest-xdist, unless ``-n``
 says otherwise (``-n 0`` runs them in one process). Tests go to the workers
 in collection order and an idle worker takes over half of a busy one's
 queue (``worksteal``): a worker keeps to one database backend for long runs
-(pytest groups the tests by it), and no long file is left for one worker at
-the end.
+(pytest groups the tests by it). The tests marked slow go first: the queues'
+tails are then short tests, so no worker waits alone at the end for a long
+one (training ran last, in tests/unit, and left one core idle for a minute).
 """
 
 import functools
@@ -41,15 +42,21 @@ def pytest_cmdline_main(config):
             config.option.dist = "worksteal"
 
 
+@pytest.hookimpl(trylast=True)  # after pytest has grouped the tests by database backend
 def pytest_collection_modifyitems(config, items):
     # Costly science whose outcome no database changes (fitting, training,
     # scoring arrays) runs once, on the default SQLite; the rest runs on both.
-    # Likewise a bucket's tests (marked both_storages) run on SQLite only.
+    # Likewise a bucket's tests (marked both_storages) run on SQLite only, and
+    # a slow one runs each backend and each storage once: SQLite with the
+    # bucket, PostgreSQL with the folder (SQLite with the folder adds neither).
     twice = [item for item in items if _on_postgresql(item) and (item.get_closest_marker("one_database") or _on_s3(item))]
+    if any(_on_postgresql(item) for item in items):
+        twice += [item for item in items if item.get_closest_marker("slow") and _variant(item) == ("sqlite", "local")]
     if twice:
         config.hook.pytest_deselected(items=twice)
         items[:] = [item for item in items if item not in twice]
     if config.getoption("--all"):
+        items.sort(key=lambda item: item.get_closest_marker("slow") is None)  # stable: each group keeps its order
         return
     skip = pytest.mark.skip(reason="marked slow or browser: run with --all")
     for item in items:
@@ -57,14 +64,18 @@ def pytest_collection_modifyitems(config, items):
             item.add_marker(skip)
 
 
+def _variant(item) -> tuple[str | None, str | None]:
+    """(database backend, storage) of a test parametrized over them, else None for each."""
+    params = getattr(item, "callspec", None) and item.callspec.params or {}
+    return params.get("database_url"), params.get("storage_url")
+
+
 def _on_postgresql(item) -> bool:
-    callspec = getattr(item, "callspec", None)
-    return callspec is not None and callspec.params.get("database_url") == "postgresql"
+    return _variant(item)[0] == "postgresql"
 
 
 def _on_s3(item) -> bool:
-    callspec = getattr(item, "callspec", None)
-    return callspec is not None and callspec.params.get("storage_url") == "s3"
+    return _variant(item)[1] == "s3"
 
 
 @pytest.fixture(scope="session", autouse=True)
@@ -79,6 +90,32 @@ def scrypt_once_per_password():
     with pytest.MonkeyPatch.context() as patch:
         patch.setattr(security, "gen_salt", functools.cache(security.gen_salt))
         patch.setattr(security, "_hash_internal", functools.cache(security._hash_internal))
+        yield
+
+
+@pytest.fixture(scope="session", autouse=True)
+def url_builders_compiled_once():
+    """Werkzeug compiles two URL builders (generated Python) for every rule of
+    every app: 45 of create_app's 56 ms, and the tests make an app per test.
+    Within a test session a rule's builders are compiled once and shared by
+    every app with the same rule: the same code Werkzeug generates, bound to
+    each app's own rule. (Rules whose defaults fill a part of the URL keep
+    their own: the converter writes that part into the code.)"""
+    from werkzeug.routing.rules import Rule
+
+    compile_builder, compiled = Rule._compile_builder, {}
+
+    def once(rule, append_unknown=True):
+        defaults = rule.defaults or {}
+        if any(dynamic and name in defaults for dynamic, name in rule._trace):
+            return compile_builder(rule, append_unknown)
+        key = (rule.rule, tuple(rule._trace), tuple(defaults), append_unknown)
+        if key not in compiled:
+            compiled[key] = compile_builder(rule, append_unknown)
+        return compiled[key]
+
+    with pytest.MonkeyPatch.context() as patch:
+        patch.setattr(Rule, "_compile_builder", once)
         yield
 
 

@@ -114,31 +114,49 @@ def demo_frames_rendered_once(monkeypatch):
     monkeypatch.setattr(synth, "render_activity", rendered_once)
 
 
-@pytest.fixture(scope="session", params=BACKENDS)
-def database_url(request, tmp_path_factory):
-    """A migrated, empty database for the whole session."""
-    if request.param == "sqlite":
-        url = f"sqlite:///{tmp_path_factory.mktemp('db') / 'test.sqlite3'}"
-        schema = None
-    else:
-        schema = f"test_{uuid.uuid4().hex[:12]}"
-        base = normalise_database_url(POSTGRES_URL)
-        engine = sa.create_engine(base)
-        with engine.begin() as conn:
-            conn.execute(sa.text(f'CREATE SCHEMA "{schema}"'))
-        engine.dispose()
-        sep = "&" if "?" in base else "?"
-        url = f"{base}{sep}options=-csearch_path%3D{schema}"
-    app = make_app(url, tmp_path_factory.mktemp("migrate"))
-    with app.app_context():
-        upgrade()
-        db.engine.dispose()
-    yield url
-    if schema:
+@pytest.fixture(scope="session")
+def migrated_databases(tmp_path_factory):
+    """Each backend's database, migrated on first use and kept for the session.
+
+    pytest tears a session fixture down when its parameter changes; a worker
+    that takes over the other backend's tests (pytest-xdist's worksteal) and
+    back would otherwise migrate again at each switch.
+    """
+    urls, schemas = {}, []
+
+    def migrated(backend: str) -> str:
+        if backend in urls:
+            return urls[backend]
+        if backend == "sqlite":
+            url = f"sqlite:///{tmp_path_factory.mktemp('db') / 'test.sqlite3'}"
+        else:
+            schemas.append(f"test_{uuid.uuid4().hex[:12]}")
+            base = normalise_database_url(POSTGRES_URL)
+            engine = sa.create_engine(base)
+            with engine.begin() as conn:
+                conn.execute(sa.text(f'CREATE SCHEMA "{schemas[-1]}"'))
+            engine.dispose()
+            sep = "&" if "?" in base else "?"
+            url = f"{base}{sep}options=-csearch_path%3D{schemas[-1]}"
+        app = make_app(url, tmp_path_factory.mktemp("migrate"))
+        with app.app_context():
+            upgrade()
+            db.engine.dispose()
+        urls[backend] = url
+        return url
+
+    yield migrated
+    for schema in schemas:
         engine = sa.create_engine(normalise_database_url(POSTGRES_URL))
         with engine.begin() as conn:
             conn.execute(sa.text(f'DROP SCHEMA "{schema}" CASCADE'))
         engine.dispose()
+
+
+@pytest.fixture(scope="session", params=BACKENDS)
+def database_url(request, migrated_databases):
+    """A migrated, empty database for the whole session."""
+    return migrated_databases(request.param)
 
 
 def pytest_generate_tests(metafunc):

@@ -39,6 +39,7 @@ def test_create_app_never_creates_tables(tmp_path):
     with app.app_context():
         app.test_client().get("/api/activities")
         assert inspect(db.engine).get_table_names() == []
+    app.extensions["egonet.queue"].stop_consumer()  # the request started one (QUEUE_IN_PROCESS): it beat on no tables
 
 
 def test_0007_gives_stored_dhg_images_the_authors_order(ctx):

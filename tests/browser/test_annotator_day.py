@@ -29,7 +29,7 @@ from app.services.importing import import_path
 from egonet import io
 from tests.app.test_suggest import network_like, stored_run
 from tests.browser.conftest import sign_in
-from tests.browser.test_label import drag, open_frame, settle
+from tests.browser.test_label import click_points, drag, open_frame, settle
 from tests.browser.test_label_depth import iou, mask_of
 from tests.browser.test_label_workbench import COLOURS, edge_point, server_annotation, wait_for_colour
 from tests.browser.test_propagate import wait_for_frame
@@ -49,12 +49,6 @@ def wait_for_area(page, k: int, mask: np.ndarray) -> None:
     page.wait_for_function(f"() => window.labelPage.instances()[{k}]?.area === {int(mask.sum())}")
     settle(page)
     assert (mask_of(page, k) == mask).all()
-
-
-def click_points(page, points) -> None:
-    for x, y in points:
-        p = page.evaluate("([x, y]) => window.labelPage.clientPoint(x, y)", [x, y])
-        page.mouse.click(p["x"], p["y"])
 
 
 def said_in_words(page, words: str) -> None:

@@ -10,20 +10,31 @@ from tests.browser.conftest import screenshot, sign_in
 pytestmark = pytest.mark.browser
 
 
+# Coarse content of the canvas: summed RGB of a 4 x 4 grid of blocks (changes when the view moves).
+SIGNATURE_JS = """() => {
+  const c = document.getElementById('view3d-canvas');
+  const d = c.getContext('2d').getImageData(0, 0, c.width, c.height).data;
+  const out = new Array(16).fill(0);
+  for (let y = 0; y < c.height; y++) for (let x = 0; x < c.width; x++) {
+    const k = 4 * (y * c.width + x), b = Math.floor(4 * y / c.height) * 4 + Math.floor(4 * x / c.width);
+    out[b] += d[k] + d[k + 1] + d[k + 2];
+  }
+  return out;
+}"""
+
+
 def canvas_signature(page) -> list[int]:
-    """Coarse content of the canvas: summed RGB of a 4 x 4 grid of blocks (changes when the view moves)."""
-    return page.evaluate(
-        """() => {
-        const c = document.getElementById('view3d-canvas');
-        const d = c.getContext('2d').getImageData(0, 0, c.width, c.height).data;
-        const out = new Array(16).fill(0);
-        for (let y = 0; y < c.height; y++) for (let x = 0; x < c.width; x++) {
-          const k = 4 * (y * c.width + x), b = Math.floor(4 * y / c.height) * 4 + Math.floor(4 * x / c.width);
-          out[b] += d[k] + d[k + 1] + d[k + 2];
-        }
-        return out;
-    }"""
-    )
+    return page.evaluate(SIGNATURE_JS)
+
+
+def wait_for_signature(page, value: list[int], *, equal: bool) -> list[int]:
+    """Wait until the canvas's signature equals ``value`` (or, with ``equal=False``, differs); return it.
+
+    The view redraws on the browser's next frames: the test waits for what it asserts, never for a time.
+    """
+    same = f"JSON.stringify(({SIGNATURE_JS})()) === JSON.stringify(value)"
+    page.wait_for_function(f"(value) => {same if equal else f'!({same})'}", arg=value)
+    return canvas_signature(page)
 
 
 def green_pixels(page) -> int:
@@ -62,16 +73,12 @@ def test_3d_view_orbits_the_marked_points(live_app, live_server, page):
     page.mouse.down()
     page.mouse.move(cx + 160, cy - 60, steps=8)
     page.mouse.up()
-    page.wait_for_timeout(100)
-    turned = canvas_signature(page)
-    assert turned != before
+    turned = wait_for_signature(page, before, equal=False)
     screenshot(page, "frame3d-orbited")
 
     page.mouse.wheel(0, -600)  # zoom in
-    page.wait_for_timeout(100)
-    assert canvas_signature(page) != turned
+    wait_for_signature(page, turned, equal=False)
     page.dblclick("#view3d-canvas")  # back to the camera's view
-    page.wait_for_timeout(100)
-    assert canvas_signature(page) == before
+    wait_for_signature(page, before, equal=True)
     page.get_by_role("button", name="3D view").click()
     assert panel.is_hidden()

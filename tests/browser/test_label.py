@@ -37,14 +37,36 @@ def open_frame(page, base_url: str, frame_id: int) -> None:
     page.wait_for_selector("#label-app[data-ready='1']")
 
 
+# Where image point (x, y) is in the window, once the view fits the stage as laid out now: a
+# change in the page's layout (a tool's hint on one line instead of two) resizes the stage, and
+# the view refits on the next frame (a ResizeObserver), moving the image by pixels. Until then
+# (the canvas keeps the stage's old size) a point read would be off where the pointer lands.
+SCREEN_POINT_JS = """([x, y]) => {
+  const stage = document.querySelector("#stage"), canvas = document.querySelector("#canvas");
+  const fitted = canvas.style.width === `${stage.clientWidth}px` && canvas.style.height === `${stage.clientHeight}px`;
+  return fitted && window.labelPage.clientPoint(x, y);
+}"""
+
+
+def screen_point(page, x: float, y: float) -> dict:
+    return page.wait_for_function(SCREEN_POINT_JS, arg=[x, y]).json_value()
+
+
 def drag(page, points, *, steps: int = 6) -> None:
     """Press at the first image point, move through the others, release."""
-    screen = [page.evaluate("([x, y]) => window.labelPage.clientPoint(x, y)", list(p)) for p in points]
+    screen = [screen_point(page, *p) for p in points]
     page.mouse.move(screen[0]["x"], screen[0]["y"])
     page.mouse.down()
     for s in screen[1:]:
         page.mouse.move(s["x"], s["y"], steps=steps)
     page.mouse.up()
+
+
+def click_points(page, points) -> None:
+    """Click at each image point in turn (the polygon tool's corners)."""
+    for x, y in points:
+        p = screen_point(page, x, y)
+        page.mouse.click(p["x"], p["y"])
 
 
 def settle(page) -> None:

@@ -154,6 +154,7 @@ def test_charts_follow_a_run_compare_runs_browse_frames_and_delete(live_app, liv
     page.get_by_role("button", name="Save").click()
     assert "saved" in page.locator(".flash").inner_text() and "lite baseline" in page.locator("h1").inner_text()
     page.get_by_role("link", name="Per-frame results (worst first)").click()
+    page.wait_for_url(f"**/training/runs/{done}/frames")  # loaded: all_inner_texts reads what is there, without waiting
     scores = page.locator("#frame-rows [data-field=f]").all_inner_texts()
     assert scores == sorted(scores) and len(scores) == 4
     first = page.locator("#frame-rows img").first

@@ -118,8 +118,9 @@ def test_outlines_toggles_and_the_colour_bar(live_app, live_server, browser):
     page.check("#normalise-prediction")
 
     page.set_viewport_size({"width": 1920, "height": 1080})
-    page.wait_for_timeout(300)  # the outlines follow the new size
-    assert page.evaluate(PIXEL, [0, 299, 150]) == colours[1] + [255]
+    # The outlines follow the new size (on the next frames): wait for the edge's colour.
+    page.wait_for_function(f"([at, colour]) => ({PIXEL})(at).every((c, i) => c === colour[i])",
+                           arg=[[0, 299, 150], colours[1] + [255]])
     screenshot(page, "viewer-stretched-1920x1080")
     assert failed == []
     context.close()
