@@ -13,12 +13,12 @@ import re
 import uuid
 
 import pytest
-import sqlalchemy as sa
 from flask.testing import FlaskClient
 from flask_migrate import upgrade
 
-from app import create_app, normalise_database_url
+from app import create_app
 from app.extensions import db
+from tests.system.harness import drop_schema, private_schema_url
 
 POSTGRES_URL = os.environ.get("EGONET_TEST_POSTGRES_URL")
 BACKENDS = ["sqlite"] + (["postgresql"] if POSTGRES_URL else [])
@@ -130,14 +130,8 @@ def migrated_databases(tmp_path_factory):
         if backend == "sqlite":
             url = f"sqlite:///{tmp_path_factory.mktemp('db') / 'test.sqlite3'}"
         else:
-            schemas.append(f"test_{uuid.uuid4().hex[:12]}")
-            base = normalise_database_url(POSTGRES_URL)
-            engine = sa.create_engine(base)
-            with engine.begin() as conn:
-                conn.execute(sa.text(f'CREATE SCHEMA "{schemas[-1]}"'))
-            engine.dispose()
-            sep = "&" if "?" in base else "?"
-            url = f"{base}{sep}options=-csearch_path%3D{schemas[-1]}"
+            url, schema = private_schema_url(POSTGRES_URL)
+            schemas.append(schema)
         app = make_app(url, tmp_path_factory.mktemp("migrate"))
         with app.app_context():
             upgrade()
@@ -147,10 +141,7 @@ def migrated_databases(tmp_path_factory):
 
     yield migrated
     for schema in schemas:
-        engine = sa.create_engine(normalise_database_url(POSTGRES_URL))
-        with engine.begin() as conn:
-            conn.execute(sa.text(f'DROP SCHEMA "{schema}" CASCADE'))
-        engine.dispose()
+        drop_schema(POSTGRES_URL, schema)
 
 
 @pytest.fixture(scope="session", params=BACKENDS)
