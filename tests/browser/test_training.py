@@ -43,7 +43,7 @@ def test_queue_a_run_watch_it_and_see_a_heatmap(live_app, live_server, page, mon
         )
         db.session.commit()
         run_id = run.id
-    page.wait_for_function("() => document.querySelector('#runs [data-field=percent]').textContent === '42%'", timeout=10_000)
+    page.wait_for_function("() => document.querySelector('#runs [data-field=percent]').textContent === '42%'")
     assert row.locator("[data-field=loss]").inner_text() == "0.1234"
     assert row.locator("[data-field=eta]").inner_text() == "2 min 05 s"
     screenshot(page, "training-progress")
@@ -65,7 +65,7 @@ def test_queue_a_run_watch_it_and_see_a_heatmap(live_app, live_server, page, mon
         )
         db.session.commit()
         frame_id = frame.id
-    page.wait_for_function("() => document.querySelector('#checkpoints') !== null", timeout=10_000)
+    page.wait_for_function("() => document.querySelector('#checkpoints') !== null")
     assert page.locator("#runs [data-field=status]").first.text_content() == "done"
     assert "0.610" in page.locator("#runs").inner_text()
     screenshot(page, "training-done")
@@ -121,18 +121,18 @@ def test_charts_follow_a_run_compare_runs_browse_frames_and_delete(live_app, liv
 
     # The live run's charts grow as the worker records epochs, without a reload.
     page.goto(f"{live_server}/training/runs/{live}")
-    page.wait_for_function("() => document.querySelector('#run-chart').dataset.loaded === '2'", timeout=10_000)
+    page.wait_for_function("() => document.querySelector('#run-chart').dataset.loaded === '2'")
     assert page.locator("#chart-mf path.line").count() == 1 and page.locator("#chart-loss path.line").count() == 2
     with live_app.app_context():
         record_epochs(live, "single", [{"epoch": 3, "train_loss": 0.2, "loss": 0.3, "lr": 0.01, "max_f": 0.55}])
         db.session.commit()
-    page.wait_for_function("() => document.querySelector('#run-chart').dataset.loaded === '3'", timeout=10_000)
+    page.wait_for_function("() => document.querySelector('#run-chart').dataset.loaded === '3'")
     assert page.locator("#chart-mf circle.dot").count() == 3
     screenshot(page, "training-run-chart")
 
     # Two runs on one chart; the fold choice lists the folds of both.
     page.goto(f"{live_server}/training/")
-    page.wait_for_function("() => document.querySelector('#compare').dataset.loaded === '15'", timeout=10_000)
+    page.wait_for_function("() => document.querySelector('#compare').dataset.loaded === '15'")
     assert page.locator("#chart-compare path.line").count() == 2
     assert page.locator("#compare-fold option").all_inner_texts() == ["mean over folds", "single", "cooking", "dining"]
     page.select_option("#compare-fold", "dining")
@@ -140,10 +140,10 @@ def test_charts_follow_a_run_compare_runs_browse_frames_and_delete(live_app, liv
     page.select_option("#compare-metric", "train_loss")
     page.select_option("#compare-fold", "__mean__")
     page.locator(f"input.compare-run[value='{live}']").uncheck()
-    page.wait_for_function("() => document.querySelectorAll('#chart-compare path.line').length === 1", timeout=10_000)
+    page.wait_for_function("() => document.querySelectorAll('#chart-compare path.line').length === 1")
     assert f"compare={done}" in page.url
     page.locator(f"input.compare-run[value='{live}']").check()
-    page.wait_for_function("() => document.querySelectorAll('#chart-compare path.line').length === 2", timeout=10_000)
+    page.wait_for_function("() => document.querySelectorAll('#chart-compare path.line').length === 2")
     screenshot(page, "training-compare")
 
     # Rename and tag the finished run; browse its frames worst first; delete it after the confirmation.
@@ -159,8 +159,7 @@ def test_charts_follow_a_run_compare_runs_browse_frames_and_delete(live_app, liv
     assert scores == sorted(scores) and len(scores) == 4
     first = page.locator("#frame-rows img").first
     first.wait_for()
-    page.wait_for_function("() => [...document.querySelectorAll('#frame-rows img')].every(i => i.complete && i.naturalWidth > 0)",
-                           timeout=10_000)
+    page.wait_for_function("() => [...document.querySelectorAll('#frame-rows img')].every(i => i.complete && i.naturalWidth > 0)")
     screenshot(page, "training-frames")
     page.goto(f"{live_server}/training/runs/{done}")
     page.get_by_role("link", name="Delete…").click()
