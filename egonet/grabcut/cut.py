@@ -422,7 +422,7 @@ def _ridges(image: np.ndarray) -> np.ndarray:
                                                       use_gaussian_derivatives=False))
         smooth = cv2.GaussianBlur(grey, (0, 0), sigma)
         gradient = np.hypot(cv2.Sobel(smooth, cv2.CV_32F, 1, 0, ksize=1), cv2.Sobel(smooth, cv2.CV_32F, 0, 1, ksize=1))
-        ridge = np.maximum(ridge, sigma * sigma * np.abs(eigen).max(axis=0) - 0.5 * sigma * gradient)
+        ridge = np.maximum(ridge, sigma * sigma * np.abs(eigen).max(axis=0) - sigma * gradient)
     return ridge
 
 
