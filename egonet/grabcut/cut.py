@@ -89,6 +89,7 @@ _COHERENT = 0.4  # ... a path counts if its colours spread at most this many tim
 _CROSSING_ITERATIONS = 2  # re-estimation + cut with the path as sure object
 _LINE_STRENGTH = 3.0  # ... the straight line prior's line counts if its mean strength is this many times the box's
 _LINE_MIDDLE = 0.5  # ... and the object is followed from this middle fraction of it (its ends may be the box's margin)
+_LINE_KEPT = 0.5  # ... unless the box's label already holds more than this fraction of that middle
 _FINE_BAND = 6  # a box's cut on the full grid moves the coarse label's edge by at most this many grid pixels
 _SHARPEN_MARGIN = 2.0  # a box's cut goes on with a foreground model of pixels it favours by this much (nats)
 _SHARPEN_ITERATIONS = 2  # ... for this many re-estimations and cuts (on the coarse grid: ``_sharpened``)
@@ -348,7 +349,7 @@ def _box_cut(frame: np.ndarray, guide: _Guide, gc: np.ndarray,
             gc[rows, cols] = view
             low, models = _cut(terms, gc, models, _CROSSING_ITERATIONS)
         else:
-            ends = _straight(guide.image[rows, cols])
+            ends = _straight(guide.image[rows, cols], low[rows, cols])
             if ends is not None:
                 ends = ends + (cols.start, rows.start)
                 middle = (1 - _LINE_MIDDLE) / 2
@@ -426,7 +427,7 @@ def _ridges(image: np.ndarray) -> np.ndarray:
     return ridge
 
 
-def _straight(image: np.ndarray) -> np.ndarray | None:
+def _straight(image: np.ndarray, low: np.ndarray) -> np.ndarray | None:
     """The box prior for a long thin straight object across its box: the strongest straight line edge to edge.
 
     A pair of chopsticks lying across a box is 2-3 grid pixels wide and of
@@ -434,35 +435,52 @@ def _straight(image: np.ndarray) -> np.ndarray | None:
     image's ridges (``_crossing``) strays onto the edges of what lies
     beside it. But the box's edges are the object's ends, and it is
     straight: of the straight lines from the box's left edge to its right
-    one and from its top to its bottom (ends every 2 grid pixels), the one
-    of strongest mean line strength (``_ridges``) is the object's, if that
-    is ``_LINE_STRENGTH`` times the box's mean and the line is of one
-    material (``_COHERENT``, as ``_crossing``'s path).
+    one and from its top to its bottom (ends every 2 grid pixels, then the
+    best one's to the pixel), the one of strongest mean line strength
+    (``_ridges``) is the object's, if that is ``_LINE_STRENGTH`` times the
+    box's mean and the line's middle ``_LINE_MIDDLE`` (its ends may lie in
+    the box's margin) is of one material (``_COHERENT``, as ``_crossing``'s
+    path) and not already the label's (a spoon's handle whose bowl the cut
+    kept too: at most ``_LINE_KEPT`` of it).
 
     Args:
         image: uint8 ``(h, w, 3)``, the box on the grid.
+        low: bool ``(h, w)``, the box's label.
 
     Returns:
         ``(2, 2)`` float ``(x, y)``: the line's two ends on ``image``, or None.
     """
     h, w = image.shape[:2]
     ridge = _ridges(image)
-    best = None
-    for across in (False, True):  # left to right, then top to bottom
-        n, m = (w, h) if across else (h, w)
-        ends = np.arange(0, n, 2)
+
+    def strongest(across: bool, starts: np.ndarray, stops: np.ndarray) -> tuple[float, np.ndarray]:
+        """The strongest line from a start to a stop (on the left and right edges, or top and bottom): its
+        strength and its pixels' ``(along, other)`` coordinates."""
+        m = h if across else w
         t = np.arange(m) / max(1, m - 1)
-        a, b = np.meshgrid(ends, ends, indexing="ij")
+        a, b = np.meshgrid(starts, stops, indexing="ij")
         along = np.rint(a[..., None] * (1 - t) + b[..., None] * t).astype(np.intp)
         other = np.broadcast_to(np.arange(m), along.shape)
         strength = (ridge[other, along] if across else ridge[along, other]).mean(axis=-1)
         k = np.unravel_index(int(np.argmax(strength)), strength.shape)
-        if best is None or strength[k] > best[0]:
-            best = (float(strength[k]), across, along[k], np.arange(m))
-    strength, across, along, other = best
+        return float(strength[k]), along[k]
+
+    best = None
+    for across in (False, True):  # left to right, then top to bottom
+        n = w if across else h
+        strength, along = strongest(across, np.arange(0, n, 2), np.arange(0, n, 2))
+        if best is None or strength > best[0]:
+            near = [np.arange(max(0, e - 1), min(n, e + 2)) for e in (along[0], along[-1])]
+            best = (*strongest(across, *near), across)
+    strength, along, across = best
+    other = np.arange(len(along))
     ys, xs = (other, along) if across else (along, other)
+    cut = round((1 - _LINE_MIDDLE) / 2 * len(along))
+    middle = ys[cut : len(along) - cut], xs[cut : len(along) - cut]
+    if low[middle].mean() > _LINE_KEPT:
+        return None
     lab = cv2.cvtColor(image, cv2.COLOR_RGB2LAB).astype(np.float32)
-    spread = np.linalg.norm(lab[ys, xs].std(axis=0)) / max(1e-6, float(np.linalg.norm(lab.reshape(-1, 3).std(axis=0))))
+    spread = np.linalg.norm(lab[middle].std(axis=0)) / max(1e-6, float(np.linalg.norm(lab.reshape(-1, 3).std(axis=0))))
     if spread > _COHERENT or strength < _LINE_STRENGTH * float(np.maximum(ridge, 0).mean()):
         return None
     return np.array([[xs[0], ys[0]], [xs[-1], ys[-1]]], float)

@@ -210,7 +210,7 @@ class GrabCutSession:
                 mask = np.zeros(self.shape, bool)
                 crop, (y0, x0) = hit
                 mask[y0 : y0 + crop.shape[0], x0 : x0 + crop.shape[1]] = crop
-                thin = _fine_cut(self._image, mask, crop, (y0, x0), True, radius, reach)
+                thin = _fine_cut(self._image, mask, crop, (y0, x0), True, radius, reach, thin=True)
                 if thin is not None and thin.any():
                     mask |= thin
                     _clip_to_box(mask, box)

@@ -233,12 +233,15 @@ def test_the_straight_line_prior_finds_a_thin_straight_object_and_not_clutter():
     image[80:125, 120:200] = (60, 90, 40)  # food on a plate, of strong edges
     image[20:60, 20:90] = (150, 150, 155)  # a laptop
     image = np.clip(cv2.GaussianBlur(image, (0, 0), 0.7) + rng.normal(0, 3, image.shape), 0, 255).astype(np.uint8)
-    ends = _straight(image)
+    ends = _straight(image, np.zeros((h, w), bool))
     assert ends is not None
     assert np.abs(ends - [(0, 123), (209, 7)]).max() <= 6  # the bar's line, to the box's edges
     clutter = cv2.resize(rng.integers(0, 256, (h // 6, w // 6, 3)).astype(np.uint8), (w, h),
                          interpolation=cv2.INTER_NEAREST)
-    assert _straight(clutter) is None
+    assert _straight(clutter, np.zeros((h, w), bool)) is None
+    kept = np.zeros((h, w), bool)
+    kept[bar.astype(bool)] = True
+    assert _straight(image, kept) is None  # a line the box's cut kept needs no prior
 
 
 def test_the_box_takes_a_pair_of_chopsticks_its_grid_cannot_resolve():
