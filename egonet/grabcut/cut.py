@@ -435,8 +435,8 @@ def _straight(image: np.ndarray, low: np.ndarray) -> np.ndarray | None:
     image's ridges (``_crossing``) strays onto the edges of what lies
     beside it. But the box's edges are the object's ends, and it is
     straight: of the straight lines from the box's left edge to its right
-    one and from its top to its bottom (ends every 2 grid pixels, then the
-    best one's to the pixel), the one of strongest mean line strength
+    one and from its top to its bottom (ends every 2 grid pixels, read
+    every 2, then the best one's to the pixel), the one of strongest mean line strength
     (``_ridges``) is the object's, if that is ``_LINE_STRENGTH`` times the
     box's mean and the line's middle ``_LINE_MIDDLE`` (its ends may lie in
     the box's margin) is of one material (``_COHERENT``, as ``_crossing``'s
@@ -453,25 +453,26 @@ def _straight(image: np.ndarray, low: np.ndarray) -> np.ndarray | None:
     h, w = image.shape[:2]
     ridge = _ridges(image)
 
-    def strongest(across: bool, starts: np.ndarray, stops: np.ndarray) -> tuple[float, np.ndarray]:
-        """The strongest line from a start to a stop (on the left and right edges, or top and bottom): its
-        strength and its pixels' ``(along, other)`` coordinates."""
+    def strongest(across: bool, starts: np.ndarray, stops: np.ndarray, step: int) -> tuple[float, np.ndarray]:
+        """The strongest line from a start to a stop (on the left and right edges, or top and bottom), read
+        every ``step`` pixels along: its strength and its pixels' coordinates across."""
         m = h if across else w
-        t = np.arange(m) / max(1, m - 1)
+        other = np.arange(0, m, step)
+        t = other / max(1, m - 1)
         a, b = np.meshgrid(starts, stops, indexing="ij")
         along = np.rint(a[..., None] * (1 - t) + b[..., None] * t).astype(np.intp)
-        other = np.broadcast_to(np.arange(m), along.shape)
         strength = (ridge[other, along] if across else ridge[along, other]).mean(axis=-1)
         k = np.unravel_index(int(np.argmax(strength)), strength.shape)
-        return float(strength[k]), along[k]
+        t = np.arange(m) / max(1, m - 1)
+        return float(strength[k]), np.rint(starts[k[0]] * (1 - t) + stops[k[1]] * t).astype(np.intp)
 
     best = None
     for across in (False, True):  # left to right, then top to bottom
         n = w if across else h
-        strength, along = strongest(across, np.arange(0, n, 2), np.arange(0, n, 2))
+        strength, along = strongest(across, np.arange(0, n, 2), np.arange(0, n, 2), 2)
         if best is None or strength > best[0]:
             near = [np.arange(max(0, e - 1), min(n, e + 2)) for e in (along[0], along[-1])]
-            best = (*strongest(across, *near), across)
+            best = (*strongest(across, *near, 1), across)
     strength, along, across = best
     other = np.arange(len(along))
     ys, xs = (other, along) if across else (along, other)
