@@ -32,6 +32,11 @@ A box whose cut keeps little of it and misses one of its edges is cut
 again with a path along the image's ridges to that edge as object
 (``_crossing``, the box prior), when the path is of one material.
 
+A box whose cut still keeps little of it, with no such path, may hold a
+long thin straight object its grid cannot resolve (chopsticks across the
+box): the strongest straight line from edge to edge (``_straight``) is
+followed at full resolution instead (``fine._fine_cut``, in the session).
+
 A colour stroke also flips the error region it lands in up to the image's
 edges (``_flooded``: a watershed from the stroke against what surely has
 the other label), not only what the re-cut's colour models move.
@@ -82,6 +87,9 @@ _SURE_MARGIN = 4.0  # a pixel whose colour favours the other label by this much 
 _CROSSING_BAND = 0.1  # the box prior's bands along the box's edges, a fraction of its width or height (``_crossing``)
 _COHERENT = 0.4  # ... a path counts if its colours spread at most this many times as much as the box's
 _CROSSING_ITERATIONS = 2  # re-estimation + cut with the path as sure object
+_LINE_STRENGTH = 3.0  # ... the straight line prior's line counts if its mean strength is this many times the box's
+_LINE_MIDDLE = 0.5  # ... and the object is followed from this middle fraction of it (its ends may be the box's margin)
+_LINE_KEPT = 0.5  # ... unless the box's label already holds more than this fraction of that middle
 _FINE_BAND = 6  # a box's cut on the full grid moves the coarse label's edge by at most this many grid pixels
 _SHARPEN_MARGIN = 2.0  # a box's cut goes on with a foreground model of pixels it favours by this much (nats)
 _SHARPEN_ITERATIONS = 2  # ... for this many re-estimations and cuts (on the coarse grid: ``_sharpened``)
@@ -291,8 +299,15 @@ def _sharpened(terms: _Terms, gc: np.ndarray, low: np.ndarray, models: np.ndarra
     return sharp, sharp_models
 
 
-def _box_cut(frame: np.ndarray, guide: _Guide, gc: np.ndarray, work_size: int) -> tuple[np.ndarray, np.ndarray]:
+def _box_cut(frame: np.ndarray, guide: _Guide, gc: np.ndarray,
+             work_size: int) -> tuple[np.ndarray, np.ndarray, np.ndarray | None]:
     """A new box's cut, from first models; a box it keeps little of is cut again (``_rescue``).
+
+    A box that every cut keeps little of, with no path of one material to
+    the edges its label misses (``_crossing``), may be crossed by a long thin
+    straight object (``_straight``): the middle ``_LINE_MIDDLE`` of that line
+    is returned, for the session to follow the object from at full
+    resolution.
 
     Args:
         frame: Full frame, uint8 ``(H, W, 3)``.
@@ -301,7 +316,9 @@ def _box_cut(frame: np.ndarray, guide: _Guide, gc: np.ndarray, work_size: int) -
         work_size: The session's work size.
 
     Returns:
-        ``(label, models)``: the bool low-resolution label and the ``(2, 65)`` models.
+        ``(label, models, line)``: the bool low-resolution label, the
+        ``(2, 65)`` models, and the straight line's middle as ``(2, 2)``
+        full-resolution ``(x, y)`` ends, or None.
     """
     geom = guide.geom
     rows, cols = geom.box_low()
@@ -331,7 +348,13 @@ def _box_cut(frame: np.ndarray, guide: _Guide, gc: np.ndarray, work_size: int) -
             view[path] = cv2.GC_FGD
             gc[rows, cols] = view
             low, models = _cut(terms, gc, models, _CROSSING_ITERATIONS)
-    return low, models
+        else:
+            ends = _straight(guide.image[rows, cols], low[rows, cols])
+            if ends is not None:
+                ends = ends + (cols.start, rows.start)
+                middle = (1 - _LINE_MIDDLE) / 2
+                return low, models, geom.to_full(ends + middle * (ends[::-1] - ends))
+    return low, models, None
 
 
 def _crossing(image: np.ndarray, low: np.ndarray) -> np.ndarray | None:
@@ -383,6 +406,85 @@ def _crossing(image: np.ndarray, low: np.ndarray) -> np.ndarray | None:
     lab = cv2.cvtColor(image, cv2.COLOR_RGB2LAB).reshape(-1, 3).astype(np.float32)
     spread = np.linalg.norm(lab[path.ravel()].std(axis=0)) / max(1e-6, float(np.linalg.norm(lab.std(axis=0))))
     return path if spread <= _COHERENT else None
+
+
+def _ridges(image: np.ndarray) -> np.ndarray:
+    """Line strength of a uint8 ``(h, w, 3)`` image: thin bright or dark lines, not edges, best over 1-2 grid pixels.
+
+    The Hessian's eigenvalue of largest magnitude (scale-normalised, as
+    ``_crossing``'s) less the gradient's magnitude at the same scale: a
+    line's middle has no gradient, an edge's flanks (which the Hessian
+    answers too) have much.
+    """
+    grey = image.astype(np.float32).mean(axis=2)
+    ridge = np.zeros_like(grey)
+    for sigma in (1, 2):
+        eigen = hessian_matrix_eigvals(hessian_matrix(grey, sigma, mode="nearest", order="rc",
+                                                      use_gaussian_derivatives=False))
+        smooth = cv2.GaussianBlur(grey, (0, 0), sigma)
+        gradient = np.hypot(cv2.Sobel(smooth, cv2.CV_32F, 1, 0, ksize=1), cv2.Sobel(smooth, cv2.CV_32F, 0, 1, ksize=1))
+        ridge = np.maximum(ridge, sigma * sigma * np.abs(eigen).max(axis=0) - sigma * gradient)
+    return ridge
+
+
+def _straight(image: np.ndarray, low: np.ndarray) -> np.ndarray | None:
+    """The box prior for a long thin straight object across its box: the strongest straight line edge to edge.
+
+    A pair of chopsticks lying across a box is 2-3 grid pixels wide and of
+    the table's colours: no cut on the grid keeps it, and a path along the
+    image's ridges (``_crossing``) strays onto the edges of what lies
+    beside it. But the box's edges are the object's ends, and it is
+    straight: of the straight lines from the box's left edge to its right
+    one and from its top to its bottom (ends every 2 grid pixels, read
+    every 2, then the best one's to the pixel), the one of strongest mean line strength
+    (``_ridges``) is the object's, if that is ``_LINE_STRENGTH`` times the
+    box's mean and the line's middle ``_LINE_MIDDLE`` (its ends may lie in
+    the box's margin) is of one material (``_COHERENT``, as ``_crossing``'s
+    path) and not already the label's (a spoon's handle whose bowl the cut
+    kept too: at most ``_LINE_KEPT`` of it).
+
+    Args:
+        image: uint8 ``(h, w, 3)``, the box on the grid.
+        low: bool ``(h, w)``, the box's label.
+
+    Returns:
+        ``(2, 2)`` float ``(x, y)``: the line's two ends on ``image``, or None.
+    """
+    h, w = image.shape[:2]
+    ridge = _ridges(image)
+
+    def strongest(across: bool, starts: np.ndarray, stops: np.ndarray, step: int) -> tuple[float, np.ndarray]:
+        """The strongest line from a start to a stop (on the left and right edges, or top and bottom), read
+        every ``step`` pixels along: its strength and its pixels' coordinates across."""
+        m = h if across else w
+        other = np.arange(0, m, step)
+        t = other / max(1, m - 1)
+        a, b = np.meshgrid(starts, stops, indexing="ij")
+        along = np.rint(a[..., None] * (1 - t) + b[..., None] * t).astype(np.intp)
+        strength = (ridge[other, along] if across else ridge[along, other]).mean(axis=-1)
+        k = np.unravel_index(int(np.argmax(strength)), strength.shape)
+        t = np.arange(m) / max(1, m - 1)
+        return float(strength[k]), np.rint(starts[k[0]] * (1 - t) + stops[k[1]] * t).astype(np.intp)
+
+    best = None
+    for across in (False, True):  # left to right, then top to bottom
+        n = w if across else h
+        strength, along = strongest(across, np.arange(0, n, 2), np.arange(0, n, 2), 2)
+        if best is None or strength > best[0]:
+            near = [np.arange(max(0, e - 1), min(n, e + 2)) for e in (along[0], along[-1])]
+            best = (*strongest(across, *near, 1), across)
+    strength, along, across = best
+    other = np.arange(len(along))
+    ys, xs = (other, along) if across else (along, other)
+    cut = round((1 - _LINE_MIDDLE) / 2 * len(along))
+    middle = ys[cut : len(along) - cut], xs[cut : len(along) - cut]
+    if low[middle].mean() > _LINE_KEPT:
+        return None
+    lab = cv2.cvtColor(image, cv2.COLOR_RGB2LAB).astype(np.float32)
+    spread = np.linalg.norm(lab[middle].std(axis=0)) / max(1e-6, float(np.linalg.norm(lab.reshape(-1, 3).std(axis=0))))
+    if spread > _COHERENT or strength < _LINE_STRENGTH * float(np.maximum(ridge, 0).mean()):
+        return None
+    return np.array([[xs[0], ys[0]], [xs[-1], ys[-1]]], float)
 
 
 def _resize(frame: np.ndarray, geom: _Geometry) -> np.ndarray:

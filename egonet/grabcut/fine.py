@@ -57,7 +57,7 @@ def _like(stroke: np.ndarray, pixels: np.ndarray) -> np.ndarray:
 
 
 def _fine_cut(image: np.ndarray, mask: np.ndarray, own: np.ndarray, origin: tuple[int, int], fg: bool,
-              radius: float) -> np.ndarray | None:
+              radius: float, reach: int = _REACH, *, thin: bool = False) -> np.ndarray | None:
     """What a stroke on a thin part gives its label at full resolution, or None when it is on no thin part.
 
     Args:
@@ -67,6 +67,9 @@ def _fine_cut(image: np.ndarray, mask: np.ndarray, own: np.ndarray, origin: tupl
         origin: ``(y, x)`` of the footprint's box.
         fg: The stroke's label.
         radius: The stroke's radius, pixels.
+        reach: Pixels around the stroke that its cut may change.
+        thin: The stroke is known to lie on a thin part (the box's straight
+            line, ``cut._straight``): it is not tested.
 
     Returns:
         bool ``(H, W)``: the pixels labelled against the stroke to give its
@@ -94,9 +97,9 @@ def _fine_cut(image: np.ndarray, mask: np.ndarray, own: np.ndarray, origin: tupl
     # Thin where the part of the stroke's colour around it is at most ``limit`` wide.
     *_, side, hard, like = window(int(limit) + 2)
     width = cv2.distanceTransform(_joined(like & ~side, hard).view(np.uint8), cv2.DIST_L2, 3)
-    if width[hard].max() > limit:
+    if not thin and width[hard].max() > limit:
         return None
-    r0, c0, r1, c1, side, hard, like = window(_REACH)
+    r0, c0, r1, c1, side, hard, like = window(reach)
     win = image[r0:r1, c0:c1]
     m = _MODEL_REACH
     a0, b0 = max(0, y0 - r0 - m), max(0, x0 - c0 - m)

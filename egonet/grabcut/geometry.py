@@ -74,6 +74,12 @@ class _Geometry:
         return np.stack([(points[:, 0] - rx0 + 0.5) * self.sx - 0.5,
                          (points[:, 1] - ry0 + 0.5) * self.sy - 0.5], axis=1)
 
+    def to_full(self, points: np.ndarray) -> np.ndarray:
+        """Low-resolution grid (x, y) -> full-resolution coordinates (``to_low``'s inverse)."""
+        rx0, ry0 = self.roi[:2]
+        return np.stack([(points[:, 0] + 0.5) / self.sx - 0.5 + rx0,
+                         (points[:, 1] + 0.5) / self.sy - 0.5 + ry0], axis=1)
+
 
 def _grow_box(box: tuple[int, int, int, int], crop: np.ndarray, origin: tuple[int, int], radius: float,
               shape: tuple[int, int]) -> tuple[int, int, int, int]:

@@ -20,8 +20,8 @@ import numpy as np
 
 from egonet.errors import EgonetError
 from egonet.grabcut.colour import _first_models
-from egonet.grabcut.cut import (_NEAR_GRID, _STROKE_REACH, _box_cut, _box_labels, _depth_box_cut, _depth_first_models,
-                               _keep_connected, _recut, _seed_cut, _Terms)
+from egonet.grabcut.cut import (_LINE_MIDDLE, _NEAR_GRID, _STROKE_REACH, _box_cut, _box_labels, _depth_box_cut,
+                               _depth_first_models, _keep_connected, _recut, _seed_cut, _Terms)
 from egonet.grabcut.depth import _DepthGuide
 from egonet.grabcut.fine import _THIN, _fine_cut
 from egonet.grabcut.frame import GrabCutFrame
@@ -194,10 +194,29 @@ class GrabCutSession:
         gc = _box_labels(guide.geom)
         if not (gc == cv2.GC_BGD).any():
             raise EgonetError("box: leaves no background in the frame around it; draw a tighter box", field="box")
+        line = None
         if self._depth is None:
-            low, models = _box_cut(self._image, guide, gc, self._work_size)
+            low, models, line = _box_cut(self._image, guide, gc, self._work_size)
         else:
             low, models = _depth_box_cut(self._image, self._depth, self._depth_guide_for(guide), gc)
+        if line is not None:
+            # A long thin straight object across the box (``cut._straight``): followed at full resolution from
+            # the line's middle, as a stroke of a grid pixel's width along it would be (``fine``), only in the
+            # box (the line's middle is half of it, so the box lies within a quarter of its long side).
+            radius = 1 / min(guide.geom.sx, guide.geom.sy)
+            reach = math.ceil((1 - _LINE_MIDDLE) / 2 * max(bx1 - bx0, by1 - by0))
+            hit = _polyline_distance_mask(self.shape, line, radius)
+            if hit is not None:
+                mask = np.zeros(self.shape, bool)
+                crop, (y0, x0) = hit
+                mask[y0 : y0 + crop.shape[0], x0 : x0 + crop.shape[1]] = crop
+                thin = _fine_cut(self._image, mask, crop, (y0, x0), True, radius, reach, thin=True)
+                if thin is not None and thin.any():
+                    mask |= thin
+                    _clip_to_box(mask, box)
+                    snap = _Snapshot(box=box, strokes=(), models=models, low=_downsample(mask, guide.geom))
+                    self._commit(guide, snap, mask)
+                    return self.mask
         snap = _Snapshot(box=box, strokes=(), models=models, low=low)
         self._commit(guide, snap, self._full_mask(guide, snap))
         return self.mask
