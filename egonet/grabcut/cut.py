@@ -86,6 +86,7 @@ _FLOOD_SMOOTH = 0.7  # Gaussian sigma of the colours before the flood's gradient
 _SURE_MARGIN = 4.0  # a pixel whose colour favours the other label by this much (-log p) stops the flood
 _ALONG_WIDTH = 2.0  # an object stroke takes the part of its colour along itself this many times the part's half-width
 _ALONG_SHARE = 0.9  # ... when at least this fraction of that part lies along the stroke (``_along``)
+_ALONG_HALF = 8  # ... and the part is at most this many grid pixels from its edge at the stroke (thin)
 _CROSSING_BAND = 0.1  # the box prior's bands along the box's edges, a fraction of its width or height (``_crossing``)
 _COHERENT = 0.4  # ... a path counts if its colours spread at most this many times as much as the box's
 _CROSSING_ITERATIONS = 2  # re-estimation + cut with the path as sure object
@@ -694,9 +695,12 @@ def _along(image: np.ndarray, against: np.ndarray, hit: tuple[np.ndarray, tuple[
     colours (``fine._like``) that are labelled against it, joined to it, are
     followed within a strip along the stroke's long axis, ``_ALONG_WIDTH``
     times the part's half-width at the stroke each side of it. That is taken
-    only when the part is thin there: at least ``_ALONG_SHARE`` of the part
-    of the stroke's colour joined to it lies in the strip (on ground of the
-    stroke's colour the part spreads beyond it, and nothing is taken).
+    only when the part is thin there: its half-width is at most
+    ``_ALONG_HALF`` grid pixels (the grid is the ROI's, so a part thin beside
+    the object: a white chair's seat before a white wall is not), and at least
+    ``_ALONG_SHARE`` of the part of the stroke's colour joined to it lies in
+    the strip (on ground of the stroke's colour the part spreads beyond it,
+    and nothing is taken).
 
     Args:
         image: uint8 ``(h, w, 3)`` RGB of the grid.
@@ -727,6 +731,8 @@ def _along(image: np.ndarray, against: np.ndarray, hit: tuple[np.ndarray, tuple[
     on[ys, xs] = True
     part = _joined(like, on)
     half = max(1.0, float(cv2.distanceTransform(part.view(np.uint8), cv2.DIST_L2, 3)[on].max()))
+    if half > _ALONG_HALF:
+        return taken  # no thin part: a region of the stroke's colour
     dy, dx = axes[:, 1]
     gy, gx = np.mgrid[0 : like.shape[0], 0 : like.shape[1]]
     strip = np.abs((gy - ys.mean()) * dx - (gx - xs.mean()) * dy) <= _ALONG_WIDTH * half
