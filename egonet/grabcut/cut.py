@@ -39,7 +39,9 @@ followed at full resolution instead (``fine._fine_cut``, in the session).
 
 A colour stroke also flips the error region it lands in up to the image's
 edges (``_flooded``: a watershed from the stroke against what surely has
-the other label), not only what the re-cut's colour models move.
+the other label), not only what the re-cut's colour models move. An object
+stroke on a thin part of its colour (a leg) also takes that part along
+itself (``_along``), where the flood stops short on the grid.
 
 What a stroke changes is local (``_keep_connected``): only pixels within
 ``_NEAR_GRID`` of the stroke, or joined to it through pixels that changed
