@@ -39,7 +39,9 @@ followed at full resolution instead (``fine._fine_cut``, in the session).
 
 A colour stroke also flips the error region it lands in up to the image's
 edges (``_flooded``: a watershed from the stroke against what surely has
-the other label), not only what the re-cut's colour models move.
+the other label), not only what the re-cut's colour models move. An object
+stroke on a thin part of its colour (a leg) also takes that part along
+itself (``_along``), where the flood stops short on the grid.
 
 What a stroke changes is local (``_keep_connected``): only pixels within
 ``_NEAR_GRID`` of the stroke, or joined to it through pixels that changed
@@ -66,7 +68,7 @@ from skimage.segmentation import watershed
 
 from egonet.grabcut.colour import _costs, _first_models, _fit_model, _learn
 from egonet.grabcut.depth import (_Z_SCALE, _depth_costs, _DepthGuide, _fallback_z, _first_model, _learn_depth)
-from egonet.grabcut.fine import _like
+from egonet.grabcut.fine import _joined, _like
 from egonet.grabcut.geometry import _Geometry
 from egonet.grabcut.graph import _CutGraph, _links
 from egonet.grabcut.refine import _Guide
@@ -84,6 +86,9 @@ _FLOOD_SCALE = 2.0  # a stroke floods at most this many times its depth in its r
 _FLOOD_MIN = 4  # ... or this many grid pixels, whichever is more
 _FLOOD_SMOOTH = 0.7  # Gaussian sigma of the colours before the flood's gradient, grid pixels
 _SURE_MARGIN = 4.0  # a pixel whose colour favours the other label by this much (-log p) stops the flood
+_ALONG_WIDTH = 2.0  # an object stroke takes the part of its colour along itself this many times the part's half-width
+_ALONG_SHARE = 0.9  # ... when at least this fraction of that part lies along the stroke (``_along``)
+_ALONG_HALF = 8  # ... and the part is at most this many grid pixels from its edge at the stroke (thin)
 _CROSSING_BAND = 0.1  # the box prior's bands along the box's edges, a fraction of its width or height (``_crossing``)
 _COHERENT = 0.4  # ... a path counts if its colours spread at most this many times as much as the box's
 _CROSSING_ITERATIONS = 2  # re-estimation + cut with the path as sure object
@@ -650,6 +655,8 @@ def _recut(terms: _Terms, guide: _Guide, models: np.ndarray, strokes: tuple[_Str
         sure = (gc == (cv2.GC_BGD if last.fg else cv2.GC_FGD)) | clear
         region = _flooded(guide.image, ~prior if last.fg else prior, hits, reach, _FLOOD_SMOOTH, sure)
         low = (low | region) if last.fg else (low & ~region)
+        if last.fg:
+            low |= _along(guide.image, ~prior & (gc != cv2.GC_BGD), hit, reach, region)
     if hit is not None:
         low = _keep_connected(low, prior, *hit, _NEAR_GRID)
     return low, models
@@ -676,6 +683,66 @@ def _unlike(image: np.ndarray, crop: np.ndarray, origin: tuple[int, int], reach:
         window = image[r0 : y0 + crop.shape[0] + reach, c0 : x0 + crop.shape[1] + reach]
         unlike[r0 : r0 + window.shape[0], c0 : c0 + window.shape[1]] = ~_like(pixels, window).reshape(window.shape[:2])
     return unlike
+
+
+def _along(image: np.ndarray, against: np.ndarray, hit: tuple[np.ndarray, tuple[int, int]], reach: int,
+           region: np.ndarray) -> np.ndarray:
+    """The thin part of an object stroke's colour that runs along the stroke (a leg, a pole), or nothing.
+
+    A click on a long missed part (a leg on a road) lies along it: the
+    labelling page's stroke is dragged along the part. The flood stops where
+    the part is narrow on the grid (both its edges blur into one ridge of the
+    gradient, which the other side's seeds cross first), so it took little
+    more than a disk around the stroke. Here the pixels like the stroke's
+    colours (``fine._like``) that are labelled against it, joined to it, are
+    followed within a strip along the stroke's long axis, ``_ALONG_WIDTH``
+    times the part's half-width at the stroke each side of it. That is taken
+    only when the part is thin there: its half-width is at most
+    ``_ALONG_HALF`` grid pixels (the grid is the ROI's, so a part thin beside
+    the object: a white chair's seat before a white wall is not), and at least
+    ``_ALONG_SHARE`` of the part of the stroke's colour joined to it lies in
+    the strip (on ground of the stroke's colour the part spreads beyond it,
+    and nothing is taken).
+
+    Args:
+        image: uint8 ``(h, w, 3)`` RGB of the grid.
+        against: bool ``(h, w)``, the pixels the stroke may give its label.
+        hit: The stroke's footprint on the grid, ``(crop, (y, x))``.
+        reach: Nothing further than this many grid pixels from the stroke is taken.
+        region: bool ``(h, w)``, what the stroke already took (``_flooded``): the part may join through it.
+
+    Returns:
+        bool ``(h, w)``: the pixels taken (all of ``against``).
+    """
+    crop, (y0, x0) = hit
+    h, w = against.shape
+    taken = np.zeros_like(against)
+    ys, xs = np.nonzero(crop)
+    if len(ys) < 3:
+        return taken
+    spread, axes = np.linalg.eigh(np.cov(np.stack([ys, xs]).astype(np.float64)))
+    if spread[1] < 2 * max(spread[0], 1e-6):
+        return taken  # a dot: no direction
+    r0, r1 = max(0, y0 - reach), min(h, y0 + crop.shape[0] + reach)
+    c0, c1 = max(0, x0 - reach), min(w, x0 + crop.shape[1] + reach)
+    window = image[r0:r1, c0:c1]
+    stroke = image[y0 : y0 + crop.shape[0], x0 : x0 + crop.shape[1]][crop]
+    like = _like(stroke, window).reshape(window.shape[:2]) & against[r0:r1, c0:c1]
+    ys, xs = ys + y0 - r0, xs + x0 - c0
+    on = np.zeros(like.shape, bool)
+    on[ys, xs] = True
+    part = _joined(like, on)
+    half = max(1.0, float(cv2.distanceTransform(part.view(np.uint8), cv2.DIST_L2, 3)[on].max()))
+    if half > _ALONG_HALF:
+        return taken  # no thin part: a region of the stroke's colour
+    dy, dx = axes[:, 1]
+    gy, gx = np.mgrid[0 : like.shape[0], 0 : like.shape[1]]
+    strip = np.abs((gy - ys.mean()) * dx - (gx - xs.mean()) * dy) <= _ALONG_WIDTH * half
+    along = _joined(like & strip, on | region[r0:r1, c0:c1]) & like & strip
+    if np.count_nonzero(along) < _ALONG_SHARE * np.count_nonzero(part):
+        return taken
+    taken[r0:r1, c0:c1] = along
+    return taken
 
 
 def _flooded(image: np.ndarray, against: np.ndarray, hits: list[tuple[np.ndarray, tuple[int, int], bool]],

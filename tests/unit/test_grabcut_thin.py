@@ -10,7 +10,7 @@ import pytest
 
 from egonet.grabcut import GrabCutSession, stroke_footprint
 from egonet.grabcut.colour import _first_models
-from egonet.grabcut.cut import _crossing, _flooded, _sharpened, _straight, _Terms
+from egonet.grabcut.cut import _along, _crossing, _flooded, _sharpened, _straight, _Terms
 from egonet.grabcut.fine import _fine_cut
 from tests import thin_objects
 
@@ -117,6 +117,36 @@ def test_a_click_floods_the_coherent_region_it_lands_in():
     sure[30:60, 66:75] = True
     region = _flooded(image, against, [(crop, (43, 45), True)], 56, 0.7, sure)
     assert not (region & sure).any() and region[40:50, 40:48].all() and not (region & ~near).any()
+
+
+def test_an_object_click_follows_a_thin_part_along_itself_and_not_a_wide_one():
+    """``_along``: a stroke along a missed leg (a thin bar of its colour) takes the bar, not a patch of its colour.
+
+    On a wide patch of the stroke's colour (the part is no thin part there),
+    or where the part of its colour spreads beyond the strip along the stroke
+    (a bar joined to a patch), nothing is taken.
+    """
+    rng = np.random.default_rng(0)
+    image = np.full((120, 160, 3), (100, 100, 100), np.float64)
+    skin = (200, 150, 120)
+    bar = np.zeros((120, 160), bool)
+    bar[10:110, 60:68] = True  # a leg, 8 grid pixels wide
+    image[bar] = skin
+    image = np.clip(image + rng.normal(0, 5, image.shape), 0, 255).astype(np.uint8)
+    crop = np.ones((11, 3), bool)  # a short stroke along the bar
+    against, nothing = np.ones((120, 160), bool), np.zeros((120, 160), bool)
+    taken = _along(image, against, (crop, (50, 63)), 56, nothing)
+    assert np.count_nonzero(taken & bar) > 0.9 * np.count_nonzero(bar)
+    near = cv2.dilate(bar.view(np.uint8), np.ones((3, 3), np.uint8)).view(bool)
+    assert not (taken & ~near).any()
+    # A wide patch of the same colour: no thin part.
+    wide = image.copy()
+    wide[30:90, 40:100] = skin
+    assert not _along(wide, against, (crop, (50, 63)), 56, nothing).any()
+    # The bar joined to a patch beside it: the part spreads beyond the strip along the stroke.
+    joined = image.copy()
+    joined[70:110, 68:130] = skin
+    assert not _along(joined, against, (crop, (50, 63)), 56, nothing).any()
 
 
 def test_an_object_click_floods_a_part_whose_colour_the_background_holds_too():
@@ -291,13 +321,15 @@ def test_noc90_on_real_frames_with_thin_objects():
     # the cows 10 -> 8, the dog 3 -> 2, the soapbox 13 -> 12); the goat takes all 20, the chopsticks
     # 7 (they missed before: IoU 0.33 at 20), the knife 5 (7 without the box prior). With the
     # straight-line prior (``_straight``) the chopsticks take 2 (the box 0.00 -> 0.88): 6.22 on all nine.
+    # With an object click following a thin part of its colour along itself (``cut._along``): 8.2 on
+    # the DAVIS frames and 5.56 on all nine (knife 4, cows 6, goat 19 at IoU 0.900, soapbox 10).
     # The goal of issue 36, 5, is not met (see docs/benchmarks.md).
-    assert np.mean(davis) <= 9.4, scores
+    assert np.mean(davis) <= 8.4, scores
     assert sum(v < thin_objects.MAX_CLICKS for v in davis) >= 4, scores
     if len(scores) > 5:
-        assert np.mean(list(scores.values())) <= 6.3, scores
+        assert np.mean(list(scores.values())) <= 5.7, scores
         assert scores["fork-00_007850_1"] <= 2 and scores["spoon-02_024150_3"] <= 3, scores
-        assert scores["knife-01_007750_6"] <= 5 and scores["chopsticks-02_024150_3"] <= 2, scores
+        assert scores["knife-01_007750_6"] <= 4 and scores["chopsticks-02_024150_3"] <= 2, scores
 
 
 def test_the_box_leaves_out_the_background_it_holds():
