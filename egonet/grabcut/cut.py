@@ -43,6 +43,11 @@ the other label), not only what the re-cut's colour models move. An object
 stroke on a thin part of its colour (a leg) also takes that part along
 itself (``_along``), where the flood stops short on the grid.
 
+A background stroke gives back a long thin part it cut off that the
+models learnt after it place on the object's side (``_restored``: a knife's
+handle lying on the mug the stroke removed, which the grid's pairwise term
+drops with the mug).
+
 What a stroke changes is local (``_keep_connected``): only pixels within
 ``_NEAR_GRID`` of the stroke, or joined to it through pixels that changed
 too, take a new label; every other pixel keeps its own, so re-estimated
@@ -86,6 +91,7 @@ _FLOOD_SCALE = 2.0  # a stroke floods at most this many times its depth in its r
 _FLOOD_MIN = 4  # ... or this many grid pixels, whichever is more
 _FLOOD_SMOOTH = 0.7  # Gaussian sigma of the colours before the flood's gradient, grid pixels
 _SURE_MARGIN = 4.0  # a pixel whose colour favours the other label by this much (-log p) stops the flood
+_LONG = 8.0  # a background stroke gives back a thin part it cut off that is at least this many times as long as wide
 _ALONG_WIDTH = 2.0  # an object stroke takes the part of its colour along itself this many times the part's half-width
 _ALONG_SHARE = 0.9  # ... when at least this fraction of that part lies along the stroke (``_along``)
 _ALONG_HALF = 8  # ... and the part is at most this many grid pixels from its edge at the stroke (thin)
@@ -657,9 +663,62 @@ def _recut(terms: _Terms, guide: _Guide, models: np.ndarray, strokes: tuple[_Str
         low = (low | region) if last.fg else (low & ~region)
         if last.fg:
             low |= _along(guide.image, ~prior & (gc != cv2.GC_BGD), hit, reach, region)
+    if not strokes[-1].fg:
+        low = _restored(terms, models, prior, low, gc)
     if hit is not None:
         low = _keep_connected(low, prior, *hit, _NEAR_GRID)
     return low, models
+
+
+def _restored(terms: _Terms, models: np.ndarray, prior: np.ndarray, low: np.ndarray, gc: np.ndarray) -> np.ndarray:
+    """A background stroke's label with the thin parts it cut off only for want of their neighbours given back.
+
+    The stroke's re-cut learns its models from the label before the stroke,
+    in which the region it was drawn on (a mug standing in the box) is still
+    the object's: those models cannot tell that region from the object, and
+    the stroke's pixels alone move the cut. A long thin part lying on the
+    region (a knife's handle across the mug) then goes with it, though its
+    colours are the object's: keeping it costs its whole outline against
+    the region, which its few pixels' data does not pay (graph cuts'
+    shrinking bias, worst where the grid leaves a part a few pixels wide).
+    The next iteration's models, learnt on the label after the stroke, place
+    the region on the background's side and the part on the object's. So the
+    pixels the stroke removed that those models favour as object by more
+    than ``_SURE_MARGIN`` nats (not the strokes' own, ``GC_BGD`` in ``gc``)
+    are given back, joined to the label, where they make a thin part: at
+    least ``_LONG`` times as long as wide (its pixels at least ``_LONG``
+    times the square of its width, twice its largest distance to its edge).
+    A wider or shorter piece (a blob of wall the colour of a white chair, a
+    strip along the new edge, a few pixels of fur) stays removed: the cut's
+    edge there is the pairwise term's call, not its bias.
+
+    Args:
+        terms: The ROI's terms.
+        models: The re-cut's models.
+        prior: The label before the stroke.
+        low: The label after it (within ``prior``).
+        gc: The re-cut's GC_* labels after its cut.
+
+    Returns:
+        bool ``(h, w)``: ``low`` with those parts back.
+    """
+    flat = low.ravel()
+    removed = np.flatnonzero((prior & ~low).ravel() & (gc.ravel() != cv2.GC_BGD))
+    if not len(removed) or not flat.any():
+        return low
+    cost_bg, cost_fg = terms.costs(terms.learn(~flat, flat, models), removed)
+    back = np.zeros(flat.size, bool)
+    back[removed[cost_bg - cost_fg > _SURE_MARGIN]] = True
+    # Closed (a 3x3 closing, within what the stroke removed), so a few pixels of noise do not make a wide part thin.
+    back = cv2.morphologyEx(back.reshape(low.shape).view(np.uint8), cv2.MORPH_CLOSE, np.ones((3, 3), np.uint8))
+    back = (_joined(back.view(bool) & prior, low) & ~low).view(np.uint8)
+    count, parts = cv2.connectedComponents(back, connectivity=8)
+    half = cv2.distanceTransform(np.pad(back, 1), cv2.DIST_L2, 3)[1:-1, 1:-1]
+    widest = np.zeros(count)
+    np.maximum.at(widest, parts.ravel(), half.ravel())
+    thin = np.bincount(parts.ravel(), minlength=count) >= _LONG * (2 * widest) ** 2
+    thin[0] = False
+    return low | thin[parts]
 
 
 def _unlike(image: np.ndarray, crop: np.ndarray, origin: tuple[int, int], reach: int) -> np.ndarray:

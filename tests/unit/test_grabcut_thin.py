@@ -10,7 +10,7 @@ import pytest
 
 from egonet.grabcut import GrabCutSession, stroke_footprint
 from egonet.grabcut.colour import _first_models
-from egonet.grabcut.cut import _along, _crossing, _flooded, _sharpened, _straight, _Terms
+from egonet.grabcut.cut import _along, _crossing, _flooded, _restored, _sharpened, _straight, _Terms
 from egonet.grabcut.fine import _fine_cut
 from tests import thin_objects
 
@@ -147,6 +147,37 @@ def test_an_object_click_follows_a_thin_part_along_itself_and_not_a_wide_one():
     joined = image.copy()
     joined[70:110, 68:130] = skin
     assert not _along(joined, against, (crop, (50, 63)), 56, nothing).any()
+
+
+def test_a_background_stroke_gives_back_a_thin_part_it_cut_off_and_not_a_wide_one():
+    """``_restored``: a knife's handle lying on a mug the stroke removed comes back; a patch of its colour does not."""
+    rng = np.random.default_rng(0)
+    h, w = 120, 300
+    image = np.empty((h, w, 3), np.float64)
+    image[...] = (90, 60, 40)  # a brown table
+    mug = np.zeros((h, w), np.uint8)
+    cv2.circle(mug, (60, 60), 40, 1, -1)
+    image[mug.view(bool)] = (235, 235, 240)  # a white mug, in the box's label
+    bar = np.zeros((h, w), np.uint8)
+    cv2.line(bar, (25, 45), (280, 75), 1, 7)  # the knife, across the mug
+    image[bar.view(bool)] = (160, 160, 150)
+    patch = np.zeros((h, w), bool)
+    patch[68:88, 185:205] = True  # a grey patch of the knife's colour under it, that the re-cut took too
+    image[patch] = (160, 160, 150)
+    image = np.clip(image + rng.normal(0, 4, image.shape), 0, 255).astype(np.uint8)
+    mug, bar = mug.view(bool), bar.view(bool)
+    prior = mug | bar | patch
+    handle = bar & (np.arange(w) < 150)
+    low = prior & ~mug & ~handle & ~patch  # the re-cut took the mug, the handle and the patch
+    gc = np.where(low, cv2.GC_PR_FGD, cv2.GC_PR_BGD).astype(np.uint8)
+    gc[55:65, 40:80] = cv2.GC_BGD  # the stroke, on the mug
+    terms = _Terms.of_image(image)
+    models = _first_models(image, np.where(prior, cv2.GC_PR_FGD, cv2.GC_BGD).astype(np.uint8),
+                           np.random.default_rng(0))
+    kept = _restored(terms, models, prior, low, gc)
+    assert not (low & ~kept).any() and not (kept & ~prior).any()
+    assert kept[handle].mean() > 0.85  # the handle, on the mug and beyond it
+    assert not kept[patch].any() and kept[mug & ~bar].mean() < 0.01
 
 
 def test_an_object_click_floods_a_part_whose_colour_the_background_holds_too():
@@ -322,14 +353,16 @@ def test_noc90_on_real_frames_with_thin_objects():
     # 7 (they missed before: IoU 0.33 at 20), the knife 5 (7 without the box prior). With the
     # straight-line prior (``_straight``) the chopsticks take 2 (the box 0.00 -> 0.88): 6.22 on all nine.
     # With an object click following a thin part of its colour along itself (``cut._along``): 8.2 on
-    # the DAVIS frames and 5.56 on all nine (knife 4, cows 6, goat 19 at IoU 0.900, soapbox 10).
+    # the DAVIS frames and 5.56 on all nine (knife 4, cows 6, goat 19 at IoU 0.900, soapbox 10). With a
+    # background click giving back the thin part it cut off (``cut._restored``: the knife's handle on the
+    # mug the first click removes): the knife 3, 5.44 on all nine.
     # The goal of issue 36, 5, is not met (see docs/benchmarks.md).
     assert np.mean(davis) <= 8.4, scores
     assert sum(v < thin_objects.MAX_CLICKS for v in davis) >= 4, scores
     if len(scores) > 5:
-        assert np.mean(list(scores.values())) <= 5.7, scores
+        assert np.mean(list(scores.values())) <= 5.5, scores
         assert scores["fork-00_007850_1"] <= 2 and scores["spoon-02_024150_3"] <= 3, scores
-        assert scores["knife-01_007750_6"] <= 4 and scores["chopsticks-02_024150_3"] <= 2, scores
+        assert scores["knife-01_007750_6"] <= 3 and scores["chopsticks-02_024150_3"] <= 2, scores
 
 
 def test_the_box_leaves_out_the_background_it_holds():
