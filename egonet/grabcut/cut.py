@@ -655,12 +655,18 @@ def _recut(terms: _Terms, guide: _Guide, models: np.ndarray, strokes: tuple[_Str
         # What surely is of the other label: the sure pixels, and those its colour model clearly prefers
         # unless they are like the stroke's own colours (``_unlike``).
         cost_bg, cost_fg = terms.costs(models, np.arange(gc.size))
-        favour = (cost_fg - cost_bg) if last.fg else (cost_bg - cost_fg)
+        favour = ((cost_fg - cost_bg) if last.fg else (cost_bg - cost_fg)).reshape(gc.shape)
         reach = _STROKE_REACH if reach is None else reach
-        clear = (favour.reshape(gc.shape) > _SURE_MARGIN) & _unlike(guide.image, *hit, reach)
-        sure = (gc == (cv2.GC_BGD if last.fg else cv2.GC_FGD)) | clear
+        unlike = _unlike(guide.image, *hit, reach)
+        sure = (gc == (cv2.GC_BGD if last.fg else cv2.GC_FGD)) | ((favour > _SURE_MARGIN) & unlike)
         region = _flooded(guide.image, ~prior if last.fg else prior, hits, reach, _FLOOD_SMOOTH, sure)
         low = (low | region) if last.fg else (low & ~region)
+        # The cut's smoothness also carries pixels to the stroke's side against their own colour (the fence
+        # beside a camel's head, a push bar beside the wall a background click clears): a pixel the other
+        # side's model explains at least as well moves only if it is like the stroke's colours. What the
+        # flood took, up to the image's edges, moves as it is.
+        carried = (low != prior) & ~region & (gc != (cv2.GC_FGD if last.fg else cv2.GC_BGD)) & (favour >= 0) & unlike
+        low = np.where(carried, prior, low)
         if last.fg:
             low |= _along(guide.image, ~prior & (gc != cv2.GC_BGD), hit, reach, region)
     if not strokes[-1].fg:
