@@ -96,6 +96,27 @@ def test_strokes_on_real_video_change_nothing_far():
     assert far == [0] * len(far)
 
 
+def test_an_object_click_does_not_carry_the_background_its_colour_model_holds():
+    """The camel a few video frames on (camel-00028): the first click, on its missed head, takes the head
+    and little of the fence behind it.
+
+    The stroke's re-cut smooths the label over the fence beside the head,
+    whose colours the background's model explains at least as well as the
+    object's: before, 39,218 px of fence came with the head (IoU 0.792 ->
+    0.788); a pixel carried against its colour now moves only if it is like
+    the stroke's colours (``cut._recut``).
+    """
+    case = thin_objects.davis_case(thin_objects.REAL_VIDEO / "camel-00024", 4)
+    session = GrabCutSession(case.rgb)
+    before = session.box(*thin_objects.loose_box(case.truth))
+    k = thin_objects.click(before, case.truth)
+    assert k.label == "fg"
+    after = session.stroke(k.points, k.label, k.radius)
+    wrong = np.count_nonzero((before == case.truth) & (after != case.truth))
+    assert wrong < 20_000, wrong  # 14,964 on 2026-12-05
+    assert thin_objects.iou(after, case.truth) > thin_objects.iou(before, case.truth) + 0.02
+
+
 def test_a_click_floods_the_coherent_region_it_lands_in():
     """``_flooded``: an object stroke in a bright square labelled background takes the square, up to its edges."""
     rng = np.random.default_rng(0)
@@ -355,14 +376,44 @@ def test_noc90_on_real_frames_with_thin_objects():
     # With an object click following a thin part of its colour along itself (``cut._along``): 8.2 on
     # the DAVIS frames and 5.56 on all nine (knife 4, cows 6, goat 19 at IoU 0.900, soapbox 10). With a
     # background click giving back the thin part it cut off (``cut._restored``: the knife's handle on the
-    # mug the first click removes): the knife 3, 5.44 on all nine.
+    # mug the first click removes): the knife 3, 5.44 on all nine. With a re-cut that carries a pixel
+    # against its colour only when it is like the stroke's (2026-12-05): 8.0 on the DAVIS frames, 5.33
+    # on all nine (soapbox 8), but the goat's first frame misses (IoU 0.89 at 20; 19 before, at 0.900),
+    # while the 20 later frames nobody tuned on go from 11.80 to 10.40 (``test_noc90_on_later_frames``).
     # The goal of issue 36, 5, is not met (see docs/benchmarks.md).
-    assert np.mean(davis) <= 8.4, scores
+    assert np.mean(davis) <= 8.2, scores
     assert sum(v < thin_objects.MAX_CLICKS for v in davis) >= 4, scores
     if len(scores) > 5:
-        assert np.mean(list(scores.values())) <= 5.5, scores
+        assert np.mean(list(scores.values())) <= 5.4, scores
         assert scores["fork-00_007850_1"] <= 2 and scores["spoon-02_024150_3"] <= 3, scores
         assert scores["knife-01_007750_6"] <= 3 and scores["chopsticks-02_024150_3"] <= 2, scores
+
+
+@pytest.mark.slow
+def test_noc90_on_later_frames():
+    """NoC@90 on the 20 later frames of the video windows, which no parameter was tuned on, every stroke local.
+
+    2026-12-05: 12.05 before that day's changes (12.15 before issue 36's
+    NoC work, 12.45 after its third pass), 11.80 with ``cut._along``, 10.40
+    with the re-cut carrying a pixel against its colour only when it is like
+    the stroke's.
+    """
+    scores = {}
+    for case in thin_objects.later_cases():
+        session = GrabCutSession(case.rgb)
+        far = []
+
+        def stroke(k, session=session, far=far):
+            before = session.mask
+            after = session.stroke(k.points, k.label, k.radius)
+            far.append(int(_far_changes(before, after, stroke_footprint(after.shape, k.points, k.radius)).sum()))
+            return after
+
+        run = thin_objects.noc(lambda b, session=session: session.box(*b), stroke, case.truth)
+        scores[case.name] = thin_objects.noc_score(run)
+        assert not any(far), (case.name, far)
+    assert len(scores) == 20
+    assert np.mean(list(scores.values())) <= 10.7, scores
 
 
 def test_the_box_leaves_out_the_background_it_holds():
