@@ -341,15 +341,8 @@ def test_the_box_takes_a_pair_of_chopsticks_its_grid_cannot_resolve():
     assert thin_objects.iou(mask, case.truth) >= 0.85  # 0.876
 
 
-@pytest.mark.slow
-def test_noc90_on_real_frames_with_thin_objects():
-    """NoC@90 (the box first, then clicks at the largest error's interior-most point), as the bench runs it.
-
-    Mean over the real frames (DAVIS windows; with ``../shared`` the first-person
-    frames with a fork, knife, spoon and chopsticks), a miss counting 20, and
-    every stroke local.
-    """
-    cases = thin_objects.all_cases()
+def _noc_scores(cases: list[thin_objects.Case]) -> dict[str, int]:
+    """NoC@90 of each case as the bench runs it (a miss counts 20), asserting that every stroke is local."""
     scores = {}
     for case in cases:
         session = GrabCutSession(case.rgb)
@@ -364,6 +357,18 @@ def test_noc90_on_real_frames_with_thin_objects():
         run = thin_objects.noc(lambda b, session=session: session.box(*b), stroke, case.truth)
         scores[case.name] = thin_objects.noc_score(run)
         assert not any(far), (case.name, far)
+    return scores
+
+
+@pytest.mark.slow
+def test_noc90_on_real_frames_with_thin_objects():
+    """NoC@90 (the box first, then clicks at the largest error's interior-most point), as the bench runs it.
+
+    Mean over the real frames (DAVIS windows; with ``../shared`` the first-person
+    frames with a fork, knife, spoon and chopsticks), a miss counting 20, and
+    every stroke local.
+    """
+    scores = _noc_scores(thin_objects.all_cases())
     davis = [v for k, v in scores.items() if k in ("camel", "cows", "dog", "goat", "soapbox")]
     assert len(davis) == 5
     # 2026-12-04: 9.2 on the DAVIS frames and 6.78 on all nine (main's engine before issue 36: 11.6
@@ -398,20 +403,7 @@ def test_noc90_on_later_frames():
     with the re-cut carrying a pixel against its colour only when it is like
     the stroke's.
     """
-    scores = {}
-    for case in thin_objects.later_cases():
-        session = GrabCutSession(case.rgb)
-        far = []
-
-        def stroke(k, session=session, far=far):
-            before = session.mask
-            after = session.stroke(k.points, k.label, k.radius)
-            far.append(int(_far_changes(before, after, stroke_footprint(after.shape, k.points, k.radius)).sum()))
-            return after
-
-        run = thin_objects.noc(lambda b, session=session: session.box(*b), stroke, case.truth)
-        scores[case.name] = thin_objects.noc_score(run)
-        assert not any(far), (case.name, far)
+    scores = _noc_scores(thin_objects.later_cases())
     assert len(scores) == 20
     assert np.mean(list(scores.values())) <= 10.7, scores
 
