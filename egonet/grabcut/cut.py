@@ -39,9 +39,12 @@ followed at full resolution instead (``fine._fine_cut``, in the session).
 
 A colour stroke also flips the error region it lands in up to the image's
 edges (``_flooded``: a watershed from the stroke against what surely has
-the other label), not only what the re-cut's colour models move. An object
-stroke on a thin part of its colour (a leg) also takes that part along
-itself (``_along``), where the flood stops short on the grid.
+the other label), not only what the re-cut's colour models move; and the
+re-cut moves a pixel against its own colour (one the other side's model
+explains at least as well, carried by the cut's smoothness) only if it is
+like the stroke's colours (the fence beside a camel's head stays out). An
+object stroke on a thin part of its colour (a leg) also takes that part
+along itself (``_along``), where the flood stops short on the grid.
 
 A background stroke gives back a long thin part it cut off that the
 models learnt after it place on the object's side (``_restored``: a knife's
