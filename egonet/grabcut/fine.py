@@ -30,6 +30,7 @@ _THIN = 2.0  # a colour stroke narrower than this many grid pixels (radius) may 
 _WIDER = 2.0  # ... it is, where the part of its colour is at most this many times its radius wide (+2 px)
 _MIN_PIXELS = 20  # a stroke of fewer pixels (a dot on an edge) has no colour to follow: left to the grid's cut
 _REACH = 360  # full-resolution pixels around the stroke that its cut may change
+_FIRST_REACH = 120  # ... first within this many (the window grows to the reach only if the part leaves it)
 _MODEL_REACH = 50  # ... and whose colours, within this many of it, train the two mixtures
 _LIKE = 11.3  # squared Mahalanobis distance to the stroke's colours of a pixel like them (chi-squared, 3 dof, 99 %)
 _BIAS = 4.0  # nats the stroke's side is favoured by, for the part's edge (pixels of mixed colour)
@@ -85,40 +86,53 @@ def _fine_cut(image: np.ndarray, mask: np.ndarray, own: np.ndarray, origin: tupl
     limit = _WIDER * radius + 2
     stroke = image[y0 : y0 + own.shape[0], x0 : x0 + own.shape[1]][own]
 
-    def window(reach: int) -> tuple[int, int, int, int, np.ndarray, np.ndarray, np.ndarray]:
-        """``(r0, c0, r1, c1)``, the stroke's label, the stroke and the pixels like it, within ``reach``."""
+    def window(reach: int) -> tuple[int, int, int, int, np.ndarray, np.ndarray]:
+        """``(r0, c0, r1, c1)``, the stroke's label and the stroke, within ``reach``."""
         r0, r1 = max(0, y0 - reach), min(h, y0 + own.shape[0] + reach)
         c0, c1 = max(0, x0 - reach), min(w, x0 + own.shape[1] + reach)
         hard = np.zeros((r1 - r0, c1 - c0), bool)
         hard[y0 - r0 : y0 - r0 + own.shape[0], x0 - c0 : x0 - c0 + own.shape[1]] = own
-        like = _like(stroke, image[r0:r1, c0:c1]).reshape(hard.shape)
-        return r0, c0, r1, c1, (mask[r0:r1, c0:c1] == fg) | hard, hard, like
+        return r0, c0, r1, c1, (mask[r0:r1, c0:c1] == fg) | hard, hard
 
     # Thin where the part of the stroke's colour around it is at most ``limit`` wide.
-    *_, side, hard, like = window(int(limit) + 2)
+    r0, c0, r1, c1, side, hard = window(int(limit) + 2)
+    like = _like(stroke, image[r0:r1, c0:c1]).reshape(hard.shape)
     width = cv2.distanceTransform(_joined(like & ~side, hard).view(np.uint8), cv2.DIST_L2, 3)
     if not thin and width[hard].max() > limit:
         return None
-    r0, c0, r1, c1, side, hard, like = window(reach)
-    win = image[r0:r1, c0:c1]
-    m = _MODEL_REACH
-    a0, b0 = max(0, y0 - r0 - m), max(0, x0 - c0 - m)
-    a1, b1 = y0 - r0 + own.shape[0] + m, x0 - c0 + own.shape[1] + m
-    near, near_side = win[a0:a1, b0:b1].reshape(-1, 3), side[a0:a1, b0:b1].ravel()
-    if near_side.all():
-        return flip
-    rest = ~near_side & ~like[a0:a1, b0:b1].ravel()
-    rng = np.random.default_rng(0)
-    other_model = _fit_model(near[rest if rest.any() else ~near_side], rng)[0]
-    own_model = _fit_model(near[near_side], rng)[0]
-    x = win.reshape(-1, 3).astype(np.float32)
-    cost_own = _costs(own_model, x).reshape(side.shape)
-    cost_other = _costs(other_model, x).reshape(side.shape) + _BIAS
-    likely = (cost_own < cost_other) & ~side
-    likely[[0, -1], :] = likely[:, [0, -1]] = False
-    # The likely pixels joined to the stroke, less what is wider than ``limit`` (an opening finds it).
-    free = _joined(likely, hard) & ~side
     size = 2 * int(limit) + 1
+    models = None
+    # The part is followed within a window that grows to ``reach`` only while the part comes near its edge: the
+    # costs over the whole window were most of a stroke's time, and a part inside a smaller window, farther than
+    # the opening's size from every side the window could still grow on, is the same part in the larger one.
+    for grow in (min(reach, max(_MODEL_REACH, _FIRST_REACH)), reach):
+        r0, c0, r1, c1, side, hard = window(grow)
+        win = image[r0:r1, c0:c1]
+        if models is None:
+            m = _MODEL_REACH
+            a0, b0 = max(0, y0 - r0 - m), max(0, x0 - c0 - m)
+            a1, b1 = y0 - r0 + own.shape[0] + m, x0 - c0 + own.shape[1] + m
+            near, near_side = win[a0:a1, b0:b1].reshape(-1, 3), side[a0:a1, b0:b1].ravel()
+            if near_side.all():
+                return flip
+            rest = ~near_side & ~_like(stroke, near)
+            rng = np.random.default_rng(0)
+            other_model = _fit_model(near[rest if rest.any() else ~near_side], rng)[0]
+            models = (_fit_model(near[near_side], rng)[0], other_model)
+        x = win.reshape(-1, 3).astype(np.float32)
+        cost_own = _costs(models[0], x).reshape(side.shape)
+        cost_other = _costs(models[1], x).reshape(side.shape) + _BIAS
+        likely = (cost_own < cost_other) & ~side
+        likely[[0, -1], :] = likely[:, [0, -1]] = False
+        # The likely pixels joined to the stroke, less what is wider than ``limit`` (an opening finds it).
+        free = _joined(likely, hard) & ~side
+        if grow < reach:
+            margin = size + 2
+            rows, cols = np.flatnonzero(free.any(axis=1)), np.flatnonzero(free.any(axis=0))
+            if len(rows) and ((r0 > 0 and rows[0] < margin) or (r1 < h and rows[-1] >= r1 - r0 - margin)
+                              or (c0 > 0 and cols[0] < margin) or (c1 < w and cols[-1] >= c1 - c0 - margin)):
+                continue
+        break
     free &= ~cv2.morphologyEx(free.view(np.uint8), cv2.MORPH_OPEN,
                               cv2.getStructuringElement(cv2.MORPH_ELLIPSE, (size, size))).view(bool)
     free = _joined(free, hard) & ~side
