@@ -401,12 +401,7 @@ def _crossing(image: np.ndarray, low: np.ndarray) -> np.ndarray | None:
     missing = [k for k, band in enumerate(bands) if not (low & band).any()]
     if not missing:
         return None
-    # Ridge strength: the Hessian's eigenvalue of largest magnitude, scale-normalised, best over 1-3 grid pixels.
-    grey = image.astype(np.float32).mean(axis=2)
-    ridge = np.zeros_like(grey)
-    for sigma in (1, 2, 3):
-        eigen = hessian_matrix_eigvals(hessian_matrix(grey, sigma, order="rc", use_gaussian_derivatives=False))
-        ridge = np.maximum(ridge, sigma * sigma * np.abs(eigen).max(axis=0))
+    ridge = _ridges(image, (1, 2, 3))
     cost = 1.0 / (ridge / (ridge.max() + 1e-9) + 0.05)
     path = np.zeros((h, w), bool)
     for k in missing:
@@ -417,27 +412,37 @@ def _crossing(image: np.ndarray, low: np.ndarray) -> np.ndarray | None:
         cumulative, _ = mcp.find_costs([tuple(p) for p in starts], [tuple(p) for p in ends], find_all_ends=False)
         for p in mcp.traceback(tuple(ends[np.argmin(cumulative[bands[k]])])):
             path[p] = True
-    lab = cv2.cvtColor(image, cv2.COLOR_RGB2LAB).reshape(-1, 3).astype(np.float32)
-    spread = np.linalg.norm(lab[path.ravel()].std(axis=0)) / max(1e-6, float(np.linalg.norm(lab.std(axis=0))))
-    return path if spread <= _COHERENT else None
+    return path if _spread(image, path) <= _COHERENT else None
 
 
-def _ridges(image: np.ndarray) -> np.ndarray:
-    """Line strength of a uint8 ``(h, w, 3)`` image: thin bright or dark lines, not edges, best over 1-2 grid pixels.
+def _spread(image: np.ndarray, where: np.ndarray | tuple[np.ndarray, np.ndarray]) -> float:
+    """How far the colours of ``image``'s pixels ``where`` spread (Lab), as a fraction of the whole image's spread.
 
-    The Hessian's eigenvalue of largest magnitude (scale-normalised, as
-    ``_crossing``'s) less the gradient's magnitude at the same scale: a
-    line's middle has no gradient, an edge's flanks (which the Hessian
-    answers too) have much.
+    A path or line of one material spreads little (the box priors' test, ``_COHERENT``).
+    """
+    lab = cv2.cvtColor(image, cv2.COLOR_RGB2LAB).astype(np.float32)
+    return float(np.linalg.norm(lab[where].std(axis=0)) / max(1e-6, float(np.linalg.norm(lab.reshape(-1, 3).std(axis=0)))))
+
+
+def _ridges(image: np.ndarray, sigmas: tuple[int, ...], *, lines_only: bool = False) -> np.ndarray:
+    """Ridge strength of a uint8 ``(h, w, 3)`` image: thin bright or dark lines, best over ``sigmas`` grid pixels.
+
+    The Hessian's eigenvalue of largest magnitude, scale-normalised (as
+    Sato's filter). With ``lines_only``, less the gradient's magnitude at the
+    same scale (the image's border repeated): a line's middle has no
+    gradient, an edge's flanks (which the Hessian answers too) have much.
     """
     grey = image.astype(np.float32).mean(axis=2)
     ridge = np.zeros_like(grey)
-    for sigma in (1, 2):
-        eigen = hessian_matrix_eigvals(hessian_matrix(grey, sigma, mode="nearest", order="rc",
-                                                      use_gaussian_derivatives=False))
-        smooth = cv2.GaussianBlur(grey, (0, 0), sigma)
-        gradient = np.hypot(cv2.Sobel(smooth, cv2.CV_32F, 1, 0, ksize=1), cv2.Sobel(smooth, cv2.CV_32F, 0, 1, ksize=1))
-        ridge = np.maximum(ridge, sigma * sigma * np.abs(eigen).max(axis=0) - sigma * gradient)
+    for sigma in sigmas:
+        mode = "nearest" if lines_only else "constant"
+        eigen = hessian_matrix_eigvals(hessian_matrix(grey, sigma, mode=mode, order="rc", use_gaussian_derivatives=False))
+        strength = sigma * sigma * np.abs(eigen).max(axis=0)
+        if lines_only:
+            smooth = cv2.GaussianBlur(grey, (0, 0), sigma)
+            strength -= sigma * np.hypot(cv2.Sobel(smooth, cv2.CV_32F, 1, 0, ksize=1),
+                                         cv2.Sobel(smooth, cv2.CV_32F, 0, 1, ksize=1))
+        ridge = np.maximum(ridge, strength)
     return ridge
 
 
@@ -465,7 +470,7 @@ def _straight(image: np.ndarray, low: np.ndarray) -> np.ndarray | None:
         ``(2, 2)`` float ``(x, y)``: the line's two ends on ``image``, or None.
     """
     h, w = image.shape[:2]
-    ridge = _ridges(image)
+    ridge = _ridges(image, (1, 2), lines_only=True)
 
     def strongest(across: bool, starts: np.ndarray, stops: np.ndarray, step: int) -> tuple[float, np.ndarray]:
         """The strongest line from a start to a stop (on the left and right edges, or top and bottom), read
@@ -494,9 +499,7 @@ def _straight(image: np.ndarray, low: np.ndarray) -> np.ndarray | None:
     middle = ys[cut : len(along) - cut], xs[cut : len(along) - cut]
     if low[middle].mean() > _LINE_KEPT:
         return None
-    lab = cv2.cvtColor(image, cv2.COLOR_RGB2LAB).astype(np.float32)
-    spread = np.linalg.norm(lab[middle].std(axis=0)) / max(1e-6, float(np.linalg.norm(lab.reshape(-1, 3).std(axis=0))))
-    if spread > _COHERENT or strength < _LINE_STRENGTH * float(np.maximum(ridge, 0).mean()):
+    if _spread(image, middle) > _COHERENT or strength < _LINE_STRENGTH * float(np.maximum(ridge, 0).mean()):
         return None
     return np.array([[xs[0], ys[0]], [xs[-1], ys[-1]]], float)
 
