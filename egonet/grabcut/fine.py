@@ -105,8 +105,15 @@ def _likely_part(win: np.ndarray, side: np.ndarray, hard: np.ndarray,
             other = _costs(models[1], x) + _BIAS
             cost_own.ravel()[pick], cost_other.ravel()[pick] = own, other
             likely.ravel()[pick] = own < other
-        part = _joined(likely, hard)
-        todo = tiles(cv2.dilate(part.view(np.uint8), np.ones((3, 3), np.uint8)).view(bool)) & ~done
+        # Joined within the tiles done (nothing beyond them is likely), and the tiles beside the part.
+        rows, cols = np.flatnonzero(done.any(axis=1)), np.flatnonzero(done.any(axis=0))
+        a0, a1, b0, b1 = rows[0] * t, min(h, (rows[-1] + 1) * t), cols[0] * t, min(w, (cols[-1] + 1) * t)
+        part = np.zeros((h, w), bool)
+        part[a0:a1, b0:b1] = _joined(likely[a0:a1, b0:b1], hard[a0:a1, b0:b1])
+        a0, a1, b0, b1 = max(0, a0 - 1), min(h, a1 + 1), max(0, b0 - 1), min(w, b1 + 1)
+        beside = np.zeros((h, w), bool)
+        beside[a0:a1, b0:b1] = cv2.dilate(part[a0:a1, b0:b1].view(np.uint8), np.ones((3, 3), np.uint8)).view(bool)
+        todo = tiles(beside) & ~done
         if not todo.any():
             return cost_own, cost_other, part & ~side
 
@@ -181,9 +188,14 @@ def _fine_cut(image: np.ndarray, mask: np.ndarray, own: np.ndarray, origin: tupl
                               or (c0 > 0 and cols[0] < margin) or (c1 < w and cols[-1] >= c1 - c0 - margin)):
                 continue
         break
-    # Less what is wider than ``limit`` (an opening finds it).
-    free &= ~cv2.morphologyEx(free.view(np.uint8), cv2.MORPH_OPEN,
-                              cv2.getStructuringElement(cv2.MORPH_ELLIPSE, (size, size))).view(bool)
+    # Less what is wider than ``limit`` (an opening finds it; opened within ``size`` of the part's bounds, the same
+    # opening as the whole window's, which is empty beyond them).
+    rows, cols = np.flatnonzero(free.any(axis=1)), np.flatnonzero(free.any(axis=0))
+    if len(rows):
+        a0, a1 = max(0, rows[0] - size), min(free.shape[0], rows[-1] + 1 + size)
+        b0, b1 = max(0, cols[0] - size), min(free.shape[1], cols[-1] + 1 + size)
+        free[a0:a1, b0:b1] &= ~cv2.morphologyEx(free[a0:a1, b0:b1].view(np.uint8), cv2.MORPH_OPEN,
+                                                cv2.getStructuringElement(cv2.MORPH_ELLIPSE, (size, size))).view(bool)
     free = _joined(free, hard) & ~side
     if not free.any():
         return flip
