@@ -110,6 +110,10 @@ _SHARPEN_ITERATIONS = 2  # ... for this many re-estimations and cuts (on the coa
 _SHARPEN_KEEP = 0.5  # ... and is taken only if it keeps at least this fraction of the label
 _SHARPEN_EDGE = 0.02  # ... and not at all when the label covers more than this fraction of the box's outline
 
+# OpenCV builds its 8-bit RGB -> Lab tables on the process's first such conversion (50-100 ms CPU, once): built at
+# import, so that the first stroke that floods (``_flooded``) does not pay for them.
+cv2.cvtColor(np.zeros((1, 1, 3), np.uint8), cv2.COLOR_RGB2LAB)
+
 # The terms of one cut: ``learn(bg, fg, models) -> models`` re-estimates both
 # models from the flat pixels ``bg`` and ``fg`` (bool masks); ``costs(models, pixels) -> (cost_bg, cost_fg)``
 # are ``-log p`` of the flat pixels under each; ``links`` the pairwise links.

@@ -34,6 +34,7 @@ _FIRST_REACH = 120  # ... first within this many (the window grows to the reach 
 _MODEL_REACH = 50  # ... and whose colours, within this many of it, train the two mixtures
 _LIKE = 11.3  # squared Mahalanobis distance to the stroke's colours of a pixel like them (chi-squared, 3 dof, 99 %)
 _BIAS = 4.0  # nats the stroke's side is favoured by, for the part's edge (pixels of mixed colour)
+_TILE = 48  # full-resolution pixels: the part's costs are computed a square of this side at a time (``_likely_part``)
 
 
 def _joined(part: np.ndarray, seed: np.ndarray) -> np.ndarray:
@@ -55,6 +56,66 @@ def _like(stroke: np.ndarray, pixels: np.ndarray) -> np.ndarray:
     inverse = np.linalg.inv(np.cov(stroke.T) + 4.0 * np.eye(3))
     d = pixels.reshape(-1, 3) - stroke.mean(axis=0)
     return np.einsum("ni,ij,nj->n", d, inverse, d) < _LIKE
+
+
+def _likely_part(win: np.ndarray, side: np.ndarray, hard: np.ndarray,
+                 models: tuple[np.ndarray, np.ndarray]) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """The pixels against the stroke that its side's colours prefer, joined to it, and their two costs.
+
+    The costs are computed a ``_TILE`` square at a time, only on the tiles
+    the joined part reaches (the stroke's first, then every tile beside a
+    pixel of the part, until the part grows no more): most of a large
+    window lies beyond the part, and its costs were most of a stroke's time.
+    The part is the same as with the costs over the whole window, since
+    every pixel beside it had its costs computed.
+
+    Args:
+        win: uint8 ``(h, w, 3)`` window of the frame.
+        side: bool ``(h, w)``, the pixels of the stroke's label (the stroke's included).
+        hard: bool ``(h, w)``, the stroke's pixels.
+        models: The stroke's side's mixture and the other side's.
+
+    Returns:
+        ``(cost_own, cost_other, part)``: float ``(h, w)`` costs, set only on
+        the tiles reached (the part's pixels among them; ``cost_other``
+        with ``_BIAS``), and bool ``(h, w)``, the part (not ``side``).
+    """
+    h, w = side.shape
+    t = _TILE
+    ny, nx = -(-h // t), -(-w // t)
+
+    def tiles(pixels: np.ndarray) -> np.ndarray:
+        """bool ``(ny, nx)``: the tiles holding any of ``pixels``."""
+        padded = np.zeros((ny * t, nx * t), bool)
+        padded[:h, :w] = pixels
+        return padded.reshape(ny, t, nx, t).any(axis=(1, 3))
+
+    cost_own, cost_other = np.zeros((h, w)), np.zeros((h, w))
+    likely = np.zeros((h, w), bool)
+    inner = np.zeros((h, w), bool)  # the window's edge is never likely
+    inner[1:-1, 1:-1] = True
+    done = np.zeros((ny, nx), bool)
+    todo = tiles(hard)
+    while True:
+        done |= todo
+        pick = np.flatnonzero((np.kron(todo, np.ones((t, t), bool))[:h, :w] & ~side & inner).ravel())
+        if len(pick):
+            x = win.reshape(-1, 3)[pick].astype(np.float32)
+            own = _costs(models[0], x)
+            other = _costs(models[1], x) + _BIAS
+            cost_own.ravel()[pick], cost_other.ravel()[pick] = own, other
+            likely.ravel()[pick] = own < other
+        # Joined within the tiles done (nothing beyond them is likely), and the tiles beside the part.
+        rows, cols = np.flatnonzero(done.any(axis=1)), np.flatnonzero(done.any(axis=0))
+        a0, a1, b0, b1 = rows[0] * t, min(h, (rows[-1] + 1) * t), cols[0] * t, min(w, (cols[-1] + 1) * t)
+        part = np.zeros((h, w), bool)
+        part[a0:a1, b0:b1] = _joined(likely[a0:a1, b0:b1], hard[a0:a1, b0:b1])
+        a0, a1, b0, b1 = max(0, a0 - 1), min(h, a1 + 1), max(0, b0 - 1), min(w, b1 + 1)
+        beside = np.zeros((h, w), bool)
+        beside[a0:a1, b0:b1] = cv2.dilate(part[a0:a1, b0:b1].view(np.uint8), np.ones((3, 3), np.uint8)).view(bool)
+        todo = tiles(beside) & ~done
+        if not todo.any():
+            return cost_own, cost_other, part & ~side
 
 
 def _fine_cut(image: np.ndarray, mask: np.ndarray, own: np.ndarray, origin: tuple[int, int], fg: bool,
@@ -119,13 +180,7 @@ def _fine_cut(image: np.ndarray, mask: np.ndarray, own: np.ndarray, origin: tupl
             rng = np.random.default_rng(0)
             other_model = _fit_model(near[rest if rest.any() else ~near_side], rng)[0]
             models = (_fit_model(near[near_side], rng)[0], other_model)
-        x = win.reshape(-1, 3).astype(np.float32)
-        cost_own = _costs(models[0], x).reshape(side.shape)
-        cost_other = _costs(models[1], x).reshape(side.shape) + _BIAS
-        likely = (cost_own < cost_other) & ~side
-        likely[[0, -1], :] = likely[:, [0, -1]] = False
-        # The likely pixels joined to the stroke, less what is wider than ``limit`` (an opening finds it).
-        free = _joined(likely, hard) & ~side
+        cost_own, cost_other, free = _likely_part(win, side, hard, models)
         if grow < reach:
             margin = size + 2
             rows, cols = np.flatnonzero(free.any(axis=1)), np.flatnonzero(free.any(axis=0))
@@ -133,8 +188,14 @@ def _fine_cut(image: np.ndarray, mask: np.ndarray, own: np.ndarray, origin: tupl
                               or (c0 > 0 and cols[0] < margin) or (c1 < w and cols[-1] >= c1 - c0 - margin)):
                 continue
         break
-    free &= ~cv2.morphologyEx(free.view(np.uint8), cv2.MORPH_OPEN,
-                              cv2.getStructuringElement(cv2.MORPH_ELLIPSE, (size, size))).view(bool)
+    # Less what is wider than ``limit`` (an opening finds it; opened within ``size`` of the part's bounds, the same
+    # opening as the whole window's, which is empty beyond them).
+    rows, cols = np.flatnonzero(free.any(axis=1)), np.flatnonzero(free.any(axis=0))
+    if len(rows):
+        a0, a1 = max(0, rows[0] - size), min(free.shape[0], rows[-1] + 1 + size)
+        b0, b1 = max(0, cols[0] - size), min(free.shape[1], cols[-1] + 1 + size)
+        free[a0:a1, b0:b1] &= ~cv2.morphologyEx(free[a0:a1, b0:b1].view(np.uint8), cv2.MORPH_OPEN,
+                                                cv2.getStructuringElement(cv2.MORPH_ELLIPSE, (size, size))).view(bool)
     free = _joined(free, hard) & ~side
     if not free.any():
         return flip
