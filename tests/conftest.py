@@ -28,6 +28,17 @@ settings.load_profile("egonet")
 for name in ("EGONET_QUEUE_URL", "FLASK_QUEUE_URL"):
     os.environ.pop(name, None)
 
+# A pytest-xdist worker is one of a core's worth of processes: torch, OpenMP, BLAS and OpenCV on one
+# thread each, in the worker and in the servers and commands its tests start (set before any of them
+# is imported). With the libraries' defaults (a thread per core) three workers on two cores ran six or
+# more compute threads, whose waits for a busy core spin.
+if os.environ.get("PYTEST_XDIST_WORKER"):
+    for name in ("OMP_NUM_THREADS", "OPENBLAS_NUM_THREADS", "MKL_NUM_THREADS"):
+        os.environ[name] = "1"
+    import cv2
+
+    cv2.setNumThreads(1)
+
 
 def pytest_addoption(parser):
     parser.addoption("--all", action="store_true", help="also run tests marked slow or browser")

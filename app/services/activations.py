@@ -19,7 +19,9 @@ them afterwards.
 
 from __future__ import annotations
 
+import functools
 import io as bytes_io
+import json
 from dataclasses import dataclass, field
 from pathlib import Path
 
@@ -54,9 +56,15 @@ class Activations:
 
 
 def parameter_count(checkpoint: Checkpoint) -> int:
-    """The checkpoint's model size, from its run's name and options (built on the meta device: no memory, no file)."""
+    """The checkpoint's model size, from its run's name and options (no memory, no file)."""
+    return _parameter_count(checkpoint.run.model_name, json.dumps(checkpoint.run.model_options or {}, sort_keys=True))
+
+
+@functools.lru_cache(maxsize=64)
+def _parameter_count(model_name: str, options: str) -> int:
+    """Built on the meta device once per model and options (a frame page asks on every view)."""
     with torch.device("meta"):
-        model = build_model(checkpoint.run.model_name, **(checkpoint.run.model_options or {}))
+        model = build_model(model_name, **json.loads(options))
     return sum(p.numel() for p in model.parameters())
 
 

@@ -306,6 +306,7 @@ def test_with_one_activity_there_are_no_learned_baselines(ctx):
     assert report.notes == [f"{name}: no other activity has labelled frames to fit the fold of cooking." for name in learned]
 
 
+@pytest.mark.one_database
 def test_frames_without_an_action_object_follow_the_chosen_policy_and_are_counted(ctx):
     add_activity("cooking", seed=1)
     add_activity("hotel", seed=2)
@@ -341,6 +342,7 @@ def test_frames_without_an_action_object_follow_the_chosen_policy_and_are_counte
     assert info.value.field == "empty"
 
 
+@pytest.mark.one_database
 def test_the_conventions_and_thresholds_against_direct_computations(ctx):
     add_activity("cooking", seed=1)
     add_activity("hotel", seed=2)
@@ -382,6 +384,7 @@ def test_the_conventions_and_thresholds_against_direct_computations(ctx):
         assert info.value.field == field
 
 
+@pytest.mark.one_database
 def test_intervals_follow_resamples_and_seed(ctx):
     add_activity("cooking", seed=1)
     add_activity("hotel", n=MIN_FRAMES, seed=2)

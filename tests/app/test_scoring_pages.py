@@ -259,6 +259,7 @@ def test_score_command_prints_each_format_and_view(ctx, runner, tmp_path):
     assert runner.invoke(args=["egonet", "score", "--format", "csv"]).stdout == report.to_csv()
 
 
+@pytest.mark.one_database
 def test_score_command_compares_two_rows(ctx, runner):
     add_activity("cooking", n=MIN_FRAMES, seed=1)
     add_activity("hotel", n=MIN_FRAMES, seed=2)
@@ -279,6 +280,7 @@ def test_score_command_compares_two_rows(ctx, runner):
     assert "mean F diff" in text and "ois-mean" in text
 
 
+@pytest.mark.one_database
 def test_p_values_at_the_floor_on_the_page_and_in_every_download_and_more_resamples_lower_it(ctx, runner, admin_client):
     add_activity("cooking", n=MIN_FRAMES, seed=1)
     add_activity("hotel", n=MIN_FRAMES, seed=2)
@@ -297,6 +299,7 @@ def test_p_values_at_the_floor_on_the_page_and_in_every_download_and_more_resamp
     assert data["p_text"] == "< 0.00005" and data["bootstrap"]["resamples"] == 20000 and data["p_value"] == pytest.approx(1 / 20001)
 
 
+@pytest.mark.one_database
 def test_below_min_frames_a_cell_or_difference_says_n_too_small_in_every_format(ctx, runner):
     """1 and MIN_FRAMES - 1 frames: the estimate, "n too small", no interval and no p-value; MIN_FRAMES frames: an interval."""
     add_activity("cooking", n=1, seed=1)
