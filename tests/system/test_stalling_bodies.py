@@ -6,6 +6,12 @@ timed out for everyone meanwhile; a 64 MiB JSON body posted to /login was
 read and decoded before anything else was decided. Now each pathological
 body is answered in milliseconds while /login keeps answering, and /login
 answers a JSON body 415 before the body has even arrived.
+
+A body the app refuses unread is drained by gunicorn (27) only up to 64 KiB
+before the connection is reused; past that it closes the connection, and a
+client still sending may see the close instead of the 415 (the kernel resets
+a socket closed with unread data). The 64 KiB probe is 2 bytes past that
+cap, so a refused log-in probe may end either way; both refuse it unread.
 """
 
 import os
@@ -46,12 +52,15 @@ def test_six_pathological_bodies_do_not_stall_the_log_in_page(server):
     annotator = staff_client(server.url, "prober", PASSWORD, timeout=60)
     anonymous = httpx.Client(base_url=server.url, timeout=60)
     anonymous.headers.update({"X-CSRFToken": csrf_token(anonymous), "Accept": "application/json"})
-    answers: list[tuple[str, int, float]] = []
+    answers: list[tuple[str, int | str, float]] = []
 
     def attack(client: httpx.Client, name: str, method: str, url: str) -> None:
         started = time.monotonic()
-        response = client.request(method, url, content=PATHOLOGICAL, headers={"Content-Type": "application/json"})
-        answers.append((name, response.status_code, time.monotonic() - started))
+        try:
+            status = client.request(method, url, content=PATHOLOGICAL, headers={"Content-Type": "application/json"}).status_code
+        except (httpx.RemoteProtocolError, httpx.ReadError, httpx.WriteError):
+            status = "closed"  # refused unread past gunicorn's 64 KiB drain (see above)
+        answers.append((name, status, time.monotonic() - started))
 
     threads = [threading.Thread(target=attack, args=(annotator, "save", "PUT", "/api/label/frames/1/annotation")) for _ in range(3)]
     threads += [threading.Thread(target=attack, args=(anonymous, "login", "POST", "/login")) for _ in range(3)]
@@ -65,15 +74,16 @@ def test_six_pathological_bodies_do_not_stall_the_log_in_page(server):
             log_in_page.append((status, time.monotonic() - started))
     for thread in threads:
         thread.join()
-    print(f"\nprobe answers (name, status, s): {sorted(answers)}")
+    annotator.close()
+    anonymous.close()
+    print(f"\nprobe answers (name, status, s): {sorted(answers, key=str)}")
     print(f"GET /login meanwhile: {len(log_in_page)} answers, slowest {max(t for _, t in log_in_page):.3f} s")
-    assert sorted((name, status) for name, status, _ in answers) == [("login", 415)] * 3 + [("save", 400)] * 3
+    assert sorted(status for name, status, _ in answers if name == "save") == [400] * 3  # read, parsed, refused
+    assert len(answers) == 6 and all(status in (415, "closed") for name, status, _ in answers if name == "login"), answers
     # Generous bounds (a loaded CI machine runs other tests beside this one) that the old scan misses by far:
     # ~15 s a body, then WORKER TIMEOUT, and every GET /login timed out for 35 s.
     assert max(took for *_, took in answers) < 8.0, answers
     assert {status for status, _ in log_in_page} == {200} and max(t for _, t in log_in_page) < 10.0, log_in_page
-    annotator.close()
-    anonymous.close()
 
 
 def test_a_64_mib_json_body_to_log_in_is_refused_before_it_arrives(server):
